@@ -1,0 +1,1 @@
+"""ECU firmware: fixed-point control loop, estimator, MRAC, PID, protection, modes."""

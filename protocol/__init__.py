@@ -1,0 +1,1 @@
+"""The CAN contract between nodes: DBC, end-to-end protection, codec, bus selection."""

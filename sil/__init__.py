@@ -1,0 +1,1 @@
+"""SIL harness: scenarios, node launch, lockstep/real-time clocking, recording, metrics, plots."""

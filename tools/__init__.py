@@ -1,0 +1,1 @@
+"""User-facing utilities, thin over the packages."""
