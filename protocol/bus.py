@@ -1,0 +1,123 @@
+"""Bus selection: one spec string names a python-can bus.
+
+Specs:
+    socketcan:vcan0            Linux SocketCAN (virtual vcan0 or a real can0)
+    udp                        loopback multicast with a group and port of this run's own
+    udp:239.x.y.z[@PORT]       loopback multicast on a named group (default port 43113)
+    virtual:NAME               python-can's in-process virtual bus
+    INTERFACE:CHANNEL          any other python-can interface (pcan:PCAN_USBBUS1, kvaser:0,
+                               slcan:/dev/ttyACM0, ...) for hardware in the loop
+
+Without a spec, :func:`default_spec` picks ``socketcan:vcan0`` when that interface exists and is
+up, else a loopback multicast bus of this run's own, and says which it chose. Simulated traffic
+never leaves the machine (see :mod:`protocol.udp_loopback`).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+
+UDP_DEFAULT_PORT = 43113
+
+
+class BusSpecError(ValueError):
+    """A bus spec that cannot be parsed or opened; the message is one line for the user."""
+
+
+@dataclass(frozen=True)
+class BusSpec:
+    interface: str  # python-can interface name, or "udp" for the loopback multicast bus
+    channel: str
+    port: int | None = None
+
+    def __str__(self) -> str:
+        if self.interface == "udp":
+            return f"udp:{self.channel}@{self.port}"
+        return f"{self.interface}:{self.channel}"
+
+
+def _known_interfaces() -> frozenset[str]:
+    return frozenset(can.interfaces.VALID_INTERFACES)
+
+
+def unique_udp_spec(rng: random.Random | None = None) -> BusSpec:
+    """A loopback multicast group and port of this run's own, so parallel runs never meet."""
+    rng = rng or random.Random(int.from_bytes(os.urandom(8), "little"))
+    group = f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}"
+    return BusSpec("udp", group, rng.randrange(20000, 60000))
+
+
+def parse_spec(spec: str) -> BusSpec:
+    """Parse a bus spec string (see the module docstring) without opening anything."""
+    text = spec.strip()
+    if not text:
+        raise BusSpecError("empty bus spec")
+    if text == "udp":
+        return unique_udp_spec()
+    interface, sep, channel = text.partition(":")
+    if not sep or not channel:
+        raise BusSpecError(
+            f"bus spec '{spec}' needs INTERFACE:CHANNEL "
+            "(socketcan:vcan0, udp:239.255.1.2@43113, virtual:NAME, pcan:PCAN_USBBUS1)"
+        )
+    if interface == "udp":
+        group, at, port_text = channel.partition("@")
+        port = UDP_DEFAULT_PORT
+        if at:
+            if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
+                raise BusSpecError(f"bus spec '{spec}': port '{port_text}' is not 1..65535")
+            port = int(port_text)
+        return BusSpec("udp", group, port)
+    if interface == "udp_multicast":
+        raise BusSpecError(
+            f"bus spec '{spec}': use udp:GROUP[@PORT] (kept on this host) for udp_multicast"
+        )
+    if interface not in _known_interfaces():
+        known = ", ".join(sorted((_known_interfaces() - {"udp_multicast"}) | {"udp"}))
+        raise BusSpecError(f"bus spec '{spec}': unknown interface '{interface}' (known: {known})")
+    return BusSpec(interface, channel)
+
+
+def socketcan_is_up(channel: str = "vcan0") -> bool:
+    """True when the network interface exists and is administratively up."""
+    flags = Path("/sys/class/net") / channel / "flags"
+    try:
+        return bool(int(flags.read_text().strip(), 16) & 0x1)  # IFF_UP
+    except (OSError, ValueError):
+        return False
+
+
+def default_spec() -> tuple[BusSpec, str]:
+    """The bus to use when none is named, and one line saying why."""
+    if socketcan_is_up("vcan0"):
+        return BusSpec("socketcan", "vcan0"), "bus: socketcan:vcan0 (vcan0 is up)"
+    spec = unique_udp_spec()
+    return spec, f"bus: {spec} (no vcan0 here; loopback multicast of this run's own)"
+
+
+def open_bus(spec: str | BusSpec, **kwargs) -> can.BusABC:
+    """Open the python-can bus a spec names; failures become one :class:`BusSpecError` line."""
+    parsed = parse_spec(spec) if isinstance(spec, str) else spec
+    try:
+        if parsed.interface == "udp":
+            from protocol.udp_loopback import LoopbackUdpMulticastBus
+
+            return LoopbackUdpMulticastBus(
+                parsed.channel, parsed.port or UDP_DEFAULT_PORT, **kwargs
+            )
+        if parsed.interface == "socketcan" and not socketcan_is_up(parsed.channel):
+            raise BusSpecError(
+                f"bus {parsed}: network interface '{parsed.channel}' does not exist or is down "
+                f"(create it with: ip link add dev {parsed.channel} type vcan && "
+                f"ip link set up {parsed.channel})"
+            )
+        return can.Bus(interface=parsed.interface, channel=parsed.channel, **kwargs)
+    except BusSpecError:
+        raise
+    except (can.CanError, OSError, ImportError, ValueError) as exc:
+        raise BusSpecError(f"bus {parsed}: {exc}") from exc
