@@ -65,8 +65,8 @@ class SignalLayout:
 def _layout(signal) -> SignalLayout:
     if signal.byte_order != "little_endian":
         raise ContractError(f"signal {signal.name}: only little-endian (Intel) signals are used")
-    if signal.is_float:
-        raise ContractError(f"signal {signal.name}: float signals are not used in this contract")
+    if signal.is_float or signal.scale <= 0:
+        raise ContractError(f"signal {signal.name}: only integer signals with a positive scale")
     lo_bits = -(1 << (signal.length - 1)) if signal.is_signed else 0
     hi_bits = (1 << (signal.length - 1)) - 1 if signal.is_signed else (1 << signal.length) - 1
     scale, offset = float(signal.scale), float(signal.offset)
@@ -177,7 +177,10 @@ class MessageCodec:
         return saturated
 
     def pack(self, values: Sequence[float]) -> int:
-        """As :meth:`pack_raw` with physical values (scaled, offset and rounded as cantools)."""
+        """As :meth:`pack_raw` with physical values (scaled, offset and rounded as cantools).
+
+        A value counts as out of range when it is more than half a step outside the DBC range.
+        """
         layouts = self._layouts(int(values[0]))
         if len(values) != len(layouts):
             raise ValueError(f"{self.name}: expected {len(layouts)} values, got {len(values)}")
@@ -187,18 +190,15 @@ class MessageCodec:
             value = values[i]
             if value != value:  # NaN
                 raise ValueError(f"{self.name}.{layout.name}: value is NaN")
-            if value < layout.minimum:
+            scaled = (value - layout.offset) / layout.scale
+            if scaled < layout.raw_min - 0.5:
                 raw = layout.raw_min
                 saturated |= 1 << i
-            elif value > layout.maximum:
+            elif scaled > layout.raw_max + 0.5:
                 raw = layout.raw_max
                 saturated |= 1 << i
             else:
-                raw = layout.to_raw(value)
-                if raw < layout.raw_min:
-                    raw = layout.raw_min
-                elif raw > layout.raw_max:
-                    raw = layout.raw_max
+                raw = min(max(round(scaled), layout.raw_min), layout.raw_max)
             word |= (raw & ((1 << layout.length) - 1)) << layout.start
         self._finish(word)
         return saturated

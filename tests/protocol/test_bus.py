@@ -1,0 +1,88 @@
+"""Bus specs, clear errors, and simulated traffic kept on this machine."""
+
+import random
+import socket
+
+import can
+import pytest
+
+from protocol.bus import BusSpec, BusSpecError, default_spec, open_bus, parse_spec, unique_udp_spec
+
+
+def test_specs_parse():
+    assert parse_spec("socketcan:vcan0") == BusSpec("socketcan", "vcan0")
+    assert parse_spec("virtual:bench") == BusSpec("virtual", "bench")
+    assert parse_spec("udp:239.255.1.2@47000") == BusSpec("udp", "239.255.1.2", 47000)
+    assert parse_spec("udp:239.255.1.2").port == 43113
+    assert parse_spec("pcan:PCAN_USBBUS1") == BusSpec("pcan", "PCAN_USBBUS1")
+    assert parse_spec("udp").interface == "udp"
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        ("", "empty"),
+        ("vcan0", "INTERFACE:CHANNEL"),
+        ("canbus:0", "unknown interface 'canbus'"),
+        ("udp:239.1.1.1@0", "port '0'"),
+        ("udp_multicast:ff15::1", "kept on this host"),
+    ],
+)
+def test_bad_specs_name_what_is_wrong(spec, words):
+    with pytest.raises(BusSpecError, match=words):
+        parse_spec(spec)
+
+
+def test_missing_interface_and_non_local_group_are_clear_errors():
+    with pytest.raises(BusSpecError, match="'vcan9' does not exist or is down"):
+        open_bus("socketcan:vcan9")
+    with pytest.raises(BusSpecError, match="not an administratively scoped"):
+        open_bus("udp:224.0.0.1@47000")
+
+
+def test_default_is_vcan0_when_up_else_own_udp(monkeypatch):
+    monkeypatch.setattr("protocol.bus.socketcan_is_up", lambda channel="vcan0": True)
+    assert default_spec()[0] == BusSpec("socketcan", "vcan0")
+    monkeypatch.setattr("protocol.bus.socketcan_is_up", lambda channel="vcan0": False)
+    spec, why = default_spec()
+    assert spec.interface == "udp" and "udp:239.255." in why
+
+
+def test_each_run_gets_its_own_group_and_port():
+    specs = {str(unique_udp_spec()) for _ in range(50)}
+    assert len(specs) == 50
+
+
+def test_udp_socket_never_leaves_the_host():
+    spec = unique_udp_spec(random.Random(7))
+    with open_bus(spec) as bus:
+        sock = bus.socket
+        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP) == 1
+        # bound to the group, not to a unicast or wildcard address: nothing listens on the LAN
+        assert sock.getsockname() == (spec.channel, spec.port)
+
+
+def test_udp_round_trip_between_two_endpoints_and_isolation():
+    rng = random.Random(11)
+    mine, other = unique_udp_spec(rng), unique_udp_spec(rng)
+    with open_bus(mine) as a, open_bus(mine) as b, open_bus(other) as c:
+        a.send(can.Message(arbitration_id=0x100, data=bytes(range(8)), is_extended_id=False))
+        got = b.recv(2.0)
+        assert (
+            got is not None and got.arbitration_id == 0x100 and bytes(got.data) == bytes(range(8))
+        )
+        assert c.recv(0.2) is None  # another run's bus hears nothing
+
+
+def test_unicast_to_the_port_is_not_received():
+    spec = unique_udp_spec(random.Random(3))
+    with open_bus(spec) as bus, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(b"\x00" * 16, ("127.0.0.1", spec.port))
+        assert bus.recv(0.2) is None
+
+
+def test_virtual_bus():
+    with open_bus("virtual:test_bus_py") as a, open_bus("virtual:test_bus_py") as b:
+        a.send(can.Message(arbitration_id=0x80, data=b"\x01" * 8, is_extended_id=False))
+        assert b.recv(1.0).arbitration_id == 0x80

@@ -1,0 +1,60 @@
+"""The `sil` command line: help, the protocol self-check, clear errors."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from sil.cli import build_parser, main
+
+
+def _sil(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=120
+    )
+
+
+def test_help_lists_every_subcommand():
+    result = _sil("--help")
+    assert result.returncode == 0
+    sub = build_parser()._subparsers._group_actions[0]
+    for name in sub.choices:
+        assert name in result.stdout
+    assert {"selfcheck", "bench"} <= set(sub.choices)
+
+
+@pytest.mark.parametrize("name", sorted(build_parser()._subparsers._group_actions[0].choices))
+def test_every_subcommand_has_help(name, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([name, "--help"])
+    assert exc.value.code == 0
+    assert "usage: sil" in capsys.readouterr().out
+
+
+def test_selfcheck_on_the_default_bus():
+    result = _sil("selfcheck")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("bus: ")
+    assert "self-check passed" in result.stdout
+
+
+def test_selfcheck_json():
+    result = _sil("selfcheck", "--bus", "virtual:cli_json", "--json")
+    report = json.loads(result.stdout)
+    assert result.returncode == 0 and report["ok"]
+    assert report["e2e_cases"]["corrupted"] == "WRONGCRC"
+    assert len(report["messages"]) >= 9
+
+
+def test_bad_bus_is_one_line_and_nonzero():
+    result = _sil("selfcheck", "--bus", "nonsense:x")
+    assert result.returncode == 2
+    assert result.stderr.strip().count("\n") == 0
+    assert "unknown interface 'nonsense'" in result.stderr
+
+
+def test_bench_codec_json():
+    result = _sil("bench", "codec", "--quick", "--json")
+    figures = json.loads(result.stdout)
+    assert figures["codec_encode_us"] > 0 and figures["cantools_decode_us"] > 0
