@@ -31,7 +31,7 @@ REQUIRED = {
     ),
     "PlantTruthA": ("Plant", {"P3", "P5", "T4"}),
     "PlantTruthB": ("Plant", {"FuelFlow", "Thrust"}),
-    "FaultInject": ("Command", {"FaultTarget", "FaultValue"}),
+    "FaultInject": ("Command", {"FaultTarget", "FaultTick", "FaultValue"}),
 }
 
 
