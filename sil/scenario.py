@@ -1,0 +1,312 @@
+"""Scenario files (TOML): plant, controller, command profile, faults, duration, ECU rate, seed.
+
+A file is checked completely before anything starts; the first problem is reported as
+``FILE: field 'command.component[2].frequency_hz': expected a positive number, got -1``.
+Shipped scenarios live in ``sil/scenarios/`` and are found by name.
+
+    name = "thesis-5.3-mrac-aero"
+    description = "..."
+    duration_s = 300
+    ecu_rate_hz = 100          # 50..1000
+    seed = 1
+
+    [plant]
+    model = "aero"             # aero | fast
+    ambient_temperature_K = 288.15
+    ambient_pressure_Pa = 101325
+    flight_speed_m_s = 0
+    supply_voltage_V = 12.0
+
+    [controller]
+    kind = "mrac"              # mrac | pid | open-loop
+    preset = "sec-5.3"         # an ECU parameter preset (optional)
+    params = { }               # overrides of ECU parameters by name (optional)
+
+    [command]                  # %N for mrac/pid, volts for open-loop
+    base = "trim"              # a number, or "trim": 89.68 %N, or the trim pump voltage
+    [[command.component]]
+    kind = "square"            # step | staircase | square | sine | ramp | csv
+    amplitude = 1.0
+    frequency_hz = 0.05
+
+    [[fault]]
+    time_s = 30
+    target = "PUMP_EFFECTIVENESS"   # a FaultTarget of the DBC
+    value = 0.5
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from protocol.dbc import load_database
+from sil import profiles
+
+SCENARIO_DIR = Path(__file__).with_name("scenarios")
+PLANT_MODELS = ("aero", "fast")
+CONTROLLERS = ("mrac", "pid", "open-loop")
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be used; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class PlantSettings:
+    model: str = "aero"
+    ambient_temperature_K: float = 288.15
+    ambient_pressure_Pa: float = 101325.0
+    flight_speed_m_s: float = 0.0
+    supply_voltage_V: float = 12.0
+
+
+@dataclass(frozen=True)
+class ControllerSettings:
+    kind: str = "mrac"
+    preset: str | None = None
+    params: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Fault:
+    time_s: float
+    target: str
+    value: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    path: Path | None
+    duration_s: float
+    ecu_rate_hz: float
+    seed: int
+    plant: PlantSettings
+    controller: ControllerSettings
+    command_base: float | str  # a number or "trim"
+    command_components: tuple[profiles.Component, ...]
+    faults: tuple[Fault, ...]
+
+    def profile(self, trim_value: float) -> profiles.Profile:
+        """The command profile, with ``trim_value`` standing for a base of "trim"."""
+        base = trim_value if self.command_base == "trim" else float(self.command_base)
+        return profiles.Profile(base, self.command_components)
+
+    @property
+    def ticks(self) -> int:
+        return int(round(self.duration_s * self.ecu_rate_hz))
+
+
+def fault_targets() -> tuple[str, ...]:
+    """Fault names, from the FaultTarget value table of the DBC."""
+    message = load_database().get_message_by_name("FaultInject")
+    choices = message.get_signal_by_name("FaultTarget").choices or {}
+    return tuple(str(choices[k]) for k in sorted(choices))
+
+
+class _Reader:
+    """Typed access to a TOML table that names the file and the field in every error."""
+
+    def __init__(self, source: str, table: dict[str, Any], prefix: str = "") -> None:
+        self.source, self.table, self.prefix = source, table, prefix
+        self.used: set[str] = set()
+
+    def fail(self, key: str, expected: str, got: Any) -> ScenarioError:
+        return ScenarioError(
+            f"{self.source}: field '{self.prefix}{key}': expected {expected}, got {got!r}"
+        )
+
+    def get(self, key: str, default: Any = ..., *, missing: str = "a value") -> Any:
+        self.used.add(key)
+        if key not in self.table:
+            if default is ...:
+                raise ScenarioError(
+                    f"{self.source}: field '{self.prefix}{key}' is missing (expected {missing})"
+                )
+            return default
+        return self.table[key]
+
+    def number(
+        self,
+        key: str,
+        default: Any = ...,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+        positive: bool = False,
+    ) -> float:
+        value = self.get(key, default, missing="a number")
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.fail(key, "a number", value)
+        if positive and value <= 0:
+            raise self.fail(key, "a positive number", value)
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.fail(key, f"a number in {lo}..{hi}", value)
+        return float(value)
+
+    def text(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None) -> str:
+        value = self.get(key, default, missing="a string")
+        if not isinstance(value, str):
+            raise self.fail(key, "a string", value)
+        if choices is not None and value not in choices:
+            raise self.fail(key, "one of " + ", ".join(choices), value)
+        return value
+
+    def sub(self, key: str, *, required: bool = False) -> _Reader:
+        value = self.get(key, ... if required else {}, missing="a table")
+        if not isinstance(value, dict):
+            raise self.fail(key, "a table", value)
+        return _Reader(self.source, value, f"{self.prefix}{key}.")
+
+    def tables(self, key: str) -> list[_Reader]:
+        value = self.get(key, [])
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.fail(key, "a list of tables ([[...]])", value)
+        return [_Reader(self.source, v, f"{self.prefix}{key}[{i}].") for i, v in enumerate(value)]
+
+    def done(self) -> None:
+        unknown = sorted(set(self.table) - self.used)
+        if unknown:
+            raise ScenarioError(
+                f"{self.source}: unknown field '{self.prefix}{unknown[0]}' "
+                f"(known here: {', '.join(sorted(self.used))})"
+            )
+
+
+def _component(r: _Reader, base_dir: Path) -> profiles.Component:
+    kind = r.text("kind", choices=("step", "staircase", "square", "sine", "ramp", "csv"))
+    if kind == "step":
+        c: profiles.Component = profiles.Step(r.number("time_s", lo=0), r.number("value"))
+    elif kind == "staircase":
+        levels = r.get("levels", missing="a list of numbers")
+        if (
+            not isinstance(levels, list)
+            or not levels
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in levels)
+        ):
+            raise r.fail("levels", "a non-empty list of numbers", levels)
+        c = profiles.Staircase(
+            tuple(float(v) for v in levels),
+            r.number("step_s", positive=True),
+            r.number("start_s", 0.0, lo=0),
+        )
+    elif kind == "square":
+        c = profiles.Square(
+            r.number("amplitude"),
+            r.number("frequency_hz", positive=True),
+            r.number("start_s", 0.0, lo=0),
+        )
+    elif kind == "sine":
+        c = profiles.Sine(
+            r.number("amplitude"),
+            r.number("frequency_hz", positive=True),
+            r.number("phase_deg", 0.0),
+            r.number("start_s", 0.0, lo=0),
+        )
+    elif kind == "ramp":
+        start, end = r.number("start_s", lo=0), r.number("end_s", lo=0)
+        if end <= start:
+            raise r.fail("end_s", f"a time after start_s ({start})", end)
+        c = profiles.Ramp(start, end, r.number("value"))
+    else:
+        path = base_dir / r.text("path")
+        if not path.is_file():
+            raise r.fail("path", "an existing CSV file", str(path))
+        try:
+            c = profiles.Table.from_csv(
+                path, r.text("time_column", "time_s"), r.text("value_column", "value")
+            )
+        except ValueError as exc:
+            raise ScenarioError(f"{r.source}: field '{r.prefix}path': {exc}") from None
+    r.done()
+    return c
+
+
+def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> Scenario:
+    """Check and build a scenario from TOML text; ``source`` names it in errors."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
+    top = _Reader(source, data)
+    name = top.text("name", Path(source).stem)
+    description = top.text("description", "")
+    duration = top.number("duration_s", positive=True, hi=86_400)
+    rate = top.number("ecu_rate_hz", 100.0, lo=50, hi=1000)
+    seed = top.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise top.fail("seed", "a non-negative integer", seed)
+
+    p = top.sub("plant")
+    plant = PlantSettings(
+        model=p.text("model", "aero", choices=PLANT_MODELS),
+        ambient_temperature_K=p.number("ambient_temperature_K", 288.15, lo=200, hi=350),
+        ambient_pressure_Pa=p.number("ambient_pressure_Pa", 101325.0, lo=20_000, hi=110_000),
+        flight_speed_m_s=p.number("flight_speed_m_s", 0.0, lo=0, hi=300),
+        supply_voltage_V=p.number("supply_voltage_V", 12.0, lo=1, hi=30),
+    )
+    p.done()
+
+    c = top.sub("controller")
+    kind = c.text("kind", "mrac", choices=CONTROLLERS)
+    preset = c.text("preset", None) if "preset" in c.table else None
+    params_reader = c.sub("params")
+    params = {k: params_reader.number(k) for k in list(params_reader.table)}
+    params_reader.done()
+    c.done()
+
+    cmd = top.sub("command", required=True)
+    base = cmd.get("base", 0.0)
+    if base != "trim" and (isinstance(base, bool) or not isinstance(base, int | float)):
+        raise cmd.fail("base", 'a number or "trim"', base)
+    components = tuple(_component(r, base_dir) for r in cmd.tables("component"))
+    cmd.done()
+
+    targets = fault_targets()
+    faults = []
+    for r in top.tables("fault"):
+        time_s = r.number("time_s", lo=0)
+        if time_s > duration:
+            raise r.fail("time_s", f"a time within the run (0..{duration:g} s)", time_s)
+        faults.append(Fault(time_s, r.text("target", choices=targets), r.number("value", 0.0)))
+        r.done()
+    top.done()
+    return Scenario(
+        name,
+        description,
+        path,
+        duration,
+        rate,
+        int(seed),
+        plant,
+        ControllerSettings(kind, preset, params),
+        base if base == "trim" else float(base),
+        components,
+        tuple(sorted(faults, key=lambda f: f.time_s)),
+    )
+
+
+def load(name_or_path: str | Path) -> Scenario:
+    """A shipped scenario by name, or a scenario file by path."""
+    path = Path(name_or_path)
+    if not path.is_file():
+        shipped = SCENARIO_DIR / f"{name_or_path}.toml"
+        if not shipped.is_file():
+            known = ", ".join(shipped_names())
+            raise ScenarioError(
+                f"{name_or_path}: no such file or shipped scenario (shipped: {known})"
+            )
+        path = shipped
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: cannot read: {exc}") from None
+    return parse(text, str(path), path.parent, path)
+
+
+def shipped_names() -> list[str]:
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
