@@ -1,0 +1,330 @@
+"""Run a command inside a throwaway virtual machine that has a real SocketCAN vcan0.
+
+This machine's kernel has no CAN support, so `ip link add vcan0 type vcan` fails on the host.
+virtme-ng boots Debian's stock kernel under QEMU with the host's root filesystem shared read-only
+into the guest: the host's Python, the project's .venv and can-utils are all visible inside, and
+folders given as rwdir are writable there (that is how a capture or a log comes back out).
+
+    python -m tools.vcan_vm [--rwdir DIR] [--timeout S] -- COMMAND...
+
+COMMAND runs in the guest as root, in the current directory, with vcan0 up. Its arguments are
+quoted as given (use `-- sh -c '...'` for shell syntax). The exit status is the command's own;
+when the VM cannot be started the status is 125 and one line on stderr says why.
+
+The first run installs what is missing (as root): Debian's qemu-system-x86, linux-image-amd64,
+busybox-static, can-utils, kmod and iproute2 with apt-get, and virtme-ng into the project's .venv
+with pip. Later runs only check, in well under a second. KVM is not used (it does not boot on
+these machines): the guest runs under software emulation, and the boot takes about 25 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+VENV_PYTHON = ROOT / ".venv" / "bin" / "python"
+VNG = VENV_PYTHON.parent / "vng"
+
+DEBIAN_PACKAGES = (
+    "qemu-system-x86",
+    "linux-image-amd64",
+    "busybox-static",
+    "can-utils",
+    "kmod",
+    "iproute2",
+)
+# The version whose options and exit-status handling this module was checked against.
+VIRTME_NG = "virtme-ng==1.42"
+GUEST_MEMORY = "1G"
+# One vCPU: under software emulation a second one made both the boot and Python slower here.
+GUEST_CPUS = 1
+# udev in the guest would load drivers for every emulated device (KVM, crypto, SATA, CD-ROM,
+# watchdog...), which takes about 15 s under software emulation and none of which vcan needs.
+GUEST_MODULE_BLACKLIST = (
+    "kvm_amd,kvm_intel,kvm,ccp,sr_mod,cdrom,sg,ahci,libata,iTCO_wdt,i6300esb,lpc_ich,i2c_i801,"
+    "psmouse,pcspkr,serio_raw,evdev,powernow_k8,aesni_intel,sha512_ssse3,sha256_ssse3,sha1_ssse3,"
+    "ghash_clmulni_intel,crc32_pclmul,crct10dif_pclmul,intel_pmc_bxt"
+)
+DEFAULT_TIMEOUT_S = 300.0
+# Exit status of the command line tool when the VM could not be started (as `env` and `docker`).
+EXIT_VM_FAILED = 125
+
+_READY = "ready"  # marker file: written by the guest once vcan0 is up, before the command
+_STATUS = "status"  # marker file: the command's exit status, written by the guest
+
+
+class VcanVmError(RuntimeError):
+    """The VM could not be started or did not run the command to its end; str() says why."""
+
+
+@dataclass(frozen=True)
+class VmResult:
+    """What one VM run gave: the command's exit status and its output (stdout and stderr)."""
+
+    returncode: int
+    output: str
+    boot_s: float  # wall time from launching the VM until vcan0 was up in the guest
+    wall_s: float  # wall time of the whole run, boot and shutdown included
+
+
+def _log(message: str) -> None:
+    print(f"vcan_vm: {message}", file=sys.stderr, flush=True)
+
+
+def _last_line(text: str) -> str:
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    return lines[-1] if lines else "(no output)"
+
+
+def _missing_debian_packages() -> list[str]:
+    if shutil.which("dpkg-query") is None:
+        raise VcanVmError("dpkg-query not found: this tool needs a Debian-based host")
+    query = subprocess.run(
+        ["dpkg-query", "-W", "-f=${Package} ${db:Status-Status}\n", *DEBIAN_PACKAGES],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    installed = {
+        name
+        for name, _, status in (line.partition(" ") for line in query.stdout.splitlines())
+        if status == "installed"
+    }
+    return [name for name in DEBIAN_PACKAGES if name not in installed]
+
+
+def _apt_get(*args: str) -> None:
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    done = subprocess.run(
+        ["apt-get", "-q", *args], capture_output=True, text=True, env=env, check=False
+    )
+    if done.returncode != 0:
+        raise VcanVmError(
+            f"apt-get {args[0]} failed (exit {done.returncode}): {_last_line(done.stderr)}"
+        )
+
+
+def _install_debian_packages() -> None:
+    missing = _missing_debian_packages()
+    if not missing:
+        return
+    if os.geteuid() != 0:
+        raise VcanVmError(
+            f"Debian packages missing and not root to install them: {' '.join(missing)}"
+            f" (run: sudo apt-get install --no-install-recommends {' '.join(missing)})"
+        )
+    _log(f"installing Debian packages: {' '.join(missing)}")
+    started = time.monotonic()
+    _apt_get("update")
+    _apt_get("install", "-y", "--no-install-recommends", *missing)
+    still_missing = _missing_debian_packages()
+    if still_missing:
+        raise VcanVmError(f"Debian packages still missing after apt-get: {' '.join(still_missing)}")
+    _log(f"installed Debian packages in {time.monotonic() - started:.0f} s")
+
+
+def _installed_virtme_ng() -> str | None:
+    probe = subprocess.run(
+        [
+            str(VENV_PYTHON),
+            "-c",
+            "import importlib.metadata as m; print(m.version('virtme-ng'))",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    return probe.stdout.strip() if probe.returncode == 0 else None
+
+
+def _install_virtme_ng() -> None:
+    if not VENV_PYTHON.exists():
+        raise VcanVmError(f"project virtual environment missing: {VENV_PYTHON} (run dev.py setup)")
+    wanted = VIRTME_NG.split("==")[1]
+    if _installed_virtme_ng() == wanted and VNG.exists():
+        return
+    _log(f"installing {VIRTME_NG} into {VENV_PYTHON.parent.parent}")
+    started = time.monotonic()
+    done = subprocess.run(
+        [str(VENV_PYTHON), "-m", "pip", "install", "-q", VIRTME_NG],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0 or not VNG.exists():
+        raise VcanVmError(
+            f"pip install {VIRTME_NG} failed (exit {done.returncode}): {_last_line(done.stderr)}"
+        )
+    _log(f"installed {VIRTME_NG} in {time.monotonic() - started:.0f} s")
+
+
+def ensure_prerequisites() -> None:
+    """Install the Debian packages and virtme-ng when missing; quick when they are present."""
+    _install_debian_packages()
+    _install_virtme_ng()
+
+
+def _version_key(kernel: Path) -> tuple[int, ...]:
+    return tuple(int(part) for part in re.findall(r"\d+", kernel.name))
+
+
+def find_kernel() -> Path:
+    """The newest Debian amd64 kernel image in /boot that has its modules, vcan included."""
+    images = sorted(Path("/boot").glob("vmlinuz-*-amd64"), key=_version_key, reverse=True)
+    if not images:
+        raise VcanVmError(
+            "no kernel image /boot/vmlinuz-*-amd64 (apt-get install linux-image-amd64)"
+        )
+    for image in images:
+        version = image.name.removeprefix("vmlinuz-")
+        if any(Path("/lib/modules", version).rglob("vcan.ko*")):
+            if not os.access(image, os.R_OK):
+                raise VcanVmError(f"kernel image {image} is not readable (run as root)")
+            return image
+    raise VcanVmError(f"no vcan module in /lib/modules for kernels {[i.name for i in images]}")
+
+
+def _guest_script(command: str, control: Path) -> str:
+    """Shell text run in the guest: vcan0 up, then the command, with markers for the host."""
+    ready = shlex.quote(str(control / _READY))
+    status = shlex.quote(str(control / _STATUS))
+    return (
+        "modprobe vcan && ip link add dev vcan0 type vcan && ip link set up vcan0"
+        f" || {{ echo 'vcan_vm: could not bring up vcan0 in the guest' >&2; exit 1; }}; "
+        f"touch {ready}; "
+        f"/bin/sh -c {shlex.quote(command)}; "
+        f"echo $? > {status}"
+    )
+
+
+def _kill_group(pgid: int) -> None:
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def run_in_vcan_vm(
+    command: str, rwdir: Path | None = None, timeout_s: float = DEFAULT_TIMEOUT_S
+) -> VmResult:
+    """Boot a throwaway VM with vcan0 up, run the shell `command` as root there, return its result.
+
+    `rwdir` is a host folder that the guest can write (at the same path); everything else of the
+    host filesystem is read-only in the guest. The command runs in the current directory.
+    Raises VcanVmError, with the reason, when the prerequisites cannot be installed, there is no
+    kernel, the VM does not boot or bring up vcan0 in time, or the VM stops before the command
+    has finished. Every process started here, QEMU included, is gone when this returns.
+    """
+    ensure_prerequisites()
+    kernel = find_kernel()
+    with tempfile.TemporaryDirectory(prefix="vcan_vm-") as scratch:
+        control = Path(scratch)
+        log_path = control / "output.log"
+        argv = [
+            str(VNG),
+            "--run",
+            str(kernel),
+            "--disable-kvm",
+            "--memory",
+            GUEST_MEMORY,
+            "--cpus",
+            str(GUEST_CPUS),
+            "--user",
+            "root",
+            "--append",
+            f"modprobe.blacklist={GUEST_MODULE_BLACKLIST}",
+            "--rwdir",
+            str(control),
+        ]
+        if rwdir is not None:
+            argv += ["--rwdir", str(Path(rwdir).resolve())]
+        argv += ["--exec", _guest_script(command, control)]
+        _log(f"booting {kernel.name} under QEMU without KVM (about 25 s)")
+        started = time.monotonic()
+        boot_s: float | None = None
+        with open(log_path, "wb") as log:
+            process = subprocess.Popen(
+                argv,
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                # vng runs its helper virtme-run through the shell: .venv/bin goes on PATH.
+                env={**os.environ, "PATH": f"{VNG.parent}{os.pathsep}{os.environ.get('PATH', '')}"},
+            )
+            try:
+                while process.poll() is None:
+                    if boot_s is None and (control / _READY).exists():
+                        boot_s = time.monotonic() - started
+                    if time.monotonic() - started > timeout_s:
+                        stage = "booting the VM" if boot_s is None else "running the command"
+                        raise VcanVmError(
+                            f"timed out after {timeout_s:.0f} s while {stage};"
+                            f" last output: {_last_line(log_path.read_text(errors='replace'))}"
+                        )
+                    time.sleep(0.1)
+            finally:
+                # vng forks QEMU (and maybe virtiofsd) into its own session: none may outlive us.
+                _kill_group(process.pid)
+                process.wait()
+        wall_s = time.monotonic() - started
+        output = log_path.read_text(errors="replace")
+        if not (control / _READY).exists():
+            raise VcanVmError(
+                f"the VM did not start or could not bring up vcan0 (vng exit {process.returncode}):"
+                f" {_last_line(output)}"
+            )
+        if not (control / _STATUS).exists():
+            raise VcanVmError(
+                f"the VM stopped before the command finished (vng exit {process.returncode}):"
+                f" {_last_line(output)}"
+            )
+        returncode = int((control / _STATUS).read_text().strip())
+        return VmResult(
+            returncode=returncode,
+            output=output,
+            boot_s=boot_s if boot_s is not None else wall_s,
+            wall_s=wall_s,
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m tools.vcan_vm",
+        description="Run COMMAND as root inside a throwaway VM with vcan0 up.",
+    )
+    parser.add_argument("--rwdir", type=Path, help="host folder the guest may write")
+    parser.add_argument(
+        "--timeout", type=float, default=DEFAULT_TIMEOUT_S, help="seconds, boot included"
+    )
+    parser.add_argument("command", nargs=argparse.REMAINDER, help="-- COMMAND [ARG...]")
+    args = parser.parse_args(argv)
+    command = args.command[1:] if args.command[:1] == ["--"] else args.command
+    if not command:
+        parser.error("no COMMAND given")
+    try:
+        result = run_in_vcan_vm(shlex.join(command), args.rwdir, args.timeout)
+    except VcanVmError as error:
+        print(f"vcan_vm: error: {error}", file=sys.stderr)
+        return EXIT_VM_FAILED
+    sys.stdout.write(result.output)
+    _log(
+        f"exit {result.returncode}; vcan0 up after {result.boot_s:.1f} s,"
+        f" whole run {result.wall_s:.1f} s"
+    )
+    return result.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
