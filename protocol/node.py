@@ -1,0 +1,183 @@
+"""Nodes are written sans-IO; drivers connect them to a python-can bus.
+
+A node (the plant, the ECU, the scenario's command node) is a class with these methods, and
+sends frames only through the ``send(frame_id, data)`` callable it is handed (``data`` may be a
+codec buffer that is reused after the call returns: the callee copies it):
+
+    start(send)                       once, before any frame; the plant sends tick 0 here
+    on_frame(frame_id, data, send)    every frame heard on the bus (its own are not echoed)
+    on_timeout(send)                  lockstep only: nothing heard for the guard time (wall clock)
+    on_period(send)                   real time only: once per period of the node's own clock
+    finished: bool                    true when the node has nothing more to do
+
+The same node runs over any python-can bus (:func:`run_lockstep`, :func:`run_realtime`) or, in one
+process with no bus at all, through :class:`protocol.node.InProcessBus` (``sil run --mode inproc``).
+Frames that the contract cannot carry (extended IDs, remote, error and CAN FD frames) are counted
+in ``DriverStats`` and never reach a node.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import can
+
+SendFn = Callable[[int, bytes | bytearray], None]
+
+
+class Node(Protocol):
+    finished: bool
+
+    def start(self, send: SendFn) -> None: ...
+
+    def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None: ...
+
+    def on_timeout(self, send: SendFn) -> None: ...
+
+    def on_period(self, send: SendFn) -> None: ...
+
+
+@dataclass
+class DriverStats:
+    received: int = 0
+    sent: int = 0
+    ignored: dict[str, int] = field(default_factory=dict)  # reason -> count
+    timeouts: int = 0
+    periods: int = 0
+    overruns: int = 0  # real time: periods that started later than one period after their time
+    jitter_s: list[float] = field(default_factory=list)  # real time: lateness of each period
+
+    def ignore(self, reason: str) -> None:
+        self.ignored[reason] = self.ignored.get(reason, 0) + 1
+
+
+def _unusable(msg: can.Message) -> str | None:
+    if msg.is_error_frame:
+        return "error frame"
+    if msg.is_fd:
+        return "CAN FD frame"
+    if msg.is_remote_frame:
+        return "remote frame"
+    if msg.is_extended_id:
+        return "extended ID"
+    return None
+
+
+def bus_sender(bus: can.BusABC, stats: DriverStats) -> SendFn:
+    def send(frame_id: int, data: bytes | bytearray) -> None:
+        bus.send(can.Message(arbitration_id=frame_id, data=bytes(data), is_extended_id=False))
+        stats.sent += 1
+
+    return send
+
+
+def _deliver(node: Node, msg: can.Message, send: SendFn, stats: DriverStats) -> None:
+    reason = _unusable(msg)
+    if reason is not None:
+        stats.ignore(reason)
+        return
+    stats.received += 1
+    node.on_frame(msg.arbitration_id, msg.data, send)
+
+
+def run_lockstep(
+    node: Node,
+    bus: can.BusABC,
+    *,
+    guard_s: float = 1.0,
+    should_stop: Callable[[], bool] = lambda: False,
+) -> DriverStats:
+    """Drive a node by the frames it hears; ``on_timeout`` after ``guard_s`` of silence."""
+    stats = DriverStats()
+    send = bus_sender(bus, stats)
+    node.start(send)
+    while not node.finished and not should_stop():
+        msg = bus.recv(guard_s)
+        if msg is None:
+            stats.timeouts += 1
+            node.on_timeout(send)
+        else:
+            _deliver(node, msg, send, stats)
+    return stats
+
+
+def run_realtime(
+    node: Node,
+    bus: can.BusABC,
+    period_s: float,
+    *,
+    should_stop: Callable[[], bool] = lambda: False,
+    clock: Callable[[], float] = time.monotonic,
+) -> DriverStats:
+    """Drive a node by its own wall clock: ``on_period`` every ``period_s``, frames in between.
+
+    Periods are scheduled against absolute times from the start, so no drift accumulates; a
+    period that starts more than one period late counts as an overrun and the missed ones are
+    skipped, as a real-time scheduler would.
+    """
+    stats = DriverStats()
+    send = bus_sender(bus, stats)
+    node.start(send)
+    start = clock()
+    k = 0
+    while not node.finished and not should_stop():
+        due = start + k * period_s
+        now = clock()
+        if now < due:
+            msg = bus.recv(due - now)
+            if msg is not None:
+                _deliver(node, msg, send, stats)
+            continue
+        lateness = now - due
+        stats.jitter_s.append(lateness)
+        if lateness > period_s:
+            stats.overruns += 1
+            k += int(lateness // period_s)
+        node.on_period(send)
+        stats.periods += 1
+        k += 1
+    return stats
+
+
+class InProcessBus:
+    """Several nodes in one process with no bus: a FIFO of frames delivered to every other node.
+
+    Deterministic by construction (frames are delivered in the order they were sent), and the
+    frames pass through the same codec as on a bus. ``tap`` sees every frame (the recorder).
+    """
+
+    def __init__(self, nodes: Sequence[Node], tap: Callable[[int, bytes], None] | None = None):
+        self.nodes = list(nodes)
+        self.tap = tap
+        self._queue: deque[tuple[int, int, bytes]] = deque()
+        self._senders = [self._sender(i) for i in range(len(self.nodes))]
+        self.frames = 0
+
+    def _sender(self, index: int) -> SendFn:
+        def send(frame_id: int, data: bytes | bytearray) -> None:
+            self._queue.append((index, frame_id, bytes(data)))
+
+        return send
+
+    def run(
+        self,
+        should_stop: Callable[[], bool] = lambda: False,
+        done: Callable[[], bool] | None = None,
+    ) -> None:
+        """Start every node, then deliver frames until the queue is empty or ``done()``."""
+        for node, send in zip(self.nodes, self._senders, strict=True):
+            node.start(send)
+        done = done or (lambda: all(n.finished for n in self.nodes))
+        queue, nodes, senders, tap = self._queue, self.nodes, self._senders, self.tap
+        while queue and not done() and not should_stop():
+            origin, frame_id, data = queue.popleft()
+            self.frames += 1
+            if tap is not None:
+                tap(frame_id, data)
+            for i, node in enumerate(nodes):
+                if i != origin:
+                    node.on_frame(frame_id, data, senders[i])
