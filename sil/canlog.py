@@ -25,7 +25,8 @@ class CandumpWriter:
         self._file: TextIO = path.open("w", encoding="ascii", newline="\n")
 
     def write(self, timestamp_s: float, frame_id: int, data: bytes | bytearray) -> None:
-        self._file.write(f"({timestamp_s:.6f}) {self.channel} {frame_id:03X}#{data.hex().upper()}\n")
+        line = f"({timestamp_s:.6f}) {self.channel} {frame_id:03X}#{data.hex().upper()}\n"
+        self._file.write(line)
         self.frames += 1
         if self.frames % self.flush_every == 0:
             self._file.flush()

@@ -1,0 +1,90 @@
+"""The command node: plays a scenario's demands and fault injections, and records the run.
+
+It follows the lockstep rules of :mod:`protocol.lockstep`: on PlantSensors(k) it sends the Demand
+for tick k + L (L = one demand period) and, before it, any FaultInject due at that tick, so both
+are on the bus before the ECU can answer tick k + L. It hears every frame and hands it, with the
+frames it sends itself, to the :class:`~sil.recorder.Recorder`. It is finished once the ECU has
+answered the last tick.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from protocol.codec import Codec
+from protocol.lockstep import TICK_MODULO, demand_lead_ticks, every_ticks
+from protocol.node import SendFn
+from sil.recorder import Recorder
+from sil.scenario import Fault, fault_targets
+
+SENSORS = 0x100
+
+
+class CommandNode:
+    def __init__(self, codec: Codec, recorder: Recorder, commands: np.ndarray, *,
+                 ecu_rate_hz: float, open_loop: bool, faults: tuple[Fault, ...] = (),
+                 progress=None) -> None:
+        self.codec = codec
+        self.recorder = recorder
+        self.commands = commands  # the command at every tick 0..ticks
+        self.last_tick = len(commands) - 1
+        self.open_loop = open_loop
+        self.demand = codec["Demand"]
+        self.fault_msg = codec["FaultInject"]
+        self.every = every_ticks(self.demand.cycle_time_ms, ecu_rate_hz)
+        self.lead = demand_lead_ticks(self.every)
+        targets = {name: i for i, name in enumerate(fault_targets())}
+        # each fault at the first demand tick at or after its time (see the module docstring)
+        self.faults: dict[int, list[tuple[int, float]]] = {}
+        for f in faults:
+            tick = math.ceil(f.time_s * ecu_rate_hz / self.every) * self.every
+            self.faults.setdefault(tick, []).append((targets[f.target], f.value))
+        self.injected: list[dict] = []
+        self.progress = progress
+        self.finished = False
+        self._sensor_out = [0, 0, 0]
+        self._send: SendFn | None = None
+
+    def _sent(self, send: SendFn, frame_id: int, data: bytearray) -> None:
+        send(frame_id, data)
+        self.recorder.record(frame_id, data)
+
+    def _play(self, tick: int, send: SendFn) -> None:
+        """Send what is due at ``tick``: fault injections first, then the demand."""
+        for target, value in self.faults.get(tick, ()):
+            self.fault_msg.pack([target, tick % TICK_MODULO, value])
+            self._sent(send, self.fault_msg.frame_id, self.fault_msg.data)
+            self.injected.append({"tick": tick, "target": target, "value": value})
+        command = float(self.commands[tick])
+        speed, volts = (0.0, command) if self.open_loop else (command, 0.0)
+        self.demand.pack([1, 0, speed, volts, tick % TICK_MODULO])
+        self._sent(send, self.demand.frame_id, self.demand.data)
+
+    def start(self, send: SendFn) -> None:
+        self.recorder.command = float(self.commands[0])
+        for tick in range(0, min(self.lead, self.last_tick + 1), self.every):
+            self._play(tick, send)
+
+    def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        recorder = self.recorder
+        tick_before = recorder.tick
+        recorder.record(frame_id, data)
+        if recorder.tick != tick_before:  # the ECU answered a tick
+            if self.progress is not None:
+                self.progress(recorder.tick)
+            if recorder.tick > self.last_tick:
+                self.finished = True
+                return
+            recorder.command = float(self.commands[recorder.tick])
+        if frame_id == SENSORS:
+            target = recorder.tick + self.lead
+            if target % self.every == 0 and target <= self.last_tick:
+                self._play(target, send)
+
+    def on_timeout(self, send: SendFn) -> None:
+        pass
+
+    def on_period(self, send: SendFn) -> None:
+        pass

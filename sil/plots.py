@@ -1,0 +1,123 @@
+"""Plots of a run laid out like the document's figures (speed, pump, EGT, estimates, gains)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+_PANELS = {
+    "estimates": (
+        "Parameter estimates (figs. 4.6, 4.10)",
+        [
+            ("Est_Ap21", "A_p21 [1/s2]"),
+            ("Est_Ap22", "A_p22 [1/s]"),
+            ("Est_Lambda", "Lambda"),
+            ("Est_Theta21", "Theta_f21"),
+            ("Est_Theta22", "Theta_f22"),
+        ],
+    ),
+    "gains": (
+        "Controller gains (fig. 6.4)",
+        [
+            ("Gain_Kx1", "K_x1"),
+            ("Gain_Kx2", "K_x2"),
+            ("Gain_Kr", "K_r"),
+            ("Gain_Kf1", "K_f1"),
+            ("Gain_Kf2", "K_f2"),
+        ],
+    ),
+}
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def speed_plot(trace: dict[str, np.ndarray], title: str, path: Path, open_loop: bool) -> Path:
+    t = trace["time"]
+    fig, (ax, ax2) = plt.subplots(
+        2, 1, figsize=(10, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]}
+    )
+    if not open_loop:
+        ax.plot(t, trace["command"], color="0.6", lw=1, label="speed command")
+        ax.plot(
+            t, trace["ReferenceSpeed"], "--", color="tab:green", lw=1.2, label="reference model"
+        )
+    ax.plot(t, trace["speed_true"], color="tab:blue", lw=1.2, label="engine (true)")
+    ax.plot(t, trace["speed_meas"], color="tab:orange", lw=0.6, alpha=0.7, label="measured")
+    ax.set_ylabel("shaft speed [%N_max]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax2.plot(t, trace["PumpVoltageTarget"], color="tab:red", lw=1, label="pump voltage")
+    if open_loop:
+        ax2.plot(t, trace["command"], "--", color="0.5", lw=1, label="voltage command")
+    ax2.set_ylabel("pump [V]")
+    ax2.set_xlabel("time [s]")
+    ax2.grid(alpha=0.3)
+    ax2.legend(loc="best", fontsize=8)
+    return _save(fig, path)
+
+
+def egt_plot(trace: dict[str, np.ndarray], title: str, path: Path) -> Path:
+    t = trace["time"]
+    fig, ax = plt.subplots(figsize=(10, 4))
+    ax.plot(t, trace["EGT"], color="tab:red", lw=1, label="EGT (thermocouple)")
+    ax.plot(t, trace["T4"], color="tab:purple", lw=0.8, alpha=0.7, label="T4 (truth)")
+    limited = trace["LoopOwner"] == 1
+    if limited.any():
+        ax.fill_between(
+            t,
+            0,
+            1,
+            where=limited,
+            transform=ax.get_xaxis_transform(),
+            color="tab:red",
+            alpha=0.12,
+            label="EGT limiter owns the pump",
+        )
+    ax.set_ylabel("temperature [K]")
+    ax.set_xlabel("time [s]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    return _save(fig, path)
+
+
+def panel_plot(trace: dict[str, np.ndarray], kind: str, title: str, path: Path) -> Path:
+    heading, signals = _PANELS[kind]
+    t = trace["time"]
+    fig, axes = plt.subplots(len(signals), 1, figsize=(10, 1.7 * len(signals)), sharex=True)
+    for ax, (column, label) in zip(axes, signals, strict=True):
+        ax.plot(t, trace[column], lw=1)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"{title}: {heading}")
+    axes[-1].set_xlabel("time [s]")
+    return _save(fig, path)
+
+
+def plot_run(
+    trace: dict[str, np.ndarray], out_dir: Path, title: str, controller: str
+) -> list[Path]:
+    """All plots of one run; returns the files written."""
+    if len(trace["time"]) < 2:
+        return []
+    open_loop = controller == "open-loop"
+    written = [
+        speed_plot(trace, title, out_dir / "speed.png", open_loop),
+        egt_plot(trace, title, out_dir / "egt.png"),
+    ]
+    if np.isfinite(trace["Est_Lambda"]).any():
+        written.append(panel_plot(trace, "estimates", title, out_dir / "estimates.png"))
+    if controller == "mrac":
+        written.append(panel_plot(trace, "gains", title, out_dir / "gains.png"))
+    return written
