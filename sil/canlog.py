@@ -6,6 +6,9 @@ time, so two runs of the same scenario and seed give byte-identical files.
 
 from __future__ import annotations
 
+import gzip
+import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
@@ -45,3 +48,172 @@ def convert(candump_path: Path, fmt: str) -> Path:
         for message in can.CanutilsLogReader(str(candump_path)):
             writer.on_message_received(message)
     return target
+
+
+class LogReadError(Exception):
+    """A log that could not be read to its end; names the file and the position."""
+
+    def __init__(self, path: Path, position: str, reason: str, frames_read: int) -> None:
+        super().__init__(f"{path}: {position}: {reason} (after {frames_read} frames)")
+        self.path, self.position, self.reason, self.frames_read = (
+            path,
+            position,
+            reason,
+            frames_read,
+        )
+
+
+FORMATS = ("candump", "asc", "blf", "trc", "csv")
+_CSV_HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"
+
+
+def detect_format(path: Path) -> tuple[str, bool]:
+    """The log format from the file's content (not its name), and whether it is gzipped."""
+    with path.open("rb") as f:
+        head = f.read(4096)
+    gz = head[:2] == b"\x1f\x8b"
+    if gz:
+        with gzip.open(path, "rb") as f:
+            try:
+                head = f.read(4096)
+            except (OSError, EOFError) as exc:
+                raise LogReadError(path, "byte 0", f"corrupt gzip data: {exc}", 0) from None
+    if head[:4] == b"LOGG":
+        return "blf", gz
+    text = head.decode("latin-1")
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        raise LogReadError(path, "line 1", "empty file: no format to recognise", 0)
+    first = lines[0]
+    if first.startswith(";$FILEVERSION") or (first.startswith(";") and "PCAN" in text):
+        return "trc", gz
+    if first.lower().startswith(_CSV_HEADER):
+        return "csv", gz
+    if _CANDUMP.match(first):
+        return "candump", gz
+    if first.startswith("date ") or any(
+        ln.startswith(("base hex", "base dec", "Begin Trigger")) for ln in lines[:8]
+    ):
+        return "asc", gz
+    raise LogReadError(path, "line 1", f"unrecognised log format (starts with {first[:40]!r})", 0)
+
+
+_CANDUMP = re.compile(r"^\((\d+\.\d+)\)\s+(\S+)\s+([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#(\S*)")
+
+
+class _CountingText:
+    """A text file that counts the lines handed out, for error positions."""
+
+    def __init__(self, f) -> None:
+        self._f = f
+        self.line = 0
+
+    def __iter__(self):
+        for line in self._f:
+            self.line += 1
+            yield line
+
+    def readline(self, *args):
+        self.line += 1
+        return self._f.readline(*args)
+
+    def __getattr__(self, name):
+        return getattr(self._f, name)
+
+
+def _candump_frames(f: _CountingText, path: Path):
+    for line in f:
+        text = line.strip()
+        if not text:
+            continue
+        m = _CANDUMP.match(text)
+        if m is None:
+            raise ValueError(f"not a candump -L line: {text[:60]!r}")
+        ts, channel, ident, payload = m.groups()
+        can_id = int(ident, 16)
+        if len(ident) == 8 and can_id & 0x20000000:
+            yield can.Message(
+                timestamp=float(ts),
+                channel=channel,
+                is_error_frame=True,
+                arbitration_id=can_id & 0x1FFFFFFF,
+            )
+            continue
+        extended = len(ident) == 8
+        if payload.startswith("#"):  # CAN FD: ID##<flags><data>
+            data = bytes.fromhex(payload[2:])
+            yield can.Message(
+                timestamp=float(ts),
+                channel=channel,
+                arbitration_id=can_id,
+                is_extended_id=extended,
+                is_fd=True,
+                data=data,
+            )
+        elif payload.upper().startswith("R"):
+            yield can.Message(
+                timestamp=float(ts),
+                channel=channel,
+                arbitration_id=can_id,
+                is_extended_id=extended,
+                is_remote_frame=True,
+            )
+        else:
+            data = bytes.fromhex(payload)
+            if len(data) > 8:
+                raise ValueError(f"{len(data)} data bytes in a classical CAN frame")
+            yield can.Message(
+                timestamp=float(ts),
+                channel=channel,
+                arbitration_id=can_id,
+                is_extended_id=extended,
+                data=data,
+            )
+
+
+def read_frames(path: Path) -> Iterator[can.Message]:
+    """Every frame of a log (candump -L, ASC, BLF, TRC or python-can CSV, optionally gzipped).
+
+    Raises :class:`LogReadError` naming the line (text formats) or byte offset (BLF) where
+    reading failed; the frames before it have been yielded.
+    """
+    fmt, gz = detect_format(path)
+    count = 0
+    if fmt == "blf":
+        raw = gzip.open(path, "rb") if gz else path.open("rb")
+        size = path.stat().st_size
+        try:
+            reader = can.BLFReader(raw)
+            for message in reader:
+                count += 1
+                yield message
+        except Exception as exc:  # python-can raises struct.error, BLFParseError, zlib.error
+            where = "unknown byte" if raw.closed else f"byte {raw.tell()}"
+            raise LogReadError(path, where, f"corrupt BLF: {exc}", count) from None
+        finally:
+            raw.close()
+        if not gz and size < reader.file_size:  # python-can stops quietly at a short file
+            raise LogReadError(
+                path,
+                f"byte {size}",
+                f"truncated BLF: the header says {reader.file_size} bytes",
+                count,
+            )
+        return
+    text = gzip.open(path, "rt", encoding="latin-1") if gz else path.open(encoding="latin-1")
+    counted = _CountingText(text)
+    try:
+        if fmt == "candump":
+            frames = _candump_frames(counted, path)
+        else:
+            reader = {"asc": can.ASCReader, "trc": can.TRCReader, "csv": can.CSVReader}[fmt]
+            frames = iter(reader(counted))
+        for message in frames:
+            count += 1
+            yield message
+    except (ValueError, IndexError, KeyError, EOFError, OSError) as exc:
+        raise LogReadError(
+            path, f"line {counted.line}", str(exc) or type(exc).__name__, count
+        ) from None
+    finally:
+        text.close()
