@@ -1,4 +1,4 @@
-"""The fast engine model of eq. 3.24 as a plant: shaft dynamics plus gear pump, voltage in, speed out.
+"""The fast engine model of eq. 3.24 as a plant: shaft dynamics plus pump, voltage in, speed out.
 
 dN'' = theta0 dN + theta1 dN' + theta2 dV + theta3 dN dV + theta4 dN^2 dV      (3.8, 3.24)
 
