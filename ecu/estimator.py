@@ -1,0 +1,72 @@
+"""Online estimator: identification model (eq. 4.7) and parameter update laws (eq. 4.31).
+
+x = [dN, dN'] (deviations from trim, %N and %N/s), u = dV (V), f(x, u) = [dN dV, dN^2 dV].
+Row 1 of A_p and Theta_f is kinematic (dN/dt = dN') and known, so only row 2 is adapted; with a
+diagonal P the laws of eq. 4.31 for row 2 read, per step of length dt (forward Euler):
+
+    A_p-hat[2][i]  -= Gamma_A[i] P22 x_i     e2 dt
+    Lambda-hat     -= Gamma_L    P22 u       e2 dt
+    Theta_f-hat[2][i] -= Gamma_T[i] P22 f_i  e2 dt
+
+The ECU measures N only: the speed rate is a central difference over +-m samples, so the
+estimator runs m + 1 ticks late on the interval [j, j+1], with x at its ends and the input u[j]
+held over it. The identification model is discretised by the trapezoidal rule (Tustin) with
+x, f at the interval's mid point (plain Euler would bias Lambda-hat by about dt/2 A22), and the
+update laws are semi-implicit Euler: mid-interval regressors times the error at the interval's
+end, computed with the parameters of the previous step. Explicit Euler (error at the start)
+diverges with the document's sec. 4.2 gains at 100 Hz (Gamma_Theta2 f2^2 dt is about 50);
+the semi-implicit form is stable there, as the continuous laws are.
+
+Robustness (each switchable): Lambda-hat floor (projection), dead zone on |e2| sized from the
+rate noise, and no adaptation when the caller says so (limiter owns the command, V saturates).
+"""
+
+from __future__ import annotations
+
+from ecu.fixedpoint import acc_q40, sat32
+from ecu.params import FirmwareParams
+from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
+
+
+def estimator_step(
+    s: EcuState, p: FirmwareParams, n0: int, v0: int, n1: int, v1: int, u: int, adapt: int
+) -> None:
+    """One interval of eq. 4.7 / 4.31. n, v: dN, dN' at the interval ends (Q7.24); u: dV (Q7.24)."""
+    th = s.theta_q24
+    n_mid = (n0 + n1) >> 1
+    v_mid = (v0 + v1) >> 1
+    f1 = sat32((u * n_mid) >> 24)  # f1 = dN dV, mid interval (Q7.24)
+    nn_q16 = ((n0 * n0) >> 33) + ((n1 * n1) >> 33)  # (dN0^2 + dN1^2) / 2 (Q15.16)
+    f2_q16 = sat32((u * nn_q16) >> 24)  # f2 = dN^2 dV, mid interval (Q15.16)
+    # eq. 4.7 row 2 forcing: (A_p-hat - A_m) x + B_p Lambda-hat u + Theta_f-hat f
+    c2 = sat32(
+        (((th[AP21] - p.am21_q24) * n_mid) >> 24)
+        + (((th[AP22] - p.am22_q24) * v_mid) >> 24)
+        + ((th[LAM] * u) >> 24)
+        + ((th[TH1] * f1) >> 24)
+        + ((th[TH2] * f2_q16) >> 16)
+    )
+    # x-hat[k+1] = M x-hat[k] + h c2 (Tustin of x-hat' = A_m x-hat + [0, c2])
+    xh1 = s.xh1_q24
+    xh2 = s.xh2_q24
+    s.xh1_q24 = sat32(
+        ((p.idm11_q24 * xh1) >> 24) + ((p.idm12_q24 * xh2) >> 24) + ((p.idh1_q24 * c2) >> 24)
+    )
+    s.xh2_q24 = sat32(
+        ((p.idm21_q24 * xh1) >> 24) + ((p.idm22_q24 * xh2) >> 24) + ((p.idh2_q24 * c2) >> 24)
+    )
+    e2 = sat32(s.xh2_q24 - v1)  # e_I row 2 (eq. 4.8) at the end of the interval
+    s.e2_q24 = e2
+    if not adapt:
+        return
+    if p.dead_zone_on and -p.dead_zone_q24 < e2 < p.dead_zone_q24:
+        return
+    # eq. 4.31: increments -(Gamma P dt) phi e2 in Q7.40 (Q7.24 x Q3.28 >> 12)
+    acc_q40(th, s.theta_ext, AP21, (-sat32((n_mid * e2) >> 24) * p.g_a1_q28) >> 12)
+    acc_q40(th, s.theta_ext, AP22, (-sat32((v_mid * e2) >> 24) * p.g_a2_q28) >> 12)
+    acc_q40(th, s.theta_ext, LAM, (-sat32((u * e2) >> 24) * p.g_lam_q28) >> 12)
+    acc_q40(th, s.theta_ext, TH1, (-sat32((f1 * e2) >> 24) * p.g_th1_q28) >> 12)
+    acc_q40(th, s.theta_ext, TH2, (-sat32((f2_q16 * e2) >> 16) * p.g_th2_q28) >> 12)
+    if p.lambda_floor_on and th[LAM] < p.lambda_floor_q24:  # projection onto Lambda >= floor
+        th[LAM] = p.lambda_floor_q24
+        s.theta_ext[LAM] = 0

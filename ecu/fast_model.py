@@ -1,0 +1,34 @@
+"""Fast engine model (eq. 3.5) run as an observer, in deviations from the trim point.
+
+    dN'  = v                                                     + L1 (N_meas - N-hat)
+    v'   = A21 dN + A22 v + Lambda dV + Th1 dN dV + Th2 dN^2 dV  + L2 (N_meas - N-hat)
+
+with the estimator's current parameters (eq. 3.5 in the form of eq. 4.6), forward Euler.
+While the speed sensor is valid the correction keeps the model on the measurement; when it
+fails the correction is switched off and the model runs open loop as the analytical redundancy
+that replaces the sensor.
+"""
+
+from __future__ import annotations
+
+from ecu.fixedpoint import sat32
+from ecu.params import FirmwareParams
+from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
+
+
+def observer_step(s: EcuState, p: FirmwareParams, u: int, dn_meas: int, valid: int) -> None:
+    """Advance the observer one tick with input u (Q7.24 V deviation)."""
+    th = s.theta_q24
+    n = s.obs_n_q24
+    v = s.obs_v_q24
+    innov = sat32(dn_meas - n) if valid else 0
+    th2_n = (th[TH2] * n) >> 24
+    acc = (
+        ((th[AP21] * n) >> 24)
+        + ((th[AP22] * v) >> 24)
+        + ((th[LAM] * u) >> 24)
+        + ((((th[TH1] * n) >> 24) * u) >> 24)
+        + ((((th2_n * n) >> 24) * u) >> 24)
+    )
+    s.obs_n_q24 = sat32(n + ((p.dt_q24 * v) >> 24) + ((p.obs_l1_dt_q24 * innov) >> 24))
+    s.obs_v_q24 = sat32(v + ((p.dt_q24 * sat32(acc)) >> 24) + ((p.obs_l2_dt_q24 * innov) >> 24))

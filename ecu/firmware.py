@@ -1,0 +1,351 @@
+"""The ECU firmware: one state object, one ``tick(inputs) -> outputs`` (inputs, outputs, state
+and parameters around one step, as Embedded Coder and PX4 lay it out).
+
+Inputs and outputs are raw integers in the CAN contract's units. The tick allocates nothing that
+survives it: the output record is reused, state lives in preallocated slots and int32 arrays,
+and the firmware path uses integers only. Order of computation, top to bottom:
+
+1. frame freshness (E2E status per frame kind): latch fresh values, age the others;
+2. sensor checks (speed range / rate / stuck, EGT open circuit), substitution of speed by the
+   fast-model observer when the sensor or its frame is lost;
+3. speed history and central-difference rate; demand hold / idle / shutdown on demand loss;
+4. protection trips (overspeed, flameout, EGT over maximum, pump current) and mode transition;
+5. in RUN: estimator (eq. 4.7/4.31), speed controller (MRAC eq. 5.4/5.16, PID or open loop),
+   reference model (eq. 5.18-5.19), min/max selection with limit loops, voltage limits and slew,
+   observer (eq. 3.5), pump driver (PWM duty from the measured supply);
+6. telemetry and fault word.
+"""
+
+from __future__ import annotations
+
+from ecu import faults as F
+from ecu import modes as M
+from ecu.estimator import estimator_step
+from ecu.fast_model import observer_step
+from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, take_sat_events
+from ecu.limiters import OWNER_SPEED, reset_loops, select_voltage
+from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
+from ecu.params import (
+    CTRL_MRAC,
+    CTRL_PID,
+    RATE_BUF_LEN,
+    EcuParams,
+    FirmwareParams,
+    compile_params,
+)
+from ecu.pid import pid_control, pid_track
+from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv
+from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, N_THETA, TH1, TH2, EcuState
+
+# E2E receiver status per frame, as passed in by the node (AUTOSAR Profile 1/11 states)
+E2E_OK = 0
+E2E_REPEATED = 1
+E2E_WRONGSEQUENCE = 2
+E2E_WRONGCRC = 3
+E2E_NONEWDATA = 4
+
+RPM_PER_PCT = 1125  # 112,500 rpm = 100 %N
+AGE_MAX = 1 << 30
+TRIP_FAULT = F.OVERSPEED | F.EGT_OVERTEMP | F.PUMP_STALL | F.PUMP_DRY
+
+
+class EcuInputs:
+    """One tick's inputs, raw integers as the CAN driver delivers them."""
+
+    __slots__ = (
+        "tick",  # lockstep tick number of the sensor frame
+        "speed_rpm",  # shaft speed, 1 rpm per count
+        "egt_dk",  # EGT, 0.1 K per count
+        "supply_mv",  # pump supply (battery) voltage, mV
+        "pump_ma",  # pump current, mA
+        "demand_cpct",  # speed demand, 0.01 %N_max per count
+        "open_loop_mv",  # pump voltage demand for the open-loop controller, mV
+        "arm",  # arm request bit
+        "stop",  # stop request bit
+        "sensor_status",  # E2E status of the sensor frame (speed, EGT)
+        "analog_status",  # E2E status of the analog frame (supply, pump current)
+        "demand_status",  # E2E status of the demand frame (demand, open loop, arm, stop)
+    )
+
+    def __init__(self) -> None:
+        for name in self.__slots__:
+            setattr(self, name, 0)
+
+
+class EcuOutputs:
+    """One tick's outputs (the same object is reused every tick)."""
+
+    __slots__ = (
+        "tick",  # echo of the input tick (lockstep answer)
+        "duty_cpct",  # pump PWM duty, 0.01 % per count (0..10000)
+        "pump_mv",  # pump voltage aimed for, mV
+        "pump_enable",  # pump driver enable bit
+        "mode",  # OFF=0, ARMED=1, RUN=2, SHUTDOWN=3, FAULT=4
+        "fault_word",  # 16-bit fault word (ecu.faults)
+        "sat_events",  # saturation events since start-up (int32, saturating)
+        "ap21_q24", "ap22_q24",  # A_p-hat row 2 (Q7.24)
+        "lambda_q24",  # Lambda-hat (Q7.24)
+        "theta21_q24", "theta22_q24",  # Theta_f-hat row 2 (Q7.24)
+        "kx1_q24", "kx2_q24", "kr_q24", "kf1_q24", "kf2_q24",  # MRAC gains (Q7.24)
+        "pump_health_pm",  # Lambda-hat / commissioning Lambda, 0.1 % per count
+        "nref_cpct",  # reference-model speed, 0.01 %N per count
+        "n_cpct",  # speed used by the control (measured or substituted), 0.01 %N per count
+        "owner",  # which loop owns the pump command (ecu.limiters.OWNER_*)
+    )  # fmt: skip
+
+    def __init__(self) -> None:
+        for name in self.__slots__:
+            setattr(self, name, 0)
+
+
+def _q24_to_cpct(x_q24: int) -> int:
+    """Q7.24 %N -> 0.01 %N per count, rounded."""
+    return (x_q24 * 100 + (1 << 23)) >> 24
+
+
+class Ecu:
+    """The firmware. ``Ecu(params)`` powers up in OFF; ``tick(inputs)`` runs one control step."""
+
+    def __init__(self, params: EcuParams | FirmwareParams | None = None) -> None:
+        if params is None:
+            params = EcuParams()
+        self.p = params if isinstance(params, FirmwareParams) else compile_params(params)
+        self.s = EcuState()
+        self.out = EcuOutputs()
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-on initialisation (the only way out of a latched FAULT)."""
+        s = self.s
+        p = self.p
+        for name in EcuState.__slots__:
+            v = getattr(s, name)
+            if isinstance(v, int):
+                setattr(s, name, 0)
+        for k in range(N_THETA):
+            s.theta_q24[k] = p.init_theta_q24[k]
+            s.theta_ext[k] = 0
+        for k in range(RATE_BUF_LEN):
+            s.n_hist_rpm[k] = 0
+            s.u_hist_q24[k] = 0
+        s.supply_mv = p.supply_nominal_mv
+        s.demand_q24 = p.idle_q24
+        s.mode = M.OFF
+        take_sat_events()
+
+    def _rate_q24(self, age: int) -> int:
+        """Central difference of speed at the sample `age` ticks old, %N/s (Q7.24)."""
+        s = self.s
+        p = self.p
+        m = p.rate_half_window
+        i_new = (s.hist_idx + RATE_BUF_LEN - age + m) % RATE_BUF_LEN
+        i_old = (s.hist_idx + RATE_BUF_LEN - age - m) % RATE_BUF_LEN
+        d_rpm = s.n_hist_rpm[i_new] - s.n_hist_rpm[i_old]
+        return div_trunc((d_rpm * p.rpm_to_q24_k * p.rate_hz) >> 16, 2 * m)
+
+    def _dn_q24(self, age: int) -> int:
+        """Speed deviation from trim of the sample `age` ticks old (Q7.24 %N)."""
+        s = self.s
+        rpm = s.n_hist_rpm[(s.hist_idx + RATE_BUF_LEN - age) % RATE_BUF_LEN]
+        return sat32(((rpm * self.p.rpm_to_q24_k) >> 16) - self.p.trim_n_q24)
+
+    def tick(self, i: EcuInputs) -> EcuOutputs:
+        p = self.p
+        s = self.s
+        o = self.out
+        th = s.theta_q24
+        s.ticks = s.ticks + 1 if s.ticks < INT32_MAX else INT32_MAX
+        faults = s.faults & ~F.TRANSIENT
+        mode = s.mode
+
+        # 1-2. sensor frame: speed and EGT
+        if i.sensor_status == E2E_OK:
+            s.sensor_age = 0
+            if s.speed_seen:
+                faults |= F.speed_checks(s, p, i.speed_rpm, s.speed_rpm, s.v_applied_q24)
+            s.speed_rpm = i.speed_rpm
+            s.egt_dk = i.egt_dk
+            faults |= F.egt_open_check(s, p, i.egt_dk)
+        else:
+            s.sensor_age = s.sensor_age + 1 if s.sensor_age < AGE_MAX else AGE_MAX
+            faults |= F.SENSOR_FRAME_LOST
+        if faults & (F.SPEED_RANGE | F.SPEED_RATE | F.SPEED_STUCK):
+            s.speed_failed = 1
+        speed_ok = 1 if (s.speed_failed == 0 and s.sensor_age == 0) else 0
+        if speed_ok:
+            n_rpm = s.speed_rpm
+        else:
+            n_rpm = ((s.obs_n_q24 + p.trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24
+            if s.speed_failed:
+                faults |= F.SPEED_SUBSTITUTED
+        egt_ok = 1 if (faults & F.EGT_OPEN) == 0 else 0
+
+        # analog frame: supply voltage and pump current
+        analog_fresh = 1 if i.analog_status == E2E_OK else 0
+        if analog_fresh:
+            s.analog_age = 0
+            s.supply_mv = i.supply_mv
+            s.pump_ma = i.pump_ma
+        else:
+            s.analog_age = s.analog_age + 1 if s.analog_age < AGE_MAX else AGE_MAX
+            s.supply_mv = p.supply_nominal_mv
+            faults |= F.ANALOG_FRAME_LOST
+
+        # demand frame: hold 0.1 s, then idle, shut down after 2 s
+        if i.demand_status == E2E_OK:
+            s.demand_age = 0
+            d = div_trunc(i.demand_cpct << 24, 100)
+            s.demand_q24 = clamp(d, p.idle_q24, p.demand_max_q24)
+            s.open_loop_q24 = div_trunc(i.open_loop_mv << 24, 1000)
+            s.arm = 1 if i.arm else 0
+            s.stop = 1 if i.stop else 0
+        else:
+            s.demand_age = s.demand_age + 1 if s.demand_age < AGE_MAX else AGE_MAX
+        demand = s.demand_q24
+        if s.demand_age > p.demand_hold_ticks:
+            demand = p.idle_q24
+            faults |= F.DEMAND_LOST
+        if not egt_ok and demand > p.egt_fail_demand_q24:
+            demand = p.egt_fail_demand_q24
+
+        # 3. speed history (raw rpm) and derived signals
+        s.hist_idx = (s.hist_idx + 1) % RATE_BUF_LEN
+        s.n_hist_rpm[s.hist_idx] = n_rpm
+        s.u_hist_q24[s.hist_idx] = 0
+        if s.speed_seen < RATE_BUF_LEN:
+            s.speed_seen += 1
+        m = p.rate_half_window
+        n_q24 = sat32((n_rpm * p.rpm_to_q24_k) >> 16)
+        dn = sat32(n_q24 - p.trim_n_q24)
+        if not speed_ok:
+            rate = s.obs_v_q24
+        elif s.speed_seen > 2 * m:
+            rate = self._rate_q24(m)
+        else:
+            rate = 0
+        s.n_q24 = n_q24
+        s.rate_q24 = rate
+
+        # 4. protection trips and mode
+        running = 1 if (mode == M.ARMED or mode == M.RUN) else 0
+        bad = running and n_rpm > p.overspeed_rpm
+        s.overspeed_cnt = F.persist(s.overspeed_cnt, bad, p.overspeed_ticks)
+        if s.overspeed_cnt >= p.overspeed_ticks:
+            faults |= F.OVERSPEED
+        bad = mode == M.RUN and n_rpm < p.flameout_rpm
+        s.flameout_cnt = F.persist(s.flameout_cnt, bad, p.flameout_ticks)
+        if s.flameout_cnt >= p.flameout_ticks:
+            faults |= F.FLAMEOUT
+        bad = running and egt_ok and s.egt_dk > p.egt_max_dk
+        s.egt_over_cnt = F.persist(s.egt_over_cnt, bad, p.egt_max_ticks)
+        if s.egt_over_cnt >= p.egt_max_ticks:
+            faults |= F.EGT_OVERTEMP
+        if mode == M.RUN and analog_fresh:
+            faults |= pump_current_checks(s, p, s.pump_ma, s.v_applied_q24)
+        trip_fault = 1 if (faults & TRIP_FAULT) else 0
+        if running and s.sensor_age > p.sensor_loss_ticks:
+            trip_fault = 1
+        trip_shutdown = 1 if (faults & F.FLAMEOUT) else 0
+        if s.demand_age >= p.demand_shutdown_ticks:
+            trip_shutdown = 1
+        new_mode = M.next_mode(
+            mode,
+            s.arm,
+            s.stop,
+            1 if n_rpm >= p.run_entry_rpm else 0,
+            1 if s.demand_age == 0 else 0,
+            trip_fault,
+            trip_shutdown,
+            1 if n_rpm < p.shutdown_done_rpm else 0,
+        )
+        if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless start at trim voltage
+            reset_loops(s, p.trim_v_q24)
+            s.hist_fill = 0
+            s.pid_i_q24 = 0
+            s.xm1_q24 = dn
+            s.xm2_q24 = 0
+            s.obs_n_q24 = dn
+            s.obs_v_q24 = rate
+        s.mode = new_mode
+
+        # 5. control
+        if new_mode == M.RUN:
+            if s.hist_fill < RATE_BUF_LEN:
+                s.hist_fill += 1
+            adapt = speed_ok
+            if p.freeze_on and (s.owner != OWNER_SPEED or s.v_saturated):
+                adapt = 0
+            if speed_ok and s.hist_fill > m + 1 and s.speed_seen > 2 * m + 1:
+                estimator_step(
+                    s,
+                    p,
+                    self._dn_q24(m + 1),
+                    self._rate_q24(m + 1),
+                    self._dn_q24(m),
+                    self._rate_q24(m),
+                    s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - m - 1) % RATE_BUF_LEN],
+                    adapt,
+                )
+            r = sat32(demand - p.trim_n_q24)
+            if p.controller == CTRL_MRAC:
+                u = mrac_control(s, p, dn, rate, r)
+                mrac_gain_update(s, p)
+            elif p.controller == CTRL_PID:
+                u = pid_control(s, p, sat32(demand - n_q24), rate)
+            else:
+                u = sat32(s.open_loop_q24 - p.trim_v_q24)
+            reference_model_step(s, p, r)
+            e_dk = clamp(p.egt_limit_dk - s.egt_dk, -1000, 1000)
+            v = select_voltage(
+                s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, rate
+            )
+            u_applied = sat32(v - p.trim_v_q24)
+            if p.controller == CTRL_PID:
+                pid_track(s, p, sat32(demand - n_q24), rate, u_applied)
+            observer_step(s, p, u_applied, dn, speed_ok)
+            s.u_hist_q24[s.hist_idx] = u_applied
+            pump_mv = volts_q24_to_mv(v)
+            duty = pump_duty(s, p, pump_mv, s.supply_mv)
+            enable = 1
+            if s.owner != OWNER_SPEED:
+                faults |= F.LIMITER_ACTIVE
+            if s.v_saturated:
+                faults |= F.PUMP_SATURATED
+        else:
+            s.v_applied_q24 = 0
+            s.xm1_q24 = dn
+            s.xm2_q24 = 0
+            s.obs_n_q24 = dn
+            s.obs_v_q24 = rate
+            pump_mv = 0
+            duty = 0
+            enable = 0
+
+        # 6. health, telemetry, fault word
+        health = F.pump_health_pm(th[LAM], p.lambda_comm_q24)
+        if health < p.health_alarm_pm:
+            faults |= F.PUMP_HEALTH
+        s.faults = faults
+        s.sat_events = sat32(s.sat_events + take_sat_events())
+        o.tick = i.tick
+        o.duty_cpct = duty
+        o.pump_mv = pump_mv
+        o.pump_enable = enable
+        o.mode = new_mode
+        o.fault_word = faults & 0xFFFF
+        o.sat_events = s.sat_events
+        o.ap21_q24 = th[AP21]
+        o.ap22_q24 = th[AP22]
+        o.lambda_q24 = th[LAM]
+        o.theta21_q24 = th[TH1]
+        o.theta22_q24 = th[TH2]
+        o.kx1_q24 = th[KX1]
+        o.kx2_q24 = th[KX2]
+        o.kr_q24 = th[KR]
+        o.kf1_q24 = th[KF1]
+        o.kf2_q24 = th[KF2]
+        o.pump_health_pm = health
+        o.nref_cpct = _q24_to_cpct(s.xm1_q24 + p.trim_n_q24)
+        o.n_cpct = _q24_to_cpct(n_q24)
+        o.owner = s.owner
+        return o

@@ -1,0 +1,161 @@
+"""Fixed-point primitives: named Q formats on 32-bit signed values, 64-bit intermediates.
+
+Conventions (CMSIS-DSP style, portable to C line by line):
+
+- Every stored variable is a 32-bit signed integer whose format is in its name:
+  ``_q24`` is Q7.24 (range +-128, resolution 2^-24 ~ 6e-8; engineering values in %N, %N/s, V,
+  K and all adaptive parameters), ``_q16`` is Q15.16 (range +-32768; squared speed deviations
+  and temperatures), ``_q28`` is Q3.28 (range +-8; learning gain times time step), ``_q40``
+  is a 64-bit increment with 40 fractional bits fed to a split accumulator (below).
+- Products are formed in 64 bits (``int64_t``) and truncated by arithmetic shift, which is
+  what Python's ``>>`` on ints and ARM's ASR do (rounds toward minus infinity). The ``_round``
+  variants add half an LSB first (round to nearest, ties up).
+- Division truncates toward zero as C's ``/`` does (Python's ``//`` floors, so it has a helper).
+  Division by zero is explicit: it returns the saturated value with the dividend's sign (0 for
+  0/0) and counts a saturation event.
+- Every store into a typed variable goes through :func:`sat32` (or a ``_sat`` primitive), which
+  clamps instead of wrapping and counts the event in a sticky counter, like the ARM Q flag.
+  The firmware reads and clears it once per tick with :func:`take_sat_events`.
+- Slow integrators (parameter update laws, where ``Gamma * x * e * dt`` is a few LSB of Q7.24)
+  use a split accumulator: a Q7.24 word plus a 16-bit extension word, i.e. Q7.40 in two
+  int32 words, so small increments are never lost to truncation (see :func:`acc_q40`).
+
+No float appears here; conversion from engineering units lives in :mod:`ecu.params`.
+"""
+
+from __future__ import annotations
+
+from array import array
+
+INT32_MIN = -(1 << 31)
+INT32_MAX = (1 << 31) - 1
+
+Q24 = 24  # Q7.24
+Q16 = 16  # Q15.16
+Q28 = 28  # Q3.28
+Q40 = 40  # Q7.40 (64-bit increments, split accumulators)
+ONE_Q24 = 1 << Q24
+ONE_Q16 = 1 << Q16
+ACC_EXT_BITS = Q40 - Q24  # bits held in the extension word of a split accumulator
+ACC_EXT_MASK = (1 << ACC_EXT_BITS) - 1
+
+# Sticky saturation counter (the ARM Q flag, counted): index 0 holds the events since last read.
+_SAT_EVENTS = array("q", [0])
+
+
+def take_sat_events() -> int:
+    """Return the saturation events counted since the last call and clear the counter."""
+    n = _SAT_EVENTS[0]
+    _SAT_EVENTS[0] = 0
+    return n
+
+
+def sat32(x: int) -> int:
+    """Store a 64-bit intermediate into int32: clamp (never wrap) and count a clamp."""
+    if x > INT32_MAX:
+        _SAT_EVENTS[0] += 1
+        return INT32_MAX
+    if x < INT32_MIN:
+        _SAT_EVENTS[0] += 1
+        return INT32_MIN
+    return x
+
+
+def clamp(x: int, lo: int, hi: int) -> int:
+    """Limit to [lo, hi]: a control limit, not an overflow, so it is not counted."""
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+
+def add_sat(a: int, b: int) -> int:
+    """a + b, saturated to int32."""
+    return sat32(a + b)
+
+
+def sub_sat(a: int, b: int) -> int:
+    """a - b, saturated to int32."""
+    return sat32(a - b)
+
+
+def neg_sat(a: int) -> int:
+    """-a, saturated (-INT32_MIN does not fit)."""
+    return sat32(-a)
+
+
+def abs_sat(a: int) -> int:
+    """|a|, saturated (|INT32_MIN| does not fit)."""
+    return sat32(-a if a < 0 else a)
+
+
+def mul_q(a: int, b: int, q: int) -> int:
+    """(a * b) >> q: 64-bit product truncated by arithmetic shift, saturated to int32."""
+    return sat32((a * b) >> q)
+
+
+def mul_q_round(a: int, b: int, q: int) -> int:
+    """(a * b + 2^(q-1)) >> q: 64-bit product rounded to nearest (ties up), saturated."""
+    return sat32((a * b + (1 << (q - 1))) >> q)
+
+
+def mul_q24(a: int, b: int) -> int:
+    """Q7.24 x Q7.24 -> Q7.24, truncated."""
+    return sat32((a * b) >> Q24)
+
+
+def mul_q24_round(a: int, b: int) -> int:
+    """Q7.24 x Q7.24 -> Q7.24, rounded to nearest."""
+    return sat32((a * b + (1 << (Q24 - 1))) >> Q24)
+
+
+def shl_sat(a: int, n: int) -> int:
+    """a << n (0 <= n < 32), saturated to int32."""
+    return sat32(a << n)
+
+
+def shr(a: int, n: int) -> int:
+    """Arithmetic shift right (truncation toward minus infinity), as ARM ASR."""
+    return a >> n
+
+
+def shr_round(a: int, n: int) -> int:
+    """Arithmetic shift right with round to nearest (ties up), saturated (n >= 1)."""
+    return sat32((a + (1 << (n - 1))) >> n)
+
+
+def div_trunc(a: int, b: int) -> int:
+    """a / b with C semantics (truncation toward zero), saturated; b == 0 saturates explicitly."""
+    if b == 0:
+        _SAT_EVENTS[0] += 1
+        if a > 0:
+            return INT32_MAX
+        if a < 0:
+            return INT32_MIN
+        return 0
+    q = (a if a >= 0 else -a) // (b if b >= 0 else -b)
+    if (a < 0) != (b < 0):
+        q = -q
+    return sat32(q)
+
+
+def div_q(a: int, b: int, q: int) -> int:
+    """(a << q) / b with C semantics: a Qm.q quotient of two values in the same format."""
+    return div_trunc(a << q, b)
+
+
+def acc_q40(hi: array, lo: array, i: int, inc_q40: int) -> None:
+    """Split accumulator: (hi[i], lo[i]) is a Q7.40 value in two int32 words; add a Q7.40 step.
+
+    hi[i] is the Q7.24 value the firmware uses, lo[i] the 16 bits below it (0..65535). The sum is
+    formed in 64 bits; on saturation the extension word is cleared.
+    """
+    total = (hi[i] << ACC_EXT_BITS) + lo[i] + inc_q40
+    h = total >> ACC_EXT_BITS
+    if h > INT32_MAX or h < INT32_MIN:
+        hi[i] = sat32(h)
+        lo[i] = 0
+        return
+    hi[i] = h
+    lo[i] = total & ACC_EXT_MASK

@@ -1,0 +1,87 @@
+"""Limit protection: limit loops combined with the speed loop by min/max selection.
+
+    V = max( V_decel, min( V_speed, V_egt, V_accel, V_nlimit ) ),  then [V_min, V_max] and slew.
+
+Each limit loop is a PI in velocity (incremental) form on its own error, started from the
+voltage applied last tick:  V_loop = V_applied[k-1] + Kp (e[k] - e[k-1]) + Ki dt e[k]  (forward
+Euler). A loop that is not selected therefore tracks the applied voltage by construction
+(integrator tracking), and takes over bumplessly when its error changes sign. The speed loop's
+own tracking is done by the controller (PID back-calculation; MRAC has no integrator).
+"""
+
+from __future__ import annotations
+
+from ecu.fixedpoint import clamp, sat32
+from ecu.params import FirmwareParams
+from ecu.state import EcuState
+
+OWNER_SPEED = 0
+OWNER_EGT = 1
+OWNER_ACCEL = 2
+OWNER_NLIMIT = 3
+OWNER_DECEL = 4
+
+
+def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:
+    return sat32(v_prev + ((kp_q24 * (e - e_prev)) >> 24) + ((ki_dt_q24 * e) >> 24))
+
+
+def select_voltage(
+    s: EcuState,
+    p: FirmwareParams,
+    v_speed: int,
+    egt_err_q24: int,
+    egt_ok: int,
+    n_q24: int,
+    rate_q24: int,
+) -> int:
+    """Min/max selection, voltage limits and slew; sets s.owner, s.v_saturated, s.v_applied_q24."""
+    if not p.limiters_on:
+        s.owner = OWNER_SPEED
+        s.v_saturated = 0
+        s.v_applied_q24 = v_speed
+        return v_speed
+    v_prev = s.v_applied_q24
+    v = v_speed
+    owner = OWNER_SPEED
+    if egt_ok:
+        v_egt = _loop(v_prev, egt_err_q24, s.egt_e_prev_q24, p.egt_kp_q24, p.egt_ki_dt_q24)
+        s.egt_e_prev_q24 = egt_err_q24
+        if v_egt < v:
+            v = v_egt
+            owner = OWNER_EGT
+    e = sat32(p.accel_max_q24 - rate_q24)
+    v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+    s.acc_e_prev_q24 = e
+    if v_acc < v:
+        v = v_acc
+        owner = OWNER_ACCEL
+    e = sat32(p.n_limit_q24 - n_q24)
+    v_nl = _loop(v_prev, e, s.nlim_e_prev_q24, p.n_limit_kp_q24, p.n_limit_ki_dt_q24)
+    s.nlim_e_prev_q24 = e
+    if v_nl < v:
+        v = v_nl
+        owner = OWNER_NLIMIT
+    e = sat32(-p.decel_max_q24 - rate_q24)
+    v_dec = _loop(v_prev, e, s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+    s.dec_e_prev_q24 = e
+    if v_dec > v:
+        v = v_dec
+        owner = OWNER_DECEL
+    v_lim = clamp(v, p.v_min_q24, p.v_max_q24)
+    v_lim = clamp(v_lim, v_prev - p.v_slew_q24, v_prev + p.v_slew_q24)
+    s.v_saturated = 1 if v_lim != v else 0
+    s.owner = owner
+    s.v_applied_q24 = v_lim
+    return v_lim
+
+
+def reset_loops(s: EcuState, v_q24: int) -> None:
+    """Start the limit loops from voltage v with no error history (entry into RUN)."""
+    s.v_applied_q24 = v_q24
+    s.egt_e_prev_q24 = 0
+    s.acc_e_prev_q24 = 0
+    s.dec_e_prev_q24 = 0
+    s.nlim_e_prev_q24 = 0
+    s.owner = OWNER_SPEED
+    s.v_saturated = 0

@@ -1,0 +1,504 @@
+"""ECU parameters: one structure in engineering units, named presets, and its Q-format compilation.
+
+``EcuParams`` is what a calibration engineer edits (floats, SI-ish units). ``compile_params``
+checks it (refusing unsafe values with the field's name) and converts it once, at start-up, into
+``FirmwareParams``: the integer constants the firmware tick reads (what a C build would hold in
+a ``const`` struct). This module is the only place where engineering values become Q formats;
+it is configuration-time code, not part of the firmware path.
+
+Discretisation (all stated here, computed for the configured rate):
+- identification model (eq. 4.7) and reference model (eq. 5.18-5.19): trapezoidal (Tustin) on
+  the state with the input held over the step; stable at any rate for a Hurwitz A_m;
+- parameter and gain update laws (eq. 4.31, 5.16), PID integrator, limit loops, fast-model
+  observer: forward Euler with dt = 1 / rate_hz.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+
+from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q24, Q28
+
+N_MAX_RPM = 112_500  # 100 %N
+RATE_MIN_HZ = 50
+RATE_MAX_HZ = 1000
+RATE_BUF_LEN = 2 * (RATE_MAX_HZ // 100) + 2  # central-difference ring, enough for 1000 Hz
+
+CONTROLLERS = ("mrac", "pid", "open_loop")
+CTRL_MRAC = 0
+CTRL_PID = 1
+CTRL_OPEN_LOOP = 2
+
+# eq. 3.23: fast-model parameters identified offline on the aero-thermal model
+AP_ROW2_EQ_3_23 = (-1.8054, -2.3360)
+LAMBDA_EQ_3_23 = 4.8220
+THETA_ROW2_EQ_3_23 = (-0.1835, -0.0001)
+
+
+@dataclass(frozen=True)
+class EcuParams:
+    """All ECU parameters in engineering units (N in %N_max, V in volts, T in K, time in s)."""
+
+    rate_hz: int = 100
+    controller: str = "mrac"
+    trim_n_pct: float = 89.68  # N0, the fast model's trim point
+    trim_v: float = 6.0  # V0, pump voltage at trim (depends on the plant's pump table)
+
+    # online estimator (eq. 4.7, 4.31); row 1 of A_p and Theta_f is kinematic and not adapted
+    am_row2: tuple[float, float] = (-25.0, -10.0)  # identification model A_m row 2
+    p22: float = 1.0  # P[1][1]; P[0][0] only weighs the row-1 error, which is not adapted
+    gamma_a: tuple[float, float] = (3.0, 3.0)
+    gamma_lambda: float = 0.017
+    gamma_theta: tuple[float, float] = (0.004, 8.0)
+    init_ap_row2: tuple[float, float] = AP_ROW2_EQ_3_23
+    init_lambda: float = LAMBDA_EQ_3_23
+    init_theta_row2: tuple[float, float] = THETA_ROW2_EQ_3_23
+    lambda_commissioned: float = LAMBDA_EQ_3_23  # reference for pump health
+    pump_health_alarm: float = 0.70  # alarm below this fraction of the commissioned Lambda
+    rate_window_s: float = 0.02  # central difference of speed over +-window/2
+    # robustness (each can be switched off to reproduce the document exactly)
+    lambda_floor_on: bool = True
+    lambda_floor: float = 1.0
+    dead_zone_on: bool = True
+    speed_noise_rpm: float = 3.0  # speed sensor noise (1 sigma); sizes the dead zone
+    dead_zone_sigmas: float = 3.0
+    freeze_on: bool = True  # no adaptation while a limiter owns the command or V saturates
+
+    # indirect MRAC (eq. 5.4, 5.15-5.16, 5.18-5.19)
+    ref_wn: float = 5.0
+    ref_zeta: float = 1.0
+    gamma_x: tuple[float, float] = (0.1, 0.1)
+    gamma_r: float = 0.1
+    gamma_f: tuple[float, float] = (0.1, 0.1)
+    init_kx: tuple[float, float] = (-4.809, -1.589)
+    init_kr: float = 5.185
+    init_kf: tuple[float, float] = (0.03805, 0.00002)
+    u_den_min: float = 0.5  # floor of (1 - K_f g(dN)) when solving eq. 5.4 for u
+
+    # PID baseline (chapter 6)
+    pid_kp: float = 2.0
+    pid_ki: float = 1.0
+    pid_kd: float = 0.5
+
+    # demand
+    idle_pct: float = 35.0
+    demand_max_pct: float = 100.0
+
+    # protection (defaults provisional until the aero-thermal running line is available)
+    limiters_on: bool = True
+    egt_limit_k: float = 1100.0
+    egt_kp: float = 0.01  # V per K
+    egt_ki: float = 0.05  # V per K s
+    egt_max_k: float = 1150.0  # shutdown above this ...
+    egt_max_time_s: float = 1.0  # ... for this long
+    accel_max_pct_s: float = 20.0
+    decel_max_pct_s: float = 30.0
+    rate_kp: float = 0.05  # V per (%N/s)
+    rate_ki: float = 0.5  # V per (%N/s) s
+    n_limit_pct: float = 102.0  # topping governor (min-select)
+    n_limit_kp: float = 0.5
+    n_limit_ki: float = 2.0
+    overspeed_pct: float = 105.0
+    overspeed_time_s: float = 0.5
+    flameout_margin: float = 0.10  # fraction under idle
+    flameout_time_s: float = 3.0
+    v_min: float = 0.5
+    v_max: float = 10.0
+    v_slew_v_s: float = 20.0
+
+    # pump driver
+    duty_min: float = 0.0
+    duty_max: float = 0.95
+    supply_nominal_v: float = 12.0  # used while the analog frame is lost
+    pump_stall_ma: float = 6000.0
+    pump_stall_time_s: float = 0.3
+    pump_dry_ma: float = 150.0
+    pump_dry_min_v: float = 2.0
+    pump_dry_time_s: float = 0.5
+
+    # fault detection
+    speed_valid_max_rpm: float = 140_000.0
+    speed_rate_max_pct_s: float = 200.0
+    speed_fault_time_s: float = 0.05
+    speed_stuck_time_s: float = 0.5
+    speed_stuck_dv: float = 0.5
+    egt_open_high_k: float = 1800.0
+    egt_open_low_k: float = 200.0
+    egt_fault_time_s: float = 0.1
+    egt_fail_demand_max_pct: float = 90.0
+    observer_l: tuple[float, float] = (18.0, 57.0)
+
+    # communication timeouts
+    demand_hold_s: float = 0.1
+    demand_shutdown_s: float = 2.0
+    sensor_loss_s: float = 0.2
+    run_entry_pct: float = 31.5  # ARMED -> RUN once the starter has the engine this fast
+    shutdown_done_pct: float = 10.0  # SHUTDOWN -> OFF below this
+
+
+def _doc_common(**kw: object) -> EcuParams:
+    """Document reproduction: limiters and robustness off, no speed floor or demand clamp."""
+    base = EcuParams(
+        lambda_floor_on=False,
+        dead_zone_on=False,
+        freeze_on=False,
+        limiters_on=False,
+        u_den_min=0.5,
+    )
+    return replace(base, **kw)  # type: ignore[arg-type]
+
+
+PRESETS: dict[str, EcuParams] = {
+    # practical default: MRAC from the commissioned eq. 3.23 model, robustness and limiters on
+    "default": EcuParams(),
+    # sec. 4.2: estimator alone, open-loop square wave on pump voltage (eq. 4.34-4.41)
+    "sec4_2_estimator": _doc_common(
+        controller="open_loop",
+        am_row2=(-0.36, -1.2),
+        p22=1.0,
+        gamma_a=(20.0, 20.0),
+        gamma_lambda=3.0,
+        gamma_theta=(0.01, 100.0),
+        init_ap_row2=(-1.0, -2.0),
+        init_lambda=0.5,
+        init_theta_row2=(0.0, 0.0),
+    ),
+    # sec. 5.2: indirect MRAC on the fast model (eq. 5.18-5.32)
+    "sec5_2_mrac_fast": _doc_common(
+        controller="mrac",
+        am_row2=(-25.0, -10.0),
+        gamma_a=(3.0, 3.0),
+        gamma_lambda=0.017,
+        gamma_theta=(0.004, 8.0),
+        init_ap_row2=(-0.5, -1.0),
+        init_lambda=4.3,
+        init_theta_row2=(0.0, 0.0),
+        gamma_x=(0.1, 0.1),
+        gamma_r=0.1,
+        gamma_f=(0.1, 0.1),
+        init_kx=(0.0, 0.0),
+        init_kr=0.0,
+        init_kf=(0.0, 0.0),
+    ),
+    # sec. 5.3: indirect MRAC on the aero-thermal model (eq. 5.39-5.53)
+    "sec5_3_mrac_aero": _doc_common(
+        controller="mrac",
+        am_row2=(-25.0, -10.0),
+        gamma_a=(3.0, 3.0),
+        gamma_lambda=0.015,
+        gamma_theta=(0.02, 0.1),
+        init_ap_row2=(-0.5, -1.0),
+        init_lambda=4.3,
+        init_theta_row2=(0.0, 0.0),
+        gamma_x=(0.1, 0.1),
+        gamma_r=0.1,
+        gamma_f=(0.1, 0.1),
+        init_kx=(0.0, 0.0),
+        init_kr=0.0,
+        init_kf=(0.0, 0.0),
+    ),
+}
+
+
+def preset(name: str, **overrides: object) -> EcuParams:
+    """A named preset, optionally with fields replaced."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown ECU preset {name!r}; choose from {sorted(PRESETS)}")
+    return replace(PRESETS[name], **overrides)  # type: ignore[arg-type]
+
+
+class ParamError(ValueError):
+    """A parameter is missing, malformed or unsafe; the message names the field."""
+
+
+def _q(x: float, frac_bits: int, field: str) -> int:
+    """Round a float to a Q format with `frac_bits` fractional bits, refusing out-of-range."""
+    v = round(x * (1 << frac_bits))
+    if not INT32_MIN <= v <= INT32_MAX:
+        raise ParamError(f"{field}={x!r} does not fit a 32-bit Q{31 - frac_bits}.{frac_bits}")
+    return v
+
+
+def _tustin(a21: float, a22: float, dt: float) -> tuple[tuple[float, ...], tuple[float, float]]:
+    """Trapezoidal discretisation of x' = [[0,1],[a21,a22]] x + [0,1] c with c held.
+
+    Returns M = (I - dt/2 A)^-1 (I + dt/2 A) as (m11, m12, m21, m22) and h = (I - dt/2 A)^-1 dt
+    column 2 as (h1, h2), so x[k+1] = M x[k] + h c[k].
+    """
+    h = dt / 2.0
+    # L = I - h A = [[1, -h], [-h a21, 1 - h a22]]
+    det = (1.0 - h * a22) - h * h * a21
+    li = ((1.0 - h * a22) / det, h / det, h * a21 / det, 1.0 / det)  # inverse of L
+    r = (1.0, h, h * a21, 1.0 + h * a22)  # R = I + h A
+    m = (
+        li[0] * r[0] + li[1] * r[2],
+        li[0] * r[1] + li[1] * r[3],
+        li[2] * r[0] + li[3] * r[2],
+        li[2] * r[1] + li[3] * r[3],
+    )
+    return m, (li[1] * dt, li[3] * dt)
+
+
+def _check(cond: bool, field: str, value: object, why: str) -> None:
+    if not cond:
+        raise ParamError(f"{field}={value!r}: {why}")
+
+
+def validate(p: EcuParams) -> None:
+    """Refuse malformed or unsafe parameters, naming the field."""
+    for f in fields(p):
+        v = getattr(p, f.name)
+        vals = v if isinstance(v, tuple) else (v,)
+        for x in vals:
+            if isinstance(x, float) and not math.isfinite(x):
+                raise ParamError(f"{f.name}={v!r}: not finite")
+    _check(
+        isinstance(p.rate_hz, int) and RATE_MIN_HZ <= p.rate_hz <= RATE_MAX_HZ,
+        "rate_hz",
+        p.rate_hz,
+        f"must be an integer in {RATE_MIN_HZ}..{RATE_MAX_HZ}",
+    )
+    _check(p.controller in CONTROLLERS, "controller", p.controller, f"one of {CONTROLLERS}")
+    _check(0.0 < p.trim_n_pct < 110.0, "trim_n_pct", p.trim_n_pct, "must be in (0, 110)")
+    _check(p.v_min <= p.trim_v <= p.v_max, "trim_v", p.trim_v, "must lie in [v_min, v_max]")
+    a21, a22 = p.am_row2
+    _check(a21 < 0.0 and a22 < 0.0, "am_row2", p.am_row2, "A_m must be Hurwitz (both < 0)")
+    _check(p.p22 > 0.0, "p22", p.p22, "P must be positive definite")
+    dt = 1.0 / p.rate_hz
+    for name in ("gamma_a", "gamma_theta", "gamma_x", "gamma_f"):
+        for g in getattr(p, name):
+            _check(g >= 0.0, name, getattr(p, name), "learning rates must be >= 0")
+            _check(g * p.p22 * dt < 4.0, name, getattr(p, name), "gain * P * dt must be < 4")
+    for name in ("gamma_lambda", "gamma_r"):
+        g = getattr(p, name)
+        _check(g >= 0.0, name, g, "learning rates must be >= 0")
+        _check(g * p.p22 * dt < 4.0, name, g, "gain * P * dt must be < 4")
+    _check(p.init_lambda > 0.0, "init_lambda", p.init_lambda, "pump gain must be > 0")
+    _check(p.lambda_commissioned > 0.0, "lambda_commissioned", p.lambda_commissioned, "> 0")
+    _check(0.0 < p.pump_health_alarm < 1.0, "pump_health_alarm", p.pump_health_alarm, "in (0,1)")
+    _check(p.lambda_floor > 0.0, "lambda_floor", p.lambda_floor, "must be > 0")
+    _check(
+        2.0 / p.rate_hz <= p.rate_window_s <= 0.2,
+        "rate_window_s",
+        p.rate_window_s,
+        "must span at least two ticks and at most 0.2 s",
+    )
+    _check(p.speed_noise_rpm >= 0.0, "speed_noise_rpm", p.speed_noise_rpm, "must be >= 0")
+    _check(p.ref_wn > 0.0 and p.ref_zeta > 0.0, "ref_wn", (p.ref_wn, p.ref_zeta), "must be > 0")
+    _check(0.05 <= p.u_den_min <= 1.0, "u_den_min", p.u_den_min, "must be in [0.05, 1]")
+    for name in ("pid_kp", "pid_ki", "pid_kd", "egt_kp", "egt_ki", "rate_kp", "rate_ki"):
+        _check(getattr(p, name) >= 0.0, name, getattr(p, name), "must be >= 0")
+    _check(0.0 < p.idle_pct < p.demand_max_pct, "idle_pct", p.idle_pct, "0 < idle < max demand")
+    _check(p.demand_max_pct <= 105.0, "demand_max_pct", p.demand_max_pct, "must be <= 105")
+    _check(
+        p.demand_max_pct < p.n_limit_pct < p.overspeed_pct <= 110.0,
+        "n_limit_pct",
+        p.n_limit_pct,
+        "need demand_max_pct < n_limit_pct < overspeed_pct <= 110",
+    )
+    _check(800.0 <= p.egt_limit_k < p.egt_max_k, "egt_limit_k", p.egt_limit_k, "800 <= x < max")
+    _check(p.egt_max_k < p.egt_open_high_k, "egt_max_k", p.egt_max_k, "below open-circuit level")
+    _check(p.accel_max_pct_s > 0.0, "accel_max_pct_s", p.accel_max_pct_s, "must be > 0")
+    _check(p.decel_max_pct_s > 0.0, "decel_max_pct_s", p.decel_max_pct_s, "must be > 0")
+    _check(0.0 <= p.v_min < p.v_max <= 30.0, "v_max", p.v_max, "need 0 <= v_min < v_max <= 30")
+    _check(p.v_slew_v_s > 0.0, "v_slew_v_s", p.v_slew_v_s, "must be > 0")
+    _check(0.0 <= p.duty_min < p.duty_max <= 1.0, "duty_max", p.duty_max, "0 <= min < max <= 1")
+    _check(p.supply_nominal_v > p.v_min, "supply_nominal_v", p.supply_nominal_v, "> v_min")
+    _check(p.pump_dry_ma < p.pump_stall_ma, "pump_dry_ma", p.pump_dry_ma, "below stall current")
+    _check(0.0 < p.flameout_margin < 0.5, "flameout_margin", p.flameout_margin, "in (0, 0.5)")
+    _check(
+        p.run_entry_pct >= p.idle_pct * (1.0 - p.flameout_margin),
+        "run_entry_pct",
+        p.run_entry_pct,
+        "must not be below the flameout threshold",
+    )
+    _check(0.0 < p.demand_hold_s < p.demand_shutdown_s, "demand_hold_s", p.demand_hold_s, "< 2 s")
+    for name in (
+        "egt_max_time_s",
+        "overspeed_time_s",
+        "flameout_time_s",
+        "pump_stall_time_s",
+        "pump_dry_time_s",
+        "speed_fault_time_s",
+        "speed_stuck_time_s",
+        "egt_fault_time_s",
+        "sensor_loss_s",
+        "demand_shutdown_s",
+    ):
+        _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
+    _check(min(p.observer_l) >= 0.0, "observer_l", p.observer_l, "must be >= 0")
+
+
+class FirmwareParams:
+    """Integer constants of the firmware (a C ``const`` struct). Built by :func:`compile_params`."""
+
+    __slots__ = (
+        "rate_hz", "controller", "dt_q24", "n_max_rpm", "rpm_to_q24_k", "trim_n_q24", "trim_v_q24",
+        "am21_q24", "am22_q24", "idm11_q24", "idm12_q24", "idm21_q24", "idm22_q24",
+        "idh1_q24", "idh2_q24",
+        "g_a1_q28", "g_a2_q28", "g_lam_q28", "g_th1_q28", "g_th2_q28",
+        "init_theta_q24",
+        "lambda_comm_q24", "health_alarm_pm", "rate_half_window", "rate_den",
+        "lambda_floor_on", "lambda_floor_q24", "dead_zone_on", "dead_zone_q24", "freeze_on",
+        "ref_am21_q24", "ref_am22_q24", "ref_bm2_q24",
+        "refm11_q24", "refm12_q24", "refm21_q24", "refm22_q24", "refh1_q24", "refh2_q24",
+        "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
+        "pid_kp_q24", "pid_ki_dt_q24", "pid_kd_q24",
+        "idle_q24", "demand_max_q24",
+        "limiters_on", "egt_limit_dk", "egt_kp_q24", "egt_ki_dt_q24", "egt_max_dk",
+        "egt_max_ticks", "accel_max_q24", "decel_max_q24", "rate_kp_q24", "rate_ki_dt_q24",
+        "n_limit_q24", "n_limit_kp_q24", "n_limit_ki_dt_q24", "overspeed_rpm", "overspeed_ticks",
+        "flameout_rpm", "flameout_ticks", "v_min_q24", "v_max_q24", "v_slew_q24",
+        "duty_min_cpct", "duty_max_cpct", "supply_nominal_mv",
+        "pump_stall_ma", "pump_stall_ticks", "pump_dry_ma", "pump_dry_min_q24", "pump_dry_ticks",
+        "speed_valid_max_rpm", "speed_step_max_rpm", "speed_fault_ticks", "speed_stuck_ticks",
+        "speed_stuck_dv_q24", "egt_open_high_dk", "egt_open_low_dk", "egt_fault_ticks",
+        "egt_fail_demand_q24", "obs_l1_dt_q24", "obs_l2_dt_q24",
+        "demand_hold_ticks", "demand_shutdown_ticks", "sensor_loss_ticks",
+        "run_entry_rpm", "shutdown_done_rpm",
+    )  # fmt: skip
+
+    def __init__(self, **values: object) -> None:
+        missing = set(self.__slots__) - set(values)
+        if missing:
+            raise ParamError(f"FirmwareParams: missing {sorted(missing)}")
+        for k, v in values.items():
+            setattr(self, k, v)
+
+
+def compile_params(p: EcuParams) -> FirmwareParams:
+    """Validate ``p`` and convert it to the firmware's integer constants."""
+    validate(p)
+    hz = p.rate_hz
+    dt = 1.0 / hz
+
+    def ticks(seconds: float) -> int:
+        return max(1, round(seconds * hz))
+
+    def rpm(pct: float) -> int:
+        return round(pct * N_MAX_RPM / 100.0)
+
+    idm, idh = _tustin(p.am_row2[0], p.am_row2[1], dt)
+    ref_a21, ref_a22 = -(p.ref_wn**2), -2.0 * p.ref_zeta * p.ref_wn
+    refm, refh = _tustin(ref_a21, ref_a22, dt)
+    m = max(1, round(p.rate_window_s * hz / 2.0))  # half window of the central difference
+    if 2 * m + 1 > RATE_BUF_LEN:
+        raise ParamError(f"rate_window_s={p.rate_window_s!r}: window too long for the buffer")
+    pct_per_rpm = 100.0 / N_MAX_RPM
+    # dead zone on e2: the central-difference rate noise from sensor noise sigma_N is
+    # sqrt(2) sigma_N / (2 m dt); quantisation adds 1/sqrt(12) count per sample.
+    sigma_n = math.hypot(p.speed_noise_rpm, 1.0 / math.sqrt(12.0)) * pct_per_rpm
+    sigma_rate = math.sqrt(2.0) * sigma_n / (2.0 * m * dt)
+    g_pdt = p.p22 * dt
+    return FirmwareParams(
+        rate_hz=hz,
+        controller=CONTROLLERS.index(p.controller),
+        dt_q24=_q(dt, Q24, "rate_hz"),
+        n_max_rpm=N_MAX_RPM,
+        # rpm -> Q7.24 %N: (rpm * K) >> 16 with K = 2^40 / 1125 (exact to 2^-16 LSB)
+        rpm_to_q24_k=_q(pct_per_rpm, Q24 + 16, "n_max_rpm"),
+        trim_n_q24=_q(p.trim_n_pct, Q24, "trim_n_pct"),
+        trim_v_q24=_q(p.trim_v, Q24, "trim_v"),
+        am21_q24=_q(p.am_row2[0], Q24, "am_row2"),
+        am22_q24=_q(p.am_row2[1], Q24, "am_row2"),
+        idm11_q24=_q(idm[0], Q24, "am_row2"),
+        idm12_q24=_q(idm[1], Q24, "am_row2"),
+        idm21_q24=_q(idm[2], Q24, "am_row2"),
+        idm22_q24=_q(idm[3], Q24, "am_row2"),
+        idh1_q24=_q(idh[0], Q24, "am_row2"),
+        idh2_q24=_q(idh[1], Q24, "am_row2"),
+        g_a1_q28=_q(p.gamma_a[0] * g_pdt, Q28, "gamma_a"),
+        g_a2_q28=_q(p.gamma_a[1] * g_pdt, Q28, "gamma_a"),
+        g_lam_q28=_q(p.gamma_lambda * g_pdt, Q28, "gamma_lambda"),
+        g_th1_q28=_q(p.gamma_theta[0] * g_pdt, Q28, "gamma_theta"),
+        g_th2_q28=_q(p.gamma_theta[1] * g_pdt, Q28, "gamma_theta"),
+        init_theta_q24=tuple(
+            _q(v, Q24, name)
+            for v, name in (
+                (p.init_ap_row2[0], "init_ap_row2"),
+                (p.init_ap_row2[1], "init_ap_row2"),
+                (p.init_lambda, "init_lambda"),
+                (p.init_theta_row2[0], "init_theta_row2"),
+                (p.init_theta_row2[1], "init_theta_row2"),
+                (p.init_kx[0], "init_kx"),
+                (p.init_kx[1], "init_kx"),
+                (p.init_kr, "init_kr"),
+                (p.init_kf[0], "init_kf"),
+                (p.init_kf[1], "init_kf"),
+            )
+        ),
+        lambda_comm_q24=_q(p.lambda_commissioned, Q24, "lambda_commissioned"),
+        health_alarm_pm=round(p.pump_health_alarm * 1000.0),
+        rate_half_window=m,
+        rate_den=2 * m * hz,  # rate = dN * rate_hz / (2 m) ... as a divisor of (dN * hz)
+        lambda_floor_on=int(p.lambda_floor_on),
+        lambda_floor_q24=_q(p.lambda_floor, Q24, "lambda_floor"),
+        dead_zone_on=int(p.dead_zone_on),
+        dead_zone_q24=_q(p.dead_zone_sigmas * sigma_rate, Q24, "speed_noise_rpm"),
+        freeze_on=int(p.freeze_on),
+        ref_am21_q24=_q(ref_a21, Q24, "ref_wn"),
+        ref_am22_q24=_q(ref_a22, Q24, "ref_zeta"),
+        ref_bm2_q24=_q(p.ref_wn**2, Q24, "ref_wn"),
+        refm11_q24=_q(refm[0], Q24, "ref_wn"),
+        refm12_q24=_q(refm[1], Q24, "ref_wn"),
+        refm21_q24=_q(refm[2], Q24, "ref_wn"),
+        refm22_q24=_q(refm[3], Q24, "ref_wn"),
+        refh1_q24=_q(refh[0] * p.ref_wn**2, Q24, "ref_wn"),
+        refh2_q24=_q(refh[1] * p.ref_wn**2, Q24, "ref_wn"),
+        g_x1_q28=_q(p.gamma_x[0] * dt, Q28, "gamma_x"),
+        g_x2_q28=_q(p.gamma_x[1] * dt, Q28, "gamma_x"),
+        g_r_q28=_q(p.gamma_r * dt, Q28, "gamma_r"),
+        g_f1_q28=_q(p.gamma_f[0] * dt, Q28, "gamma_f"),
+        g_f2_q28=_q(p.gamma_f[1] * dt, Q28, "gamma_f"),
+        u_den_min_q24=_q(p.u_den_min, Q24, "u_den_min"),
+        pid_kp_q24=_q(p.pid_kp, Q24, "pid_kp"),
+        pid_ki_dt_q24=_q(p.pid_ki * dt, Q24, "pid_ki"),
+        pid_kd_q24=_q(p.pid_kd, Q24, "pid_kd"),
+        idle_q24=_q(p.idle_pct, Q24, "idle_pct"),
+        demand_max_q24=_q(p.demand_max_pct, Q24, "demand_max_pct"),
+        limiters_on=int(p.limiters_on),
+        egt_limit_dk=round(p.egt_limit_k * 10.0),
+        egt_kp_q24=_q(p.egt_kp, Q24, "egt_kp"),
+        egt_ki_dt_q24=_q(p.egt_ki * dt, Q24, "egt_ki"),
+        egt_max_dk=round(p.egt_max_k * 10.0),
+        egt_max_ticks=ticks(p.egt_max_time_s),
+        accel_max_q24=_q(p.accel_max_pct_s, Q24, "accel_max_pct_s"),
+        decel_max_q24=_q(p.decel_max_pct_s, Q24, "decel_max_pct_s"),
+        rate_kp_q24=_q(p.rate_kp, Q24, "rate_kp"),
+        rate_ki_dt_q24=_q(p.rate_ki * dt, Q24, "rate_ki"),
+        n_limit_q24=_q(p.n_limit_pct, Q24, "n_limit_pct"),
+        n_limit_kp_q24=_q(p.n_limit_kp, Q24, "n_limit_kp"),
+        n_limit_ki_dt_q24=_q(p.n_limit_ki * dt, Q24, "n_limit_ki"),
+        overspeed_rpm=rpm(p.overspeed_pct),
+        overspeed_ticks=ticks(p.overspeed_time_s),
+        flameout_rpm=rpm(p.idle_pct * (1.0 - p.flameout_margin)),
+        flameout_ticks=ticks(p.flameout_time_s),
+        v_min_q24=_q(p.v_min, Q24, "v_min"),
+        v_max_q24=_q(p.v_max, Q24, "v_max"),
+        v_slew_q24=_q(p.v_slew_v_s * dt, Q24, "v_slew_v_s"),
+        duty_min_cpct=round(p.duty_min * 10000.0),
+        duty_max_cpct=round(p.duty_max * 10000.0),
+        supply_nominal_mv=round(p.supply_nominal_v * 1000.0),
+        pump_stall_ma=round(p.pump_stall_ma),
+        pump_stall_ticks=ticks(p.pump_stall_time_s),
+        pump_dry_ma=round(p.pump_dry_ma),
+        pump_dry_min_q24=_q(p.pump_dry_min_v, Q24, "pump_dry_min_v"),
+        pump_dry_ticks=ticks(p.pump_dry_time_s),
+        speed_valid_max_rpm=round(p.speed_valid_max_rpm),
+        speed_step_max_rpm=max(1, round(rpm(p.speed_rate_max_pct_s) * dt)),
+        speed_fault_ticks=ticks(p.speed_fault_time_s),
+        speed_stuck_ticks=ticks(p.speed_stuck_time_s),
+        speed_stuck_dv_q24=_q(p.speed_stuck_dv, Q24, "speed_stuck_dv"),
+        egt_open_high_dk=round(p.egt_open_high_k * 10.0),
+        egt_open_low_dk=round(p.egt_open_low_k * 10.0),
+        egt_fault_ticks=ticks(p.egt_fault_time_s),
+        egt_fail_demand_q24=_q(p.egt_fail_demand_max_pct, Q24, "egt_fail_demand_max_pct"),
+        obs_l1_dt_q24=_q(p.observer_l[0] * dt, Q24, "observer_l"),
+        obs_l2_dt_q24=_q(p.observer_l[1] * dt, Q24, "observer_l"),
+        demand_hold_ticks=ticks(p.demand_hold_s),
+        demand_shutdown_ticks=ticks(p.demand_shutdown_s),
+        sensor_loss_ticks=ticks(p.sensor_loss_s),
+        run_entry_rpm=rpm(p.run_entry_pct),
+        shutdown_done_rpm=rpm(p.shutdown_done_pct),
+    )

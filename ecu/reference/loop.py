@@ -1,0 +1,71 @@
+"""Float64 twin of the firmware's speed loop in RUN (document reproduction: no limiters, no
+robustness): central-difference rate (or the true rate, as the document's simulation had),
+delayed estimator interval, MRAC / open loop, reference model. Used by sil.verify and tests."""
+
+from __future__ import annotations
+
+from collections import deque
+
+from ecu.params import CONTROLLERS, CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PID, EcuParams
+from ecu.reference.estimator import FloatEstimator
+from ecu.reference.mrac import FloatMrac
+from ecu.reference.pid import FloatPid
+
+
+class FloatLoop:
+    """step(n_pct, demand_pct, open_loop_v, true_rate=None) -> pump voltage (V)."""
+
+    def __init__(self, params: EcuParams) -> None:
+        self.p = params
+        self.ctrl = CONTROLLERS.index(params.controller)
+        self.est = FloatEstimator(params)
+        self.mrac = FloatMrac(params)
+        self.pid = FloatPid(params)
+        self.m = max(1, round(params.rate_window_s * params.rate_hz / 2.0))
+        self.n_hist: deque[float] = deque(maxlen=2 * self.m + 2)  # newest last
+        self.v_hist: deque[float] = deque(maxlen=self.m + 2)  # given true rates
+        self.u_hist: deque[float] = deque(maxlen=self.m + 2)
+        self.first = True
+
+    def _rate(self, age: int, true_rate: bool) -> float:
+        if true_rate:
+            return self.v_hist[-1 - age]
+        h, m = self.n_hist, self.m
+        return (h[-1 - age + m] - h[-1 - age - m]) * self.p.rate_hz / (2 * m)
+
+    def step(
+        self, n_pct: float, demand_pct: float, open_loop_v: float, true_rate: float | None = None
+    ) -> float:
+        p, m = self.p, self.m
+        dn = n_pct - p.trim_n_pct
+        self.n_hist.append(dn)
+        self.v_hist.append(true_rate if true_rate is not None else 0.0)
+        self.u_hist.append(0.0)
+        use_true = true_rate is not None
+        filled = len(self.n_hist) > 2 * m
+        if self.first:
+            self.mrac.xm1 = dn
+            self.first = False
+        rate = true_rate if use_true else (self._rate(m, False) if filled else 0.0)
+        if len(self.n_hist) == 2 * m + 2 and len(self.u_hist) == m + 2:
+            h = self.n_hist
+            self.est.step(
+                h[-1 - (m + 1)],
+                self._rate(m + 1, use_true),
+                h[-1 - m],
+                self._rate(m, use_true),
+                self.u_hist[-1 - (m + 1)],
+                True,
+            )
+        r = demand_pct - p.trim_n_pct
+        if self.ctrl == CTRL_MRAC:
+            u = self.mrac.control(dn, rate, r)
+            self.mrac.gain_update(self.est)
+        elif self.ctrl == CTRL_PID:
+            u = self.pid.control(demand_pct - n_pct, rate)
+        else:
+            assert self.ctrl == CTRL_OPEN_LOOP
+            u = open_loop_v - p.trim_v
+        self.mrac.reference_step(r)
+        self.u_hist[-1] = u
+        return p.trim_v + u

@@ -1,0 +1,67 @@
+"""The firmware's persistent state: one flat record of int32 fields (a C struct).
+
+Scalars are slot attributes holding ints that every store saturates to int32; vectors are
+``array('i')`` (C int32, which refuses out-of-range stores outright). Nothing here grows.
+"""
+
+from __future__ import annotations
+
+from array import array
+
+from ecu.params import RATE_BUF_LEN
+
+# adaptive parameter vector (split accumulators): estimator (eq. 4.31) then MRAC gains (eq. 5.16)
+AP21 = 0  # A_p-hat row 2, column 1
+AP22 = 1  # A_p-hat row 2, column 2
+LAM = 2  # Lambda-hat
+TH1 = 3  # Theta_f-hat row 2, column 1 (dN dV)
+TH2 = 4  # Theta_f-hat row 2, column 2 (dN^2 dV)
+KX1 = 5
+KX2 = 6
+KR = 7
+KF1 = 8
+KF2 = 9
+N_THETA = 10
+
+
+class EcuState:
+    """All firmware state, preallocated. Formats are in the names (see ecu.fixedpoint)."""
+
+    __slots__ = (
+        # adaptive parameters: Q7.24 words and their 16-bit extensions
+        "theta_q24", "theta_ext",
+        # speed history for the central-difference rate (raw rpm), ring index and fill count
+        "n_hist_rpm", "u_hist_q24", "hist_idx", "hist_fill",
+        # identification model (eq. 4.7) state and last identification error e2
+        "xh1_q24", "xh2_q24", "e2_q24",
+        # fast-model observer (eq. 3.5) state, deviations from trim
+        "obs_n_q24", "obs_v_q24",
+        # reference model (eq. 5.18-5.19) state, deviations from trim
+        "xm1_q24", "xm2_q24",
+        # PID integrator (V)
+        "pid_i_q24",
+        # limit loops: previous errors (velocity form) and the applied pump voltage
+        "egt_e_prev_q24", "acc_e_prev_q24", "dec_e_prev_q24", "nlim_e_prev_q24",
+        "v_applied_q24", "owner", "v_saturated",
+        # last valid inputs held on frame loss
+        "speed_rpm", "egt_dk", "supply_mv", "pump_ma", "demand_q24", "open_loop_q24",
+        "arm", "stop",
+        # persistence counters (ticks)
+        "sensor_age", "analog_age", "demand_age",
+        "speed_range_cnt", "speed_rate_cnt", "speed_stuck_cnt", "speed_stuck_v_q24",
+        "egt_open_cnt", "egt_over_cnt", "overspeed_cnt", "flameout_cnt",
+        "pump_stall_cnt", "pump_dry_cnt",
+        # derived signals of this tick (kept for telemetry)
+        "n_q24", "rate_q24", "speed_failed", "speed_seen",
+        # modes, faults, counters
+        "mode", "faults", "sat_events", "ticks",
+    )  # fmt: skip
+
+    def __init__(self) -> None:
+        self.theta_q24 = array("i", [0] * N_THETA)
+        self.theta_ext = array("i", [0] * N_THETA)
+        self.n_hist_rpm = array("i", [0] * RATE_BUF_LEN)
+        self.u_hist_q24 = array("i", [0] * RATE_BUF_LEN)
+        for name in self.__slots__:
+            if not hasattr(self, name):
+                setattr(self, name, 0)
