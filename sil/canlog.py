@@ -126,6 +126,8 @@ def _candump_frames(f: _CountingText, path: Path):
         text = line.strip()
         if not text:
             continue
+        if not line.endswith("\n"):
+            raise ValueError(f"last line cut short (no end of line): {text[:60]!r}")
         m = _CANDUMP.match(text)
         if m is None:
             raise ValueError(f"not a candump -L line: {text[:60]!r}")

@@ -14,6 +14,7 @@ TARGETS = {
     "codec": "protocol.bench",
     "plant": "plant.bench",
     "ecu": "ecu.bench",
+    "replay": "tools.replay_bench",
 }
 
 
