@@ -20,6 +20,7 @@ these machines): the guest runs under software emulation, and the boot takes abo
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import re
 import shlex
@@ -28,6 +29,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -107,7 +109,11 @@ def _missing_debian_packages() -> list[str]:
 def _apt_get(*args: str) -> None:
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     done = subprocess.run(
-        ["apt-get", "-q", *args], capture_output=True, text=True, env=env, check=False
+        ["apt-get", "-q", "-o", "DPkg::Lock::Timeout=300", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=False,
     )
     if done.returncode != 0:
         raise VcanVmError(
@@ -208,6 +214,11 @@ def _guest_script(command: str, control: Path) -> str:
     )
 
 
+def _drain(stream: io.BufferedReader, chunks: list[bytes]) -> None:
+    while chunk := stream.read1(65536):
+        chunks.append(chunk)
+
+
 def _kill_group(pgid: int) -> None:
     try:
         os.killpg(pgid, signal.SIGKILL)
@@ -230,7 +241,6 @@ def run_in_vcan_vm(
     kernel = find_kernel()
     with tempfile.TemporaryDirectory(prefix="vcan_vm-") as scratch:
         control = Path(scratch)
-        log_path = control / "output.log"
         argv = [
             str(VNG),
             "--run",
@@ -253,33 +263,40 @@ def run_in_vcan_vm(
         _log(f"booting {kernel.name} under QEMU without KVM (about 25 s)")
         started = time.monotonic()
         boot_s: float | None = None
-        with open(log_path, "wb") as log:
-            process = subprocess.Popen(
-                argv,
-                stdin=subprocess.DEVNULL,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,
-                # vng runs its helper virtme-run through the shell: .venv/bin goes on PATH.
-                env={**os.environ, "PATH": f"{VNG.parent}{os.pathsep}{os.environ.get('PATH', '')}"},
-            )
-            try:
-                while process.poll() is None:
-                    if boot_s is None and (control / _READY).exists():
-                        boot_s = time.monotonic() - started
-                    if time.monotonic() - started > timeout_s:
-                        stage = "booting the VM" if boot_s is None else "running the command"
-                        raise VcanVmError(
-                            f"timed out after {timeout_s:.0f} s while {stage};"
-                            f" last output: {_last_line(log_path.read_text(errors='replace'))}"
-                        )
-                    time.sleep(0.1)
-            finally:
-                # vng forks QEMU (and maybe virtiofsd) into its own session: none may outlive us.
-                _kill_group(process.pid)
-                process.wait()
+        # One pipe for stdout and stderr: QEMU reopens the guest's stdout and stderr ports by
+        # /proc/self/fd/N, and two opens of one regular file would overwrite each other.
+        process = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            # vng runs its helper virtme-run through the shell: .venv/bin goes on PATH.
+            env={**os.environ, "PATH": f"{VNG.parent}{os.pathsep}{os.environ.get('PATH', '')}"},
+        )
+        chunks: list[bytes] = []
+        assert process.stdout is not None
+        reader = threading.Thread(target=_drain, args=(process.stdout, chunks), daemon=True)
+        reader.start()
+        try:
+            while process.poll() is None:
+                if boot_s is None and (control / _READY).exists():
+                    boot_s = time.monotonic() - started
+                if time.monotonic() - started > timeout_s:
+                    stage = "booting the VM" if boot_s is None else "running the command"
+                    raise VcanVmError(
+                        f"timed out after {timeout_s:.0f} s while {stage};"
+                        f" last output: {_last_line(b''.join(chunks).decode(errors='replace'))}"
+                    )
+                time.sleep(0.1)
+        finally:
+            # vng forks QEMU into its own process group: nothing of it may outlive this call.
+            _kill_group(process.pid)
+            process.wait()
+            reader.join()
+            process.stdout.close()
         wall_s = time.monotonic() - started
-        output = log_path.read_text(errors="replace")
+        output = b"".join(chunks).decode(errors="replace")
         if not (control / _READY).exists():
             raise VcanVmError(
                 f"the VM did not start or could not bring up vcan0 (vng exit {process.returncode}):"
