@@ -1,0 +1,142 @@
+"""`sil identify FILE`: fit the fast engine model (ch. 3) to a recording, report and export it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from sil.canlog import LogReadError  # noqa: E402
+from tools import identify as ident  # noqa: E402
+
+NAME = "identify"
+HELP = "identify the fast engine model (eq. 3.5 or appendix B) from a trace, CAN log or CSV"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", type=Path, help="trace.csv of a run, a CAN log, or a plain CSV")
+    parser.add_argument(
+        "--order",
+        choices=ident.ORDERS,
+        default="second",
+        help="model: eq. 3.5 (second), eq. B.4 (first), B.4 + dN^2 dV",
+    )
+    parser.add_argument("--trim-n", type=float, metavar="PCT", help="trim speed, %%N_max")
+    parser.add_argument("--trim-v", type=float, metavar="VOLTS", help="trim pump voltage")
+    parser.add_argument(
+        "--window",
+        type=int,
+        metavar="SAMPLES",
+        help="Savitzky-Golay window (odd; default: chosen by fit)",
+    )
+    parser.add_argument(
+        "--validate",
+        type=Path,
+        metavar="FILE",
+        help="a second recording to judge the fit on (default: held-out part)",
+    )
+    parser.add_argument(
+        "--holdout",
+        type=float,
+        default=0.3,
+        help="fraction at the end kept out of the fit (default 0.3)",
+    )
+    parser.add_argument("--time-column", default="time")
+    parser.add_argument("--speed-column", default="speed_meas")
+    parser.add_argument("--voltage-column", default="PumpVoltageTarget")
+    parser.add_argument("--speed-unit", choices=("pct", "rpm"), default="pct")
+    parser.add_argument("--out", type=Path, help="folder for identify.json and the fit plot")
+    parser.add_argument(
+        "--export",
+        type=Path,
+        metavar="FILE",
+        help="write the ECU commissioning file (initial estimates, trim)",
+    )
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def _plot(path: Path, rec: ident.Recording, simulated: np.ndarray, title: str) -> None:
+    fig, (ax, ax2) = plt.subplots(
+        2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
+    )
+    ax.plot(rec.t, rec.n_pct, lw=1, label="recorded")
+    ax.plot(rec.t, simulated, "--", lw=1.2, label="identified model")
+    ax.set_ylabel("shaft speed [%N_max]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax2.plot(rec.t, rec.v, color="tab:red", lw=1)
+    ax2.set_ylabel("pump [V]")
+    ax2.set_xlabel("time [s]")
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    columns = {
+        "time_column": args.time_column,
+        "speed_column": args.speed_column,
+        "voltage_column": args.voltage_column,
+        "speed_unit": args.speed_unit,
+    }
+    try:
+        rec = ident.read_recording(args.file, **columns)
+        if args.validate:
+            fit_part, check = rec, ident.read_recording(args.validate, **columns)
+        else:
+            if not 0 <= args.holdout < 0.9:
+                raise ValueError(f"--holdout {args.holdout} must be in 0..0.9")
+            fit_part = rec.part(0.0, 1.0 - args.holdout)
+            check = rec.part(1.0 - args.holdout, 1.0) if args.holdout else rec
+        trim = None
+        if args.trim_n is not None or args.trim_v is not None:
+            guess = ident.estimate_trim(rec)
+            trim = ident.Trim(
+                args.trim_n if args.trim_n is not None else guess.n_pct,
+                args.trim_v if args.trim_v is not None else guess.v,
+            )
+        result = ident.identify(fit_part, order=args.order, trim=trim, window=args.window)
+        result.nrmse_pct = ident.validate(result, check)
+    except (ValueError, OSError, LogReadError) as exc:
+        print(f"sil identify: {exc}", file=sys.stderr)
+        return 2
+    report = {
+        "file": str(args.file),
+        "samples": len(rec.t),
+        "sample_time_s": rec.dt,
+        "validated_on": str(args.validate)
+        if args.validate
+        else f"last {args.holdout:.0%} of the file",
+        **result.as_dict(),
+    }
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        simulated = ident.simulate(np.asarray(result.theta), result.order, rec, result.trim)
+        _plot(
+            args.out / "identify.png",
+            rec,
+            simulated,
+            f"{args.file.name}: {args.order}-order model, NRMSE {result.nrmse_pct:.2f} %",
+        )
+        ident.write_json(args.out / "identify.json", report)
+    if args.export:
+        try:
+            ident.write_json(args.export, ident.ecu_commissioning(result))
+        except ValueError as exc:
+            print(f"sil identify: {exc}", file=sys.stderr)
+            return 2
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    for key, value in report.items():
+        print(f"{key}: {value}")
+    return 0

@@ -1,0 +1,145 @@
+"""Offline identification recovers known models; readers and the CLI handle bad input."""
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from plant.fast_model import THETA_EQ_3_23, FastEngine
+from tools import identify as ident
+
+TRIM = ident.Trim(89.68, 5.0)
+
+
+def _eq_3_24_record(dt: float = 0.01, seconds: float = 200.0) -> ident.Recording:
+    """Square and step voltage into the eq. 3.24 model (the document's own fast model)."""
+    engine = FastEngine()
+    t = np.arange(0, seconds, dt)
+    dv = np.where((t // 10) % 2 == 0, 1.0, -1.0) + np.where(t > seconds / 2, 1.0, 0.0)
+    n = np.empty_like(t)
+    for k, u in enumerate(dv):
+        n[k] = engine.n_pct
+        engine.step(float(u), dt)
+    return ident.Recording(t, n, dv + TRIM.v, "eq-3.24")
+
+
+def test_recovers_eq_3_23_from_clean_data():
+    result = ident.identify(_eq_3_24_record(), trim=TRIM)
+    np.testing.assert_allclose(result.theta[:4], THETA_EQ_3_23[:4], rtol=0.02)
+    assert result.derived["omega_n"] == pytest.approx(1.3437, rel=0.02)
+    assert result.derived["zeta"] == pytest.approx(0.8692, rel=0.02)
+    assert ident.validate(result, _eq_3_24_record()) < 0.5
+
+
+def test_noisy_10_hz_data_with_savitzky_golay():
+    rec = _eq_3_24_record()
+    rng = np.random.default_rng(42)
+    noisy = ident.Recording(
+        rec.t[::10], rec.n_pct[::10] + rng.normal(0, 0.05, 2000), rec.v[::10], "10 Hz"
+    )
+    result = ident.identify(noisy, trim=TRIM)
+    np.testing.assert_allclose(result.theta[:3], THETA_EQ_3_23[:3], rtol=0.15)
+    assert result.nrmse_pct < 2.0
+
+
+def test_first_order_models_of_appendix_b():
+    # dN' = -1/tau dN + a0/tau dV + a1/tau dN dV with the eq. B.9 parameters
+    theta = np.array([-0.5662, 1.5632, -0.0628])
+    t = np.arange(0, 120, 0.01)
+    v = TRIM.v + np.where((t // 8) % 2 == 0, 1.0, -1.5)
+    rec0 = ident.Recording(t, np.full_like(t, TRIM.n_pct), v, "B.4")
+    n = ident.simulate(theta, "first", rec0, TRIM)
+    result = ident.identify(ident.Recording(t, n, v, "B.4"), order="first", trim=TRIM)
+    np.testing.assert_allclose(result.theta, theta, rtol=0.03)
+    assert result.derived["tau"] == pytest.approx(1 / 0.5662, rel=0.03)
+    quad = ident.identify(ident.Recording(t, n, v, "B.4"), order="first-quadratic", trim=TRIM)
+    assert abs(quad.theta[3]) < 0.01  # no dN^2 dV term in the data
+
+
+def test_trim_estimate_and_window_errors():
+    rec = _eq_3_24_record(seconds=20)
+    assert ident.estimate_trim(rec).n_pct == pytest.approx(89.68 + 0.45, abs=0.5)
+    with pytest.raises(ValueError, match="must be odd"):
+        ident.derivatives(rec, 10)
+    with pytest.raises(ValueError, match="too few"):
+        ident.identify(rec.part(0, 0.0005))
+
+
+def _write_csv(path, rec, speed_scale=1.0):
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", "speed", "volts"])
+        for row in zip(rec.t, rec.n_pct * speed_scale, rec.v, strict=True):
+            w.writerow(row)
+
+
+def test_plain_csv_in_rpm_and_cli_export(tmp_path):
+    rec = _eq_3_24_record()
+    _write_csv(tmp_path / "bench.csv", rec, 1125.0)
+    export = tmp_path / "commission.json"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sil.cli",
+            "identify",
+            str(tmp_path / "bench.csv"),
+            "--time-column",
+            "t",
+            "--speed-column",
+            "speed",
+            "--voltage-column",
+            "volts",
+            "--speed-unit",
+            "rpm",
+            "--trim-n",
+            "89.68",
+            "--trim-v",
+            "5",
+            "--export",
+            str(export),
+            "--out",
+            str(tmp_path / "out"),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["theta"][0] == pytest.approx(-1.8054, rel=0.05)
+    assert report["nrmse_pct"] < 1.0
+    commissioning = json.loads(export.read_text())
+    assert commissioning["Lambda"] == pytest.approx(4.822, rel=0.05)
+    assert (tmp_path / "out" / "identify.png").stat().st_size > 10_000
+
+
+def test_bad_csv_names_file_and_line(tmp_path):
+    path = tmp_path / "bad.csv"
+    path.write_text("t,speed,volts\n0,90,5\n0.1,abc,5\n")
+    with pytest.raises(ValueError, match=r"bad.csv, line 3"):
+        ident.read_csv(path, "t", "speed", "volts")
+    with pytest.raises(ValueError, match="no column 'rpm'"):
+        ident.read_csv(path, "t", "rpm", "volts")
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sil.cli",
+            "identify",
+            str(path),
+            "--time-column",
+            "t",
+            "--speed-column",
+            "speed",
+            "--voltage-column",
+            "volts",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 2 and "bad.csv, line 3" in result.stderr
