@@ -2,11 +2,13 @@
 
     V = max( V_decel, min( V_speed, V_egt, V_accel, V_nlimit ) ),  then [V_min, V_max] and slew.
 
-Each limit loop is a PI in velocity (incremental) form on its own error, started from the
-voltage applied last tick:  V_loop = V_applied[k-1] + Kp (e[k] - e[k-1]) + Ki dt e[k]  (forward
-Euler). A loop that is not selected therefore tracks the applied voltage by construction
-(integrator tracking), and takes over bumplessly when its error changes sign. The speed loop's
-own tracking is done by the controller (PID back-calculation; MRAC has no integrator).
+Each limit loop is a PI in velocity (incremental) form on its own error (margin to its limit),
+started from the voltage applied last tick:  V_loop = V_applied[k-1] + Kp (e[k] - e[k-1]) +
+Ki dt e[k]  (forward Euler). A loop that is not selected therefore tracks the applied voltage by
+construction (integrator tracking) and takes over bumplessly as its margin shrinks. A loop joins
+the selection only inside its engagement band (margin below ``*_engage``); far from its limit it
+would otherwise act as a voltage rate limit and own every large step of the speed loop. The speed
+loop's own tracking is done by the controller (PID back-calculation; MRAC has no integrator).
 """
 
 from __future__ import annotations
@@ -45,32 +47,37 @@ def select_voltage(
     v = v_speed
     owner = OWNER_SPEED
     if egt_ok:
-        v_egt = _loop(v_prev, egt_err_q24, s.egt_e_prev_q24, p.egt_kp_q24, p.egt_ki_dt_q24)
-        s.egt_e_prev_q24 = egt_err_q24
-        if v_egt < v:
-            v = v_egt
-            owner = OWNER_EGT
+        e = egt_err_q24
+        if e < p.egt_engage_q24:
+            v_egt = _loop(v_prev, e, s.egt_e_prev_q24, p.egt_kp_q24, p.egt_ki_dt_q24)
+            if v_egt < v:
+                v = v_egt
+                owner = OWNER_EGT
+        s.egt_e_prev_q24 = e
     e = sat32(p.accel_max_q24 - rate_q24)
-    v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+    if e < p.rate_engage_q24:
+        v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+        if v_acc < v:
+            v = v_acc
+            owner = OWNER_ACCEL
     s.acc_e_prev_q24 = e
-    if v_acc < v:
-        v = v_acc
-        owner = OWNER_ACCEL
     e = sat32(p.n_limit_q24 - n_q24)
-    v_nl = _loop(v_prev, e, s.nlim_e_prev_q24, p.n_limit_kp_q24, p.n_limit_ki_dt_q24)
+    if e < p.n_limit_engage_q24:
+        v_nl = _loop(v_prev, e, s.nlim_e_prev_q24, p.n_limit_kp_q24, p.n_limit_ki_dt_q24)
+        if v_nl < v:
+            v = v_nl
+            owner = OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
-    if v_nl < v:
-        v = v_nl
-        owner = OWNER_NLIMIT
-    e = sat32(-p.decel_max_q24 - rate_q24)
-    v_dec = _loop(v_prev, e, s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+    e = sat32(rate_q24 + p.decel_max_q24)  # margin above the deceleration limit
+    if e < p.rate_engage_q24:
+        v_dec = _loop(v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+        if v_dec > v:
+            v = v_dec
+            owner = OWNER_DECEL
     s.dec_e_prev_q24 = e
-    if v_dec > v:
-        v = v_dec
-        owner = OWNER_DECEL
     v_lim = clamp(v, p.v_min_q24, p.v_max_q24)
+    s.v_saturated = 1 if v_lim != v else 0  # at a voltage limit (the slew alone is not)
     v_lim = clamp(v_lim, v_prev - p.v_slew_q24, v_prev + p.v_slew_q24)
-    s.v_saturated = 1 if v_lim != v else 0
     s.owner = owner
     s.v_applied_q24 = v_lim
     return v_lim

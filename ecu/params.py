@@ -48,15 +48,17 @@ class EcuParams:
     # online estimator (eq. 4.7, 4.31); row 1 of A_p and Theta_f is kinematic and not adapted
     am_row2: tuple[float, float] = (-25.0, -10.0)  # identification model A_m row 2
     p22: float = 1.0  # P[1][1]; P[0][0] only weighs the row-1 error, which is not adapted
-    gamma_a: tuple[float, float] = (3.0, 3.0)
-    gamma_lambda: float = 0.017
-    gamma_theta: tuple[float, float] = (0.004, 8.0)
+    # practical defaults: Lambda-hat (pump health) learns fastest, Theta_f slowest (f2 = dN^2 dV
+    # is nearly collinear with dV under small steps, so a large Gamma_Theta2 steals Lambda's role)
+    gamma_a: tuple[float, float] = (0.5, 0.5)
+    gamma_lambda: float = 1.0
+    gamma_theta: tuple[float, float] = (0.01, 0.001)
     init_ap_row2: tuple[float, float] = AP_ROW2_EQ_3_23
     init_lambda: float = LAMBDA_EQ_3_23
     init_theta_row2: tuple[float, float] = THETA_ROW2_EQ_3_23
     lambda_commissioned: float = LAMBDA_EQ_3_23  # reference for pump health
     pump_health_alarm: float = 0.70  # alarm below this fraction of the commissioned Lambda
-    rate_window_s: float = 0.02  # central difference of speed over +-window/2
+    rate_window_s: float = 0.04  # central difference of speed over +-window/2
     # robustness (each can be switched off to reproduce the document exactly)
     lambda_floor_on: bool = True
     lambda_floor: float = 1.0
@@ -88,17 +90,20 @@ class EcuParams:
     # protection (defaults provisional until the aero-thermal running line is available)
     limiters_on: bool = True
     egt_limit_k: float = 1100.0
-    egt_kp: float = 0.01  # V per K
-    egt_ki: float = 0.05  # V per K s
+    egt_kp: float = 0.02  # V per K
+    egt_ki: float = 0.5  # V per K s
+    egt_engage_k: float = 30.0  # the EGT loop joins the min-select within this of its limit
     egt_max_k: float = 1150.0  # shutdown above this ...
     egt_max_time_s: float = 1.0  # ... for this long
     accel_max_pct_s: float = 20.0
     decel_max_pct_s: float = 30.0
     rate_kp: float = 0.05  # V per (%N/s)
-    rate_ki: float = 0.5  # V per (%N/s) s
+    rate_ki: float = 2.0  # V per (%N/s) s
+    rate_engage_pct_s: float = 5.0
     n_limit_pct: float = 102.0  # topping governor (min-select)
     n_limit_kp: float = 0.5
-    n_limit_ki: float = 2.0
+    n_limit_ki: float = 5.0
+    n_limit_engage_pct: float = 2.0
     overspeed_pct: float = 105.0
     overspeed_time_s: float = 0.5
     flameout_margin: float = 0.10  # fraction under idle
@@ -144,7 +149,7 @@ def _doc_common(**kw: object) -> EcuParams:
         dead_zone_on=False,
         freeze_on=False,
         limiters_on=False,
-        u_den_min=0.5,
+        rate_window_s=0.02,
     )
     return replace(base, **kw)  # type: ignore[arg-type]
 
@@ -301,6 +306,8 @@ def validate(p: EcuParams) -> None:
     _check(p.egt_max_k < p.egt_open_high_k, "egt_max_k", p.egt_max_k, "below open-circuit level")
     _check(p.accel_max_pct_s > 0.0, "accel_max_pct_s", p.accel_max_pct_s, "must be > 0")
     _check(p.decel_max_pct_s > 0.0, "decel_max_pct_s", p.decel_max_pct_s, "must be > 0")
+    for name in ("egt_engage_k", "rate_engage_pct_s", "n_limit_engage_pct"):
+        _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
     _check(0.0 <= p.v_min < p.v_max <= 30.0, "v_max", p.v_max, "need 0 <= v_min < v_max <= 30")
     _check(p.v_slew_v_s > 0.0, "v_slew_v_s", p.v_slew_v_s, "must be > 0")
     _check(0.0 <= p.duty_min < p.duty_max <= 1.0, "duty_max", p.duty_max, "0 <= min < max <= 1")
@@ -346,7 +353,8 @@ class FirmwareParams:
         "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
         "pid_kp_q24", "pid_ki_dt_q24", "pid_kd_q24",
         "idle_q24", "demand_max_q24",
-        "limiters_on", "egt_limit_dk", "egt_kp_q24", "egt_ki_dt_q24", "egt_max_dk",
+        "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
+        "egt_kp_q24", "egt_ki_dt_q24", "egt_max_dk",
         "egt_max_ticks", "accel_max_q24", "decel_max_q24", "rate_kp_q24", "rate_ki_dt_q24",
         "n_limit_q24", "n_limit_kp_q24", "n_limit_ki_dt_q24", "overspeed_rpm", "overspeed_ticks",
         "flameout_rpm", "flameout_ticks", "v_min_q24", "v_max_q24", "v_slew_q24",
@@ -459,6 +467,9 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         demand_max_q24=_q(p.demand_max_pct, Q24, "demand_max_pct"),
         limiters_on=int(p.limiters_on),
         egt_limit_dk=round(p.egt_limit_k * 10.0),
+        egt_engage_q24=_q(p.egt_engage_k, Q24, "egt_engage_k"),
+        rate_engage_q24=_q(p.rate_engage_pct_s, Q24, "rate_engage_pct_s"),
+        n_limit_engage_q24=_q(p.n_limit_engage_pct, Q24, "n_limit_engage_pct"),
         egt_kp_q24=_q(p.egt_kp, Q24, "egt_kp"),
         egt_ki_dt_q24=_q(p.egt_ki * dt, Q24, "egt_ki"),
         egt_max_dk=round(p.egt_max_k * 10.0),
