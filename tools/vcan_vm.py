@@ -5,7 +5,7 @@ virtme-ng boots Debian's stock kernel under QEMU with the host's root filesystem
 into the guest: the host's Python, the project's .venv and can-utils are all visible inside, and
 folders given as rwdir are writable there (that is how a capture or a log comes back out).
 
-    python -m tools.vcan_vm [--rwdir DIR] [--timeout S] -- COMMAND...
+    python -m tools.vcan_vm [--rwdir DIR] [--timeout S] [--boot-console] -- COMMAND...
 
 COMMAND runs in the guest as root, in the current directory, with vcan0 up. Its arguments are
 quoted as given (use `-- sh -c '...'` for shell syntax). The exit status is the command's own;
@@ -14,7 +14,8 @@ when the VM cannot be started the status is 125 and one line on stderr says why.
 The first run installs what is missing (as root): Debian's qemu-system-x86, linux-image-amd64,
 busybox-static, can-utils, kmod and iproute2 with apt-get, and virtme-ng into the project's .venv
 with pip. Later runs only check, in well under a second. KVM is not used (it does not boot on
-these machines): the guest runs under software emulation, and the boot takes about 25 s.
+these machines): the guest runs under software emulation, so vcan0 is up about 30 s after the
+start (up to 50 s on a busy machine) and Python in the guest starts some 20 times slower.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
+from typing import NoReturn
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_PYTHON = ROOT / ".venv" / "bin" / "python"
@@ -62,8 +65,11 @@ DEFAULT_TIMEOUT_S = 300.0
 # Exit status of the command line tool when the VM could not be started (as `env` and `docker`).
 EXIT_VM_FAILED = 125
 
+BOOT_CONSOLE_HINT = "`python -m tools.vcan_vm --boot-console -- true` shows the guest's boot log"
 _READY = "ready"  # marker file: written by the guest once vcan0 is up, before the command
-_STATUS = "status"  # marker file: the command's exit status, written by the guest
+# Marker file: the command's exit status, written by the guest. vng 1.42 returns that status too,
+# but also returns 255 when the guest died, which a command can return as well.
+_STATUS = "status"
 
 
 class VcanVmError(RuntimeError):
@@ -84,9 +90,10 @@ def _log(message: str) -> None:
     print(f"vcan_vm: {message}", file=sys.stderr, flush=True)
 
 
-def _last_line(text: str) -> str:
+def _tail(text: str, count: int = 3) -> str:
+    """The last `count` non-empty lines of `text` on one line."""
     lines = [line.strip() for line in text.splitlines() if line.strip()]
-    return lines[-1] if lines else "(no output)"
+    return " | ".join(lines[-count:]) if lines else "(no output)"
 
 
 def _missing_debian_packages() -> list[str]:
@@ -119,7 +126,7 @@ def _apt_get(*args: str) -> None:
     )
     if done.returncode != 0:
         raise VcanVmError(
-            f"apt-get {args[0]} failed (exit {done.returncode}): {_last_line(done.stderr)}"
+            f"apt-get {args[0]} failed (exit {done.returncode}): {_tail(done.stderr)}"
         )
 
 
@@ -172,7 +179,7 @@ def _install_virtme_ng() -> None:
     )
     if done.returncode != 0 or not VNG.exists():
         raise VcanVmError(
-            f"pip install {VIRTME_NG} failed (exit {done.returncode}): {_last_line(done.stderr)}"
+            f"pip install {VIRTME_NG} failed (exit {done.returncode}): {_tail(done.stderr)}"
         )
     _log(f"installed {VIRTME_NG} in {time.monotonic() - started:.0f} s")
 
@@ -229,12 +236,16 @@ def _kill_group(pgid: int) -> None:
 
 
 def run_in_vcan_vm(
-    command: str, rwdir: Path | None = None, timeout_s: float = DEFAULT_TIMEOUT_S
+    command: str,
+    rwdir: Path | None = None,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+    boot_console: bool = False,
 ) -> VmResult:
     """Boot a throwaway VM with vcan0 up, run the shell `command` as root there, return its result.
 
     `rwdir` is a host folder that the guest can write (at the same path); everything else of the
     host filesystem is read-only in the guest. The command runs in the current directory.
+    `boot_console` puts the guest kernel's console into the output (to see why a boot fails).
     Raises VcanVmError, with the reason, when the prerequisites cannot be installed, there is no
     kernel, the VM does not boot or bring up vcan0 in time, or the VM stops before the command
     has finished. Every process started here, QEMU included, is gone when this returns.
@@ -264,8 +275,10 @@ def run_in_vcan_vm(
         ]
         if rwdir is not None:
             argv += ["--rwdir", str(Path(rwdir).resolve())]
+        if boot_console:
+            argv.append("--verbose")
         argv += ["--exec", _guest_script(command, control)]
-        _log(f"booting {kernel.name} under QEMU without KVM (about 25 s)")
+        _log(f"booting {kernel.name} under QEMU without KVM (about 30 s)")
         started = time.monotonic()
         boot_s: float | None = None
         # One pipe for stdout and stderr: QEMU reopens the guest's stdout and stderr ports by
@@ -291,7 +304,7 @@ def run_in_vcan_vm(
                     stage = "booting the VM" if boot_s is None else "running the command"
                     raise VcanVmError(
                         f"timed out after {timeout_s:.0f} s while {stage};"
-                        f" last output: {_last_line(b''.join(chunks).decode(errors='replace'))}"
+                        f" last output: {_tail(b''.join(chunks).decode(errors='replace'))}"
                     )
                 time.sleep(0.1)
         finally:
@@ -303,14 +316,15 @@ def run_in_vcan_vm(
         wall_s = time.monotonic() - started
         output = b"".join(chunks).decode(errors="replace")
         if not (control / _READY).exists():
+            hint = "" if boot_console else f"; {BOOT_CONSOLE_HINT}"
             raise VcanVmError(
                 f"the VM did not start or could not bring up vcan0 (vng exit {process.returncode}):"
-                f" {_last_line(output)}"
+                f" {_tail(output)}{hint}"
             )
         if not (control / _STATUS).exists():
             raise VcanVmError(
                 f"the VM stopped before the command finished (vng exit {process.returncode}):"
-                f" {_last_line(output)}"
+                f" {_tail(output)}"
             )
         returncode = int((control / _STATUS).read_text().strip())
         return VmResult(
@@ -321,6 +335,10 @@ def run_in_vcan_vm(
         )
 
 
+def _exit_on_sigterm(signum: int, _frame: FrameType | None) -> NoReturn:
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m tools.vcan_vm",
@@ -328,15 +346,20 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--rwdir", type=Path, help="host folder the guest may write")
     parser.add_argument(
+        "--boot-console", action="store_true", help="show the guest kernel's boot console too"
+    )
+    parser.add_argument(
         "--timeout", type=float, default=DEFAULT_TIMEOUT_S, help="seconds, boot included"
     )
     parser.add_argument("command", nargs=argparse.REMAINDER, help="-- COMMAND [ARG...]")
     args = parser.parse_args(argv)
+    # SIGTERM (a CI cancelling, `timeout`) unwinds like Ctrl-C, so the VM is killed on the way out.
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
     command = args.command[1:] if args.command[:1] == ["--"] else args.command
     if not command:
         parser.error("no COMMAND given")
     try:
-        result = run_in_vcan_vm(shlex.join(command), args.rwdir, args.timeout)
+        result = run_in_vcan_vm(shlex.join(command), args.rwdir, args.timeout, args.boot_console)
     except VcanVmError as error:
         print(f"vcan_vm: error: {error}", file=sys.stderr)
         return EXIT_VM_FAILED

@@ -105,6 +105,7 @@ def decode_capture(capture: Path) -> list[tuple[str, dict[str, float]]]:
 
 
 @pytest.mark.vcan
+@pytest.mark.slow
 def test_codec_frames_on_real_vcan0(tmp_path: Path) -> None:
     codec = Codec()
     plan_frames = [
