@@ -38,22 +38,23 @@ def estimator_step(
     f1 = sat32((u * n_mid) >> 24)  # f1 = dN dV, mid interval (Q7.24)
     nn_q16 = ((n0 * n0) >> 33) + ((n1 * n1) >> 33)  # (dN0^2 + dN1^2) / 2 (Q15.16)
     f2_q16 = sat32((u * nn_q16) >> 24)  # f2 = dN^2 dV, mid interval (Q15.16)
-    # eq. 4.7 row 2 forcing: (A_p-hat - A_m) x + B_p Lambda-hat u + Theta_f-hat f
-    c2 = sat32(
-        (((th[AP21] - p.am21_q24) * n_mid) >> 24)
-        + (((th[AP22] - p.am22_q24) * v_mid) >> 24)
-        + ((th[LAM] * u) >> 24)
-        + ((th[TH1] * f1) >> 24)
-        + ((th[TH2] * f2_q16) >> 16)
+    # eq. 4.7 row 2 forcing: (A_p-hat - A_m) x + B_p Lambda-hat u + Theta_f-hat f, in %N/s^2;
+    # with a fast A_m it exceeds the Q7.24 range in large transients, so it is Q15.16
+    c2_q16 = sat32(
+        (((th[AP21] - p.am21_q24) * n_mid) >> 32)
+        + (((th[AP22] - p.am22_q24) * v_mid) >> 32)
+        + ((th[LAM] * u) >> 32)
+        + ((th[TH1] * f1) >> 32)
+        + ((th[TH2] * f2_q16) >> 24)
     )
     # x-hat[k+1] = M x-hat[k] + h c2 (Tustin of x-hat' = A_m x-hat + [0, c2])
     xh1 = s.xh1_q24
     xh2 = s.xh2_q24
     s.xh1_q24 = sat32(
-        ((p.idm11_q24 * xh1) >> 24) + ((p.idm12_q24 * xh2) >> 24) + ((p.idh1_q24 * c2) >> 24)
+        ((p.idm11_q24 * xh1) >> 24) + ((p.idm12_q24 * xh2) >> 24) + ((p.idh1_q24 * c2_q16) >> 16)
     )
     s.xh2_q24 = sat32(
-        ((p.idm21_q24 * xh1) >> 24) + ((p.idm22_q24 * xh2) >> 24) + ((p.idh2_q24 * c2) >> 24)
+        ((p.idm21_q24 * xh1) >> 24) + ((p.idm22_q24 * xh2) >> 24) + ((p.idh2_q24 * c2_q16) >> 16)
     )
     e2 = sat32(s.xh2_q24 - v1)  # e_I row 2 (eq. 4.8) at the end of the interval
     s.e2_q24 = e2

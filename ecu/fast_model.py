@@ -23,12 +23,13 @@ def observer_step(s: EcuState, p: FirmwareParams, u: int, dn_meas: int, valid: i
     v = s.obs_v_q24
     innov = sat32(dn_meas - n) if valid else 0
     th2_n = (th[TH2] * n) >> 24
-    acc = (
-        ((th[AP21] * n) >> 24)
-        + ((th[AP22] * v) >> 24)
-        + ((th[LAM] * u) >> 24)
-        + ((((th[TH1] * n) >> 24) * u) >> 24)
-        + ((((th2_n * n) >> 24) * u) >> 24)
+    # acceleration in %N/s^2 (Q15.16: it exceeds the Q7.24 range far from trim)
+    acc_q16 = sat32(
+        ((th[AP21] * n) >> 32)
+        + ((th[AP22] * v) >> 32)
+        + ((th[LAM] * u) >> 32)
+        + ((((th[TH1] * n) >> 24) * u) >> 32)
+        + ((((th2_n * n) >> 24) * u) >> 32)
     )
     s.obs_n_q24 = sat32(n + ((p.dt_q24 * v) >> 24) + ((p.obs_l1_dt_q24 * innov) >> 24))
-    s.obs_v_q24 = sat32(v + ((p.dt_q24 * sat32(acc)) >> 24) + ((p.obs_l2_dt_q24 * innov) >> 24))
+    s.obs_v_q24 = sat32(v + ((p.dt_q24 * acc_q16) >> 16) + ((p.obs_l2_dt_q24 * innov) >> 24))

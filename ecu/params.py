@@ -90,14 +90,14 @@ class EcuParams:
     # protection (defaults provisional until the aero-thermal running line is available)
     limiters_on: bool = True
     egt_limit_k: float = 1100.0
-    egt_kp: float = 0.02  # V per K
-    egt_ki: float = 0.5  # V per K s
+    egt_kp: float = 0.01  # V per K
+    egt_ki: float = 0.02  # V per K s
     egt_engage_k: float = 30.0  # the EGT loop joins the min-select within this of its limit
     egt_max_k: float = 1150.0  # shutdown above this ...
     egt_max_time_s: float = 1.0  # ... for this long
     accel_max_pct_s: float = 20.0
     decel_max_pct_s: float = 30.0
-    rate_kp: float = 0.05  # V per (%N/s)
+    rate_kp: float = 0.5  # V per (%N/s)
     rate_ki: float = 2.0  # V per (%N/s) s
     rate_engage_pct_s: float = 5.0
     n_limit_pct: float = 102.0  # topping governor (min-select)
