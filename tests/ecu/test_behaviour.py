@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-
 from typing import Any
 
 import pytest
@@ -89,8 +88,9 @@ def test_stuck_speed_sensor_is_replaced_by_the_fast_model(rig: Any) -> None:
         rig.step(1000, demand_cpct=9200 if k % 2 == 0 else 8800)
     frozen = rig.i.speed_rpm
     rig.step(1, demand_cpct=9200, speed_rpm=frozen)
-    taken = rig.run_until(lambda o: o.fault_word & F.SPEED_STUCK, 200, demand_cpct=9200,
-                          speed_rpm=frozen)
+    taken = rig.run_until(
+        lambda o: o.fault_word & F.SPEED_STUCK, 200, demand_cpct=9200, speed_rpm=frozen
+    )
     assert taken < 100
     worst_during = worst_after = 0.0
     for k in range(1000):  # 10 s on the estimate, demand steps included
@@ -124,8 +124,9 @@ def test_egt_over_maximum_faults(rig: Any) -> None:
     assert rig.out.fault_word & F.EGT_OVERTEMP and taken == 100
 
 
-@pytest.mark.parametrize(("pump_ma", "bit", "ticks"), [(7_000, F.PUMP_STALL, 30),
-                                                       (50, F.PUMP_DRY, 50)])
+@pytest.mark.parametrize(
+    ("pump_ma", "bit", "ticks"), [(7_000, F.PUMP_STALL, 30), (50, F.PUMP_DRY, 50)]
+)
 def test_pump_current_checks(rig: Any, pump_ma: int, bit: int, ticks: int) -> None:
     taken = rig.run_until(lambda o: o.mode == M.FAULT, 100, pump_ma=pump_ma)
     assert rig.out.fault_word & bit and taken == ticks
