@@ -48,8 +48,13 @@ class FastEngine:
         if not np.isfinite(dv_volt) or not np.isfinite(dt_s) or dt_s <= 0.0:
             raise ValueError(f"FastEngine.step: bad input dv={dv_volt!r} dt={dt_s!r}")
         t = self.theta
-        theta = (t[0], t[1], t[2] * self.lambda_scale, t[3] * self.lambda_scale,
-                 t[4] * self.lambda_scale)
+        theta = (
+            t[0],
+            t[1],
+            t[2] * self.lambda_scale,
+            t[3] * self.lambda_scale,
+            t[4] * self.lambda_scale,
+        )
         x1, x2 = self.dn_pct, self.dn_dot
         k1 = fast_model_derivative(x1, x2, dv_volt, theta)
         k2 = fast_model_derivative(x1 + 0.5 * dt_s * k1[0], x2 + 0.5 * dt_s * k1[1], dv_volt, theta)

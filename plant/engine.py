@@ -1,0 +1,252 @@
+"""The aero-thermal engine of ch. 2: parameters, the derivative of x = [P3, P5, T4, N] and the
+fixed-step advance, wiring the component functions (T-MATS style: components are pure functions,
+the integrator in plant/integrator.py knows nothing about engines).
+
+RK4 at 1 ms (sec. 2.3); at idle and below, where the jet-pipe plenum is stiffer than RK4 at 1 ms
+can follow, each step is split (split_for_stiffness).
+
+State: P3 and P5 in Pa, T4 in K, N in % of N_max (as eq. 2.32). Input: fuel flow (kg/s), or pump
+voltage with the gear pump in the loop (fuel flow then follows P3, sec. 2.2).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from plant.burner import burner
+from plant.compressor import CompressorMap, compressor
+from plant.flags import LEAN_LIMIT, NOZZLE_CHOKED, PUMP_MAP_CLAMPED
+from plant.intake import intake
+from plant.integrator import STAGES, rk4_combine, rk4_stage_point
+from plant.nozzle import PR_LINEAR, nozzle
+from plant.plenum import plenum_dp_dt
+from plant.pump import PumpTable, pump_flow
+from plant.shaft import shaft_domega_dt
+from plant.thermo import R_AIR
+from plant.turbine import TurbineMap, turbine
+
+N_MAX_RPM = 112_500.0  # AMT Olympus (appendix A)
+MAX_SPLIT = 16  # most substeps one RK4 step is split into (see split_for_stiffness)
+
+
+class EngineParams(NamedTuple):
+    """Scalars of the model. Defaults: the document's sea-level static test bench (sec. 2.3)."""
+
+    nozzle_area_m2: float  # from the calibration (plant.maps.load_maps().nozzle_area_m2)
+    p0_pa: float = 101325.0
+    t0_k: float = 288.15
+    u0_m_s: float = 0.0
+    v_pc_m3: float = 0.002  # compressor plenum
+    v_jp_m3: float = 0.001  # jet-pipe plenum
+    inertia_kg_m2: float = 0.0002
+    cp_fuel: float = 2010.0  # JP8, J/(kg K)
+    lhv: float = 42.5e6  # J/kg
+    eta_loss: float = 0.98  # burner pressure ratio P4/P3
+    tau_b: float = 0.01  # burner time constant, s
+    eta_b: float = 0.80
+    eta_n: float = 0.98
+    eta_m: float = 0.90
+    n_max_rpm: float = N_MAX_RPM
+    far_lean: float = 0.006  # fuel-air ratio below which the flame goes out
+    injector_dp_pa: float = 1.0e5  # pump outlet pressure above P3
+    comp_flow_scale: float = 1.0  # health parameters (1.0 = new)
+    comp_eff_scale: float = 1.0
+    turb_flow_scale: float = 1.0
+    turb_eff_scale: float = 1.0
+    pump_effectiveness: float = 1.0  # fuel delivered / fuel of a new pump
+
+
+class EngineModel(NamedTuple):
+    """Everything the compiled model reads: parameters and tables."""
+
+    params: EngineParams
+    compressor: CompressorMap
+    turbine: TurbineMap
+    pump: PumpTable
+
+
+class Stations(NamedTuple):
+    """Station values at one state (truth for logging and for the balance checks)."""
+
+    g2: float  # compressor flow, kg/s
+    g3: float  # burner inlet flow
+    g4: float  # turbine flow
+    g6: float  # nozzle flow
+    g_fuel: float
+    t3: float
+    t5: float  # = EGT (T6 = T5, eq. 2.24)
+    power_compressor: float
+    power_turbine: float
+    thrust: float
+    flags: int
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def stations_at(x: np.ndarray, g_fuel: float, p2: float, t2: float, model: EngineModel) -> tuple:
+    """All station values at state x, fuel flow g_fuel and compressor inlet (P2, T2)."""
+    p = model.params
+    p3, p5, t4, n_pct = x[0], x[1], x[2], x[3]
+    g2, t3, pwr_c, f_c = compressor(
+        p2, t2, p3, n_pct, model.compressor, p.comp_flow_scale, p.comp_eff_scale
+    )
+    p4 = p.eta_loss * p3  # 2.17
+    n_rpm = n_pct * 0.01 * p.n_max_rpm
+    g4, t5, pwr_t, f_t = turbine(
+        p4, t4, p5, n_rpm, model.turbine, p.turb_flow_scale, p.turb_eff_scale
+    )
+    g3 = g4 - g_fuel  # 2.16
+    g6, thrust, choked = nozzle(p5, t5, p.p0_pa, p.u0_m_s, p.nozzle_area_m2, p.eta_n)
+    flags = f_c | f_t
+    if choked:
+        flags |= NOZZLE_CHOKED
+    if g_fuel <= 0.0 or g3 <= 0.0 or g_fuel < p.far_lean * g3:
+        flags |= LEAN_LIMIT  # too little fuel for the air, or no air through the burner
+    return g2, g3, g4, g6, g_fuel, t3, t5, pwr_c, pwr_t, thrust, flags
+
+
+@njit(cache=True, error_model="numpy")
+def stations(x: np.ndarray, g_fuel: float, model: EngineModel) -> tuple:
+    """All station values at state x and fuel flow g_fuel (see Stations for the order)."""
+    p = model.params
+    p2, t2 = intake(p.p0_pa, p.t0_k, p.u0_m_s)
+    return stations_at(x, g_fuel, p2, t2, model)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def rates_at(
+    x: np.ndarray,
+    g_fuel: float,
+    lit: float,
+    p2: float,
+    t2: float,
+    model: EngineModel,
+    dxdt: np.ndarray,
+) -> int:
+    """dx/dt for fuel flow g_fuel and compressor inlet (P2, T2); lit = 1 while the flame
+    burns, 0 after a flameout. Returns the status flags."""
+    p = model.params
+    g2, g3, g4, g6, _, t3, t5, pwr_c, pwr_t, _, flags = stations_at(x, g_fuel, p2, t2, model)
+    _, dt4 = burner(
+        x[0],
+        t3,
+        g3,
+        x[2],
+        g4,
+        g_fuel,
+        p.t0_k,
+        lit,
+        p.eta_loss,
+        p.eta_b,
+        p.lhv,
+        p.cp_fuel,
+        p.tau_b,
+    )
+    omega_max = p.n_max_rpm * math.pi / 30.0
+    dxdt[0] = plenum_dp_dt(t3, p.v_pc_m3, g2, g3)  # 2.12
+    dxdt[1] = plenum_dp_dt(t5, p.v_jp_m3, g4, g6)  # 2.22, g5 = g4
+    dxdt[2] = dt4  # 2.15
+    dxdt[3] = (
+        100.0
+        * shaft_domega_dt(x[3] * 0.01 * omega_max, pwr_t, pwr_c, p.eta_m, p.inertia_kg_m2)
+        / omega_max
+    )  # 2.31 in %N_max/s
+    return flags
+
+
+@njit(cache=True, error_model="numpy")
+def engine_rates(
+    x: np.ndarray, g_fuel: float, lit: float, model: EngineModel, dxdt: np.ndarray
+) -> int:
+    """dx/dt for fuel flow g_fuel at the model's ambient; returns the status flags."""
+    p = model.params
+    p2, t2 = intake(p.p0_pa, p.t0_k, p.u0_m_s)
+    return rates_at(x, g_fuel, lit, p2, t2, model, dxdt)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def pump_fuel_flow(x: np.ndarray, v_pump: float, model: EngineModel) -> tuple[float, bool]:
+    """Fuel delivered by the gear pump at voltage v_pump against P3 plus the injector drop."""
+    p = model.params
+    p_out_gauge = x[0] + p.injector_dp_pa - p.p0_pa
+    return pump_flow(v_pump, p_out_gauge, model.pump, p.pump_effectiveness)
+
+
+@njit(cache=True, error_model="numpy")
+def split_for_stiffness(x: np.ndarray, dt: float, params: EngineParams) -> int:
+    """How many equal RK4 substeps one step of dt needs to stay stable.
+
+    The fastest mode is the jet-pipe plenum (eq. 2.22) emptying through the nozzle, with rate
+    R T5 / V_jp * dg6/dP5. Near P5 = P0 that rate exceeds what RK4 at 1 ms can follow (|lambda dt|
+    < 2.78): this is the case at idle and below. The rate is estimated from the state with the
+    orifice law g6 = A sqrt(2 rho (P5 - P0)) (T4 >= T5 as the temperature, and a 1.6 factor for the
+    turbine's share found from the Jacobian on the running line); the step is split until
+    |lambda h| <= 2.
+    """
+    dp = max(x[1] - params.p0_pa, (PR_LINEAR - 1.0) * params.p0_pa)
+    t = max(x[2], 200.0)
+    rho = x[1] / (R_AIR * t)
+    rate = 1.6 * R_AIR * t / params.v_jp_m3 * params.nozzle_area_m2 * math.sqrt(rho / (2.0 * dp))
+    return min(max(int(math.ceil(rate * dt / 2.0)), 1), MAX_SPLIT)
+
+
+@njit(cache=True, error_model="numpy")
+def _advance(x, v_or_fuel, is_pump, lit, n_steps, dt, model, work):  # noqa: ANN001, ANN202
+    flags = 0
+    p = model.params
+    p2, t2 = intake(p.p0_pa, p.t0_k, p.u0_m_s)  # ambient is constant over the call
+    for _ in range(n_steps):
+        step_flags = 0
+        k = split_for_stiffness(x, dt, p)
+        h = dt / k
+        for _ in range(k):
+            for stage in range(STAGES):
+                xt = rk4_stage_point(x, stage, h, work)
+                g_fuel = v_or_fuel
+                if is_pump:
+                    g_fuel, clamped = pump_fuel_flow(xt, v_or_fuel, model)
+                    if clamped:
+                        step_flags |= PUMP_MAP_CLAMPED
+                step_flags |= rates_at(xt, g_fuel, lit, p2, t2, model, work[stage])
+            rk4_combine(x, h, work)
+        if step_flags & LEAN_LIMIT:
+            lit = 0.0  # flameout latches: no relight without a restart
+        if x[3] < 0.0:
+            x[3] = 0.0
+        flags |= step_flags
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            raise FloatingPointError("engine state is not finite")
+    return flags, lit
+
+
+@njit(cache=True, error_model="numpy")
+def advance_fuel(
+    x: np.ndarray,
+    g_fuel: float,
+    lit: float,
+    n_steps: int,
+    dt: float,
+    model: EngineModel,
+    work: np.ndarray,
+) -> tuple[int, float]:
+    """n_steps RK4 steps of dt with the fuel flow held; returns (OR of flags, lit)."""
+    return _advance(x, g_fuel, False, lit, n_steps, dt, model, work)
+
+
+@njit(cache=True, error_model="numpy")
+def advance_pump(
+    x: np.ndarray,
+    v_pump: float,
+    lit: float,
+    n_steps: int,
+    dt: float,
+    model: EngineModel,
+    work: np.ndarray,
+) -> tuple[int, float]:
+    """n_steps RK4 steps of dt with the pump voltage held (fuel flow follows P3);
+    returns (OR of flags, lit)."""
+    return _advance(x, v_pump, True, lit, n_steps, dt, model, work)

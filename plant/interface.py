@@ -1,0 +1,134 @@
+"""The plant's interface around one ECU period, shared by both plants (Embedded Coder / PX4 style):
+parameters in ``PlantConfig``, inputs as the arguments of ``step``, outputs in one reused
+``PlantOutputs`` record, state inside the plant. Simulated time is counted by the plant in ECU
+periods (lockstep: the plant owns time); nothing reads the wall clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from plant.faults import Fault
+from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
+
+SUBSTEP_S = 0.001  # RK4 step (sec. 2.3)
+
+
+def check_finite(
+    name: str, value: float, minimum: float | None = None, maximum: float | None = None
+) -> float:
+    """value as float, or ValueError naming the field when it is NaN, infinite or out of range."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if minimum is not None and v < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value!r}")
+    if maximum is not None and v > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Ambient:
+    """Engine inlet conditions; default: the document's sea-level static test bench (sec. 2.3)."""
+
+    t0_k: float = 288.15
+    p0_pa: float = 101325.0
+    flight_speed_m_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_finite("ambient t0_k", self.t0_k, 180.0, 340.0)
+        check_finite("ambient p0_pa", self.p0_pa, 10000.0, 110000.0)
+        check_finite("ambient flight_speed_m_s", self.flight_speed_m_s, 0.0, 300.0)
+
+
+@dataclass(frozen=True)
+class Battery:
+    """Pump supply: open-circuit voltage and internal resistance (sags with pump current).
+    Default: a 6S lithium-polymer pack at nominal voltage."""
+
+    voltage_v: float = 22.2
+    internal_resistance_ohm: float = 0.05
+
+    def __post_init__(self) -> None:
+        check_finite("battery voltage_v", self.voltage_v, 0.0, 100.0)
+        check_finite("battery internal_resistance_ohm", self.internal_resistance_ohm, 0.0, 10.0)
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Parameters of a plant run."""
+
+    ecu_period_s: float = 0.01  # one step() advances this much, in SUBSTEP_S RK4 steps
+    ambient: Ambient = field(default_factory=Ambient)
+    battery: Battery = field(default_factory=Battery)
+    initial_fuel_kg_s: float = 0.008  # start at the steady state of this fuel flow (eq. 2.33)
+    faults: tuple[Fault, ...] = ()
+    seed: int = 0
+    speed_pickup: SpeedPickupConfig = field(default_factory=SpeedPickupConfig)
+    thermocouple: ThermocoupleConfig = field(default_factory=ThermocoupleConfig)
+    overspeed_pct: float = 100.0  # reported above this speed (rated maximum, 112,500 rpm)
+    overtemperature_egt_k: float = 1300.0  # reported above this EGT (see plant/__init__.py)
+
+    def __post_init__(self) -> None:
+        check_finite("ecu_period_s", self.ecu_period_s, SUBSTEP_S, 1.0)
+        n = self.ecu_period_s / SUBSTEP_S
+        if abs(n - round(n)) > 1e-9:
+            raise ValueError(
+                f"ecu_period_s must be a multiple of {SUBSTEP_S} s, got {self.ecu_period_s}"
+            )
+        check_finite("initial_fuel_kg_s", self.initial_fuel_kg_s, 1e-4, 0.05)
+        check_finite("overspeed_pct", self.overspeed_pct, 0.0)
+        check_finite("overtemperature_egt_k", self.overtemperature_egt_k, 0.0)
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.ecu_period_s / SUBSTEP_S))
+
+
+@dataclass(slots=True)
+class PlantOutputs:
+    """One ECU period's outputs: sensor readings (what the ECU sees) and truth (for logging)."""
+
+    tick: int = 0  # ECU periods simulated so far
+    time_s: float = 0.0  # simulated time at the end of the period
+    # sensors
+    speed_rpm: float = 0.0  # speed pickup reading
+    egt_k: float = 0.0  # thermocouple reading
+    supply_v: float = 0.0  # pump supply (battery) voltage under load
+    pump_current_a: float = 0.0
+    # truth
+    n_rpm: float = 0.0
+    n_pct: float = 0.0
+    p3_pa: float = 0.0
+    p5_pa: float = 0.0
+    t4_k: float = 0.0
+    egt_true_k: float = 0.0  # T5 = T6 (eq. 2.24)
+    fuel_kg_s: float = 0.0
+    air_kg_s: float = 0.0
+    thrust_n: float = 0.0
+    pump_v: float = 0.0  # voltage at the pump terminals = duty x supply voltage
+    pump_effectiveness: float = 1.0
+    flags: int = 0  # plant.flags bits (decode with plant.flags.PlantFlag)
+
+
+class Plant(Protocol):
+    """What the SIL harness and the CAN node need from a plant."""
+
+    config: PlantConfig
+    outputs: PlantOutputs
+
+    def step(self, pump_duty: float, pump_enabled: bool = True) -> PlantOutputs:
+        """Advance one ECU period with the pump driven at ``pump_duty`` (0..1) of the supply."""
+        ...
+
+    def inject(self, fault: Fault) -> None:
+        """Schedule a fault (``fault.at_s`` in simulated seconds; past times apply at once)."""
+        ...
