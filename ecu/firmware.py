@@ -35,7 +35,7 @@ from ecu.params import (
 )
 from ecu.pid import pid_control, pid_track
 from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv
-from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, N_THETA, TH1, TH2, EcuState
+from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, N_THETA, PID_I, TH1, TH2, EcuState
 
 # E2E receiver status per frame, as passed in by the node (AUTOSAR Profile 1/11 states)
 E2E_OK = 0
@@ -261,7 +261,8 @@ class Ecu:
         if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless start at trim voltage
             reset_loops(s, p.trim_v_q24)
             s.hist_fill = 0
-            s.pid_i_q24 = 0
+            s.theta_q24[PID_I] = 0
+            s.theta_ext[PID_I] = 0
             s.xm1_q24 = dn
             s.xm2_q24 = 0
             s.obs_n_q24 = dn

@@ -23,7 +23,8 @@ from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q24, Q28
 N_MAX_RPM = 112_500  # 100 %N
 RATE_MIN_HZ = 50
 RATE_MAX_HZ = 1000
-RATE_BUF_LEN = 2 * (RATE_MAX_HZ // 100) + 2  # central-difference ring, enough for 1000 Hz
+RATE_WINDOW_MAX_S = 0.05
+RATE_BUF_LEN = RATE_MAX_HZ // 20 + 2  # central-difference ring: 0.05 s at 1000 Hz, +2 samples
 
 CONTROLLERS = ("mrac", "pid", "open_loop")
 CTRL_MRAC = 0
@@ -284,10 +285,10 @@ def validate(p: EcuParams) -> None:
     _check(0.0 < p.pump_health_alarm < 1.0, "pump_health_alarm", p.pump_health_alarm, "in (0,1)")
     _check(p.lambda_floor > 0.0, "lambda_floor", p.lambda_floor, "must be > 0")
     _check(
-        2.0 / p.rate_hz <= p.rate_window_s <= 0.2,
+        2.0 / p.rate_hz <= p.rate_window_s <= RATE_WINDOW_MAX_S,
         "rate_window_s",
         p.rate_window_s,
-        "must span at least two ticks and at most 0.2 s",
+        f"must span at least two ticks and at most {RATE_WINDOW_MAX_S} s",
     )
     _check(p.speed_noise_rpm >= 0.0, "speed_noise_rpm", p.speed_noise_rpm, "must be >= 0")
     _check(p.ref_wn > 0.0 and p.ref_zeta > 0.0, "ref_wn", (p.ref_wn, p.ref_zeta), "must be > 0")
@@ -351,7 +352,7 @@ class FirmwareParams:
         "ref_am21_q24", "ref_am22_q24", "ref_bm2_q24",
         "refm11_q24", "refm12_q24", "refm21_q24", "refm22_q24", "refh1_q24", "refh2_q24",
         "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
-        "pid_kp_q24", "pid_ki_dt_q24", "pid_kd_q24",
+        "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
         "idle_q24", "demand_max_q24",
         "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
         "egt_kp_q24", "egt_ki_dt_q24", "egt_max_dk",
@@ -434,6 +435,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
                 (p.init_kr, "init_kr"),
                 (p.init_kf[0], "init_kf"),
                 (p.init_kf[1], "init_kf"),
+                (0.0, "pid_ki"),  # PID integrator starts at zero
             )
         ),
         lambda_comm_q24=_q(p.lambda_commissioned, Q24, "lambda_commissioned"),
@@ -461,7 +463,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         g_f2_q28=_q(p.gamma_f[1] * dt, Q28, "gamma_f"),
         u_den_min_q24=_q(p.u_den_min, Q24, "u_den_min"),
         pid_kp_q24=_q(p.pid_kp, Q24, "pid_kp"),
-        pid_ki_dt_q24=_q(p.pid_ki * dt, Q24, "pid_ki"),
+        pid_ki_dt_q28=_q(p.pid_ki * dt, Q28, "pid_ki"),
         pid_kd_q24=_q(p.pid_kd, Q24, "pid_kd"),
         idle_q24=_q(p.idle_pct, Q24, "idle_pct"),
         demand_max_q24=_q(p.demand_max_pct, Q24, "demand_max_pct"),

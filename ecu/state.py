@@ -10,7 +10,7 @@ from array import array
 
 from ecu.params import RATE_BUF_LEN
 
-# adaptive parameter vector (split accumulators): estimator (eq. 4.31) then MRAC gains (eq. 5.16)
+# slow integrators (split accumulators): estimator (eq. 4.31), MRAC gains (eq. 5.16), PID integral
 AP21 = 0  # A_p-hat row 2, column 1
 AP22 = 1  # A_p-hat row 2, column 2
 LAM = 2  # Lambda-hat
@@ -21,7 +21,8 @@ KX2 = 6
 KR = 7
 KF1 = 8
 KF2 = 9
-N_THETA = 10
+PID_I = 10  # PID integrator (V), a slow integrator like the others
+N_THETA = 11
 
 
 class EcuState:
@@ -38,8 +39,6 @@ class EcuState:
         "obs_n_q24", "obs_v_q24",
         # reference model (eq. 5.18-5.19) state, deviations from trim
         "xm1_q24", "xm2_q24",
-        # PID integrator (V)
-        "pid_i_q24",
         # limit loops: previous errors (velocity form) and the applied pump voltage
         "egt_e_prev_q24", "acc_e_prev_q24", "dec_e_prev_q24", "nlim_e_prev_q24",
         "v_applied_q24", "owner", "v_saturated",

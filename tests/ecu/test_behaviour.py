@@ -192,3 +192,18 @@ def test_pump_failure_is_seen_in_lambda_and_health(rig: Any) -> None:
     assert health0 is not None and health0 > 950
     assert rig.out.pump_health_pm < 700 and rig.out.fault_word & F.PUMP_HEALTH
     assert rig.out.mode == M.RUN and rig.out.sat_events == 0
+
+
+def test_pid_baseline_tracks_and_does_not_wind_up(make_rig: Any) -> None:
+    p = replace(EcuParams(), controller="pid", v_max=7.5)  # 95 %N is out of reach at 7.5 V
+    r = make_rig(params=p)
+    r.step(2000, demand_cpct=9050)
+    assert abs(r.plant.n_pct - 90.5) < 0.05  # integral action: no steady-state error
+    r.step(2000, demand_cpct=9500)  # 20 s against the voltage limit
+    assert r.out.pump_mv == 7500 and r.plant.n_pct < 93.5
+    lowest = 100.0
+    for _ in range(1000):
+        r.step(1, demand_cpct=9050)
+        lowest = min(lowest, r.plant.n_pct)
+    assert lowest > 90.0  # no wound-up integrator dragging the speed far under the demand
+    assert abs(r.plant.n_pct - 90.5) < 0.05
