@@ -1,0 +1,34 @@
+"""`sil steady-line [--out DIR]`: the aero-thermal engine's running line as CSV and PNG."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "steady-line"
+HELP = "running line over the fuel range: CSV and PNG of P3, EGT, fuel and thrust vs speed"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("out/steady_line"),
+        metavar="DIR",
+        help="output folder (default out/steady_line)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from plant.aerothermal import make_model
+    from plant.steady_line import plot, running_line, write_csv
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    table = running_line(make_model())
+    csv_path, png_path = args.out / "steady_line.csv", args.out / "steady_line.png"
+    write_csv(table, csv_path)
+    plot(table, png_path)
+    n = table["N_pct"]
+    print(f"running line: {len(n)} points, {n.min():.1f} to {n.max():.1f} %N")
+    print(f"wrote {csv_path} and {png_path}")
+    return 0
