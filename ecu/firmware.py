@@ -62,9 +62,12 @@ class EcuInputs:
         "open_loop_mv",  # pump voltage demand for the open-loop controller, mV
         "arm",  # arm request bit
         "stop",  # stop request bit
-        "sensor_status",  # E2E status of the sensor frame (speed, EGT)
-        "analog_status",  # E2E status of the analog frame (supply, pump current)
-        "demand_status",  # E2E status of the demand frame (demand, open loop, arm, stop)
+        # per frame kind, what arrived since the last tick: E2E_OK (a fresh, valid frame: its
+        # values above are used), REPEATED / WRONGSEQUENCE / WRONGCRC (one arrived but was
+        # rejected) or NONEWDATA (none arrived). The firmware counts ages and timeouts itself.
+        "sensor_status",  # sensor frame (speed, EGT): expected every tick
+        "analog_status",  # analog frame (supply, pump current): every 50 ms
+        "demand_status",  # demand frame (demand, open loop, arm, stop): every 50 ms
     )
 
     def __init__(self) -> None:
@@ -188,8 +191,9 @@ class Ecu:
             s.pump_ma = i.pump_ma
         else:
             s.analog_age = s.analog_age + 1 if s.analog_age < AGE_MAX else AGE_MAX
-            s.supply_mv = p.supply_nominal_mv
-            faults |= F.ANALOG_FRAME_LOST
+            if s.analog_age > p.analog_loss_ticks:  # frames come every 50 ms: hold till then
+                s.supply_mv = p.supply_nominal_mv
+                faults |= F.ANALOG_FRAME_LOST
 
         # demand frame: hold 0.1 s, then idle, shut down after 2 s
         if i.demand_status == E2E_OK:
@@ -253,7 +257,7 @@ class Ecu:
             s.arm,
             s.stop,
             1 if n_rpm >= p.run_entry_rpm else 0,
-            1 if s.demand_age == 0 else 0,
+            1 if s.demand_age <= p.demand_hold_ticks else 0,
             trip_fault,
             trip_shutdown,
             1 if n_rpm < p.shutdown_done_rpm else 0,

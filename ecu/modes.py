@@ -1,8 +1,8 @@
 """Mode logic: OFF -> ARMED -> RUN -> SHUTDOWN, with a latched FAULT.
 
 - OFF: pump off. Arm request (and no stop request) -> ARMED.
-- ARMED: pump off, waiting for the starter to bring the engine to ``run_entry_pct`` with a fresh
-  demand -> RUN. Losing the arm request or a stop request -> OFF.
+- ARMED: pump off, waiting for the starter to bring the engine to ``run_entry_pct`` with a valid
+  demand (not older than the hold time) -> RUN. Losing the arm request or a stop request -> OFF.
 - RUN: closed-loop control. Stop request, arm dropped, demand lost for 2 s or flameout ->
   SHUTDOWN. Overspeed, EGT over its maximum, pump stall or dry running, or sensor frames lost
   beyond their timeout -> FAULT.

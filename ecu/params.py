@@ -139,6 +139,7 @@ class EcuParams:
     demand_hold_s: float = 0.1
     demand_shutdown_s: float = 2.0
     sensor_loss_s: float = 0.2
+    analog_loss_s: float = 0.15  # analog frames come every 50 ms: three missed ones
     run_entry_pct: float = 31.5  # ARMED -> RUN once the starter has the engine this fast
     shutdown_done_pct: float = 10.0  # SHUTDOWN -> OFF below this
 
@@ -332,6 +333,7 @@ def validate(p: EcuParams) -> None:
         "speed_stuck_time_s",
         "egt_fault_time_s",
         "sensor_loss_s",
+        "analog_loss_s",
         "demand_shutdown_s",
     ):
         _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
@@ -364,7 +366,7 @@ class FirmwareParams:
         "speed_valid_max_rpm", "speed_step_max_rpm", "speed_fault_ticks", "speed_stuck_ticks",
         "speed_stuck_dv_q24", "egt_open_high_dk", "egt_open_low_dk", "egt_fault_ticks",
         "egt_fail_demand_q24", "obs_l1_dt_q24", "obs_l2_dt_q24",
-        "demand_hold_ticks", "demand_shutdown_ticks", "sensor_loss_ticks",
+        "demand_hold_ticks", "demand_shutdown_ticks", "sensor_loss_ticks", "analog_loss_ticks",
         "run_entry_rpm", "shutdown_done_rpm",
     )  # fmt: skip
 
@@ -512,6 +514,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         demand_hold_ticks=ticks(p.demand_hold_s),
         demand_shutdown_ticks=ticks(p.demand_shutdown_s),
         sensor_loss_ticks=ticks(p.sensor_loss_s),
+        analog_loss_ticks=ticks(p.analog_loss_s),
         run_entry_rpm=rpm(p.run_entry_pct),
         shutdown_done_rpm=rpm(p.shutdown_done_pct),
     )
