@@ -88,13 +88,14 @@ def encode(message: MessageCodec, values: dict[str, float]) -> str:
 
 def decode_capture(capture: Path) -> list[tuple[str, dict[str, float]]]:
     """`cantools decode` of a candump log: (message name, signal name -> value) per frame."""
-    decoded = subprocess.run(
-        [str(CANTOOLS), "decode", "--no-decode-choices", "--single-line", str(DBC_PATH)],
-        stdin=capture.open("rb"),
-        capture_output=True,
-        text=True,
-        check=True,
-    )
+    with capture.open("rb") as log:
+        decoded = subprocess.run(
+            [str(CANTOOLS), "decode", "--no-decode-choices", "--single-line", str(DBC_PATH)],
+            stdin=log,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
     frames = []
     for line in decoded.stdout.splitlines():
         match = DECODED_LINE.fullmatch(line)
