@@ -1,0 +1,206 @@
+"""The ECU as a CAN node: a thin sans-IO layer between the protocol codec and the firmware tick.
+
+Frames are decoded with :mod:`protocol.codec` (raw integers, which are already the firmware's
+units: rpm, 0.1 K, mV, mA, 0.01 %) and checked with its E2E checkers; the per-frame-kind status
+of what arrived since the last tick goes to the firmware with the values (see
+:class:`ecu.firmware.EcuInputs`). Outputs go back as EcuStatus and EcuTelemetry when due, then
+EcuActuator last, following :mod:`protocol.lockstep`:
+
+- lockstep: one tick per PlantSensors frame, answered with ActuatorTick = SensorTick; when a
+  Demand is due at that tick (and the command node sends ticked demands) the tick waits for it,
+  or for the driver's wall-clock guard (``on_timeout``), after which it runs without it;
+- real time: one tick per period of the node's own clock (``on_period``), with whatever frames
+  arrived in between; ActuatorTick counts the node's own ticks.
+
+The node reuses its buffers: nothing it keeps grows per frame or per tick.
+"""
+
+from __future__ import annotations
+
+from ecu.firmware import E2E_NONEWDATA, E2E_OK, Ecu, EcuInputs
+from ecu.params import EcuParams, FirmwareParams
+from protocol.codec import Codec
+from protocol.lockstep import TICK_MODULO, every_ticks
+from protocol.node import SendFn
+
+_TELEMETRY_FIELDS = (
+    "ap21_q24", "ap22_q24", "lambda_q24", "theta21_q24", "theta22_q24",
+    "kx1_q24", "kx2_q24", "kr_q24", "kf1_q24", "kf2_q24",
+)  # fmt: skip
+TELEMETRY_COUNT = 13  # EcuTelemetry mux indices 0..12 (DBC)
+
+
+def _clamp(x: int, lo: int, hi: int) -> int:
+    return lo if x < lo else hi if x > hi else x
+
+
+class EcuNode:
+    """The firmware on the bus. ``lockstep`` selects the clocking (see the module docstring);
+    ``max_ticks`` makes the node finish after answering that many ticks (None: run until
+    stopped)."""
+
+    def __init__(
+        self,
+        params: EcuParams | FirmwareParams | None = None,
+        *,
+        lockstep: bool = True,
+        max_ticks: int | None = None,
+        codec: Codec | None = None,
+    ) -> None:
+        self.ecu = Ecu(params)
+        self.rate_hz = self.ecu.p.rate_hz
+        self.lockstep = lockstep
+        self.max_ticks = max_ticks
+        codec = codec or Codec()
+        self.sensors = codec["PlantSensors"]
+        self.analog = codec["PlantAnalog"]
+        self.demand = codec["Demand"]
+        self.actuator = codec["EcuActuator"]
+        self.status = codec["EcuStatus"]
+        self.telemetry = codec["EcuTelemetry"]
+        # checkers classify each frame (one lost frame before a good one is tolerated: the good
+        # one is fresh); timeouts are counted by the firmware, in ticks
+        self.sensors_check = self.sensors.checker(max_delta=2)
+        self.analog_check = self.analog.checker(max_delta=2)
+        self.demand_check = self.demand.checker(max_delta=2)
+        self.every_status = every_ticks(self.status.cycle_time_ms, self.rate_hz)
+        self.every_telemetry = every_ticks(self.telemetry.cycle_time_ms, self.rate_hz)
+        self.every_demand = every_ticks(self.demand.cycle_time_ms, self.rate_hz)
+        self.i = EcuInputs()
+        self.i.sensor_status = self.i.analog_status = self.i.demand_status = E2E_NONEWDATA
+        self._sensor_raw = [0] * len(self.sensors.signal_names)
+        self._analog_raw = [0] * len(self.analog.signal_names)
+        self._demand_raw = [0] * len(self.demand.signal_names)
+        self._actuator_raw = [0] * len(self.actuator.signal_names)
+        self._status_raw = [0] * len(self.status.signal_names)
+        self._telemetry_raw = [0, 0]
+        self.ticks = 0  # ticks run
+        self.tick = 0  # tick number being answered (lockstep: SensorTick)
+        self.telemetry_index = 0
+        self.ticked_demands = False  # the command node sends Demand frames with their tick
+        self.demand_tick = -1  # DemandTick of the last valid Demand
+        self.demand_pending = False  # a valid Demand not yet handed to the firmware
+        self.waiting = False  # a sensor frame waits for its Demand (lockstep)
+        self.demand_waits = 0  # ticks run without their due Demand after the guard time
+        self.finished = False
+
+    # -- frames in ---------------------------------------------------------------------------
+    def start(self, send: SendFn) -> None:
+        pass
+
+    def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        i = self.i
+        if frame_id == self.sensors.frame_id:
+            status = self.sensors_check.check(data)
+            i.sensor_status = status
+            if status == E2E_OK:
+                raw = self._sensor_raw
+                self.sensors.unpack_raw(data, raw)
+                i.tick = raw[0]
+                i.speed_rpm = raw[1]
+                i.egt_dk = raw[2]
+            if self.lockstep:
+                self.tick = i.tick if status == E2E_OK else (self.tick + 1) % TICK_MODULO
+                if self._demand_due():
+                    self.waiting = True
+                else:
+                    self._run_tick(send)
+        elif frame_id == self.analog.frame_id:
+            status = self.analog_check.check(data)
+            if status == E2E_OK:
+                raw = self._analog_raw
+                self.analog.unpack_raw(data, raw)
+                i.supply_mv = raw[1]
+                i.pump_ma = raw[2]
+            if i.analog_status != E2E_OK:  # an OK frame since the last tick wins
+                i.analog_status = status
+        elif frame_id == self.demand.frame_id:
+            status = self.demand_check.check(data)
+            if status == E2E_OK:
+                self.demand.unpack_raw(data, self._demand_raw)  # applies from its DemandTick
+                self.demand_tick = self._demand_raw[4]
+                self.demand_pending = True
+                self.ticked_demands = self.lockstep
+            elif i.demand_status != E2E_OK:
+                i.demand_status = status
+            if self.waiting and not self._demand_due():
+                self._run_tick(send)
+
+    def _demand_due(self) -> bool:
+        """Lockstep: a Demand is due at this tick and the one carrying this tick has not come."""
+        return (
+            self.ticked_demands
+            and self.tick % self.every_demand == 0
+            and self.demand_tick != self.tick
+        )
+
+    def on_timeout(self, send: SendFn) -> None:
+        """Lockstep guard time passed: run the waiting tick without its Demand."""
+        if self.waiting:
+            self.demand_waits += 1
+            self._run_tick(send)
+
+    def on_period(self, send: SendFn) -> None:
+        """Real time: one tick per period of the node's own clock."""
+        self.tick = self.ticks % TICK_MODULO
+        self._run_tick(send)
+
+    # -- tick and frames out -----------------------------------------------------------------
+    def _apply_demand(self) -> None:
+        """Hand a received Demand to the firmware once its tick has come (at once if unticked)."""
+        if not self.demand_pending:
+            return
+        if self.ticked_demands and (self.tick - self.demand_tick) % TICK_MODULO >= TICK_MODULO // 2:
+            return  # DemandTick still ahead
+        raw = self._demand_raw
+        i = self.i
+        i.arm = raw[0]
+        i.stop = raw[1]
+        i.demand_cpct = raw[2]
+        i.open_loop_mv = raw[3]
+        i.demand_status = E2E_OK
+        self.demand_pending = False
+
+    def _run_tick(self, send: SendFn) -> None:
+        self.waiting = False
+        i = self.i
+        self._apply_demand()
+        i.tick = self.tick
+        o = self.ecu.tick(i)
+        i.sensor_status = i.analog_status = i.demand_status = E2E_NONEWDATA
+        k = self.ticks
+        if k % self.every_status == 0:
+            raw = self._status_raw
+            raw[0] = o.mode
+            raw[1] = o.fault_word
+            raw[2] = _clamp(o.pump_health_pm, 0, 4095)
+            raw[3] = o.owner
+            raw[4] = _clamp(o.nref_cpct, 0, 15000)
+            self.status.pack_raw(raw)
+            send(self.status.frame_id, self.status.data)
+        if k % self.every_telemetry == 0:
+            raw = self._telemetry_raw
+            j = self.telemetry_index
+            raw[0] = j
+            if j < 10:
+                raw[1] = getattr(o, _TELEMETRY_FIELDS[j])
+            elif j == 10:
+                raw[1] = self.ecu.s.obs_n_q24  # fast-model speed deviation estimate (Q7.24)
+            elif j == 11:
+                raw[1] = self.ecu.s.obs_v_q24  # fast-model speed rate estimate (Q7.24)
+            else:
+                raw[1] = o.sat_events
+            self.telemetry.pack_raw(raw)
+            send(self.telemetry.frame_id, self.telemetry.data)
+            self.telemetry_index = j + 1 if j + 1 < TELEMETRY_COUNT else 0
+        raw = self._actuator_raw
+        raw[0] = o.pump_enable
+        raw[1] = o.mode
+        raw[2] = self.tick
+        raw[3] = o.duty_cpct
+        raw[4] = _clamp(o.pump_mv, 0, 30000)
+        self.actuator.pack_raw(raw)
+        send(self.actuator.frame_id, self.actuator.data)
+        self.ticks = k + 1
+        if self.max_ticks is not None and self.ticks >= self.max_ticks:
+            self.finished = True

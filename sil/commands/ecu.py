@@ -1,0 +1,94 @@
+"""`sil ecu --bus SPEC`: the ECU firmware as a CAN node (lockstep or real time)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+NAME = "ecu"
+HELP = "run the ECU firmware as a CAN node on a bus (lockstep: one tick per sensor frame)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--bus",
+        metavar="SPEC",
+        required=True,
+        help="bus spec (socketcan:vcan0, udp:GROUP@PORT, virtual:NAME, ...)",
+    )
+    parser.add_argument(
+        "--mode",
+        choices=("lockstep", "realtime"),
+        default="lockstep",
+        help="lockstep: one tick per PlantSensors frame (default); realtime: "
+        "the node's own wall-clock rate",
+    )
+    parser.add_argument("--preset", default="default", help="parameter preset (ecu.params)")
+    parser.add_argument(
+        "--controller",
+        choices=("mrac", "pid", "open_loop"),
+        help="override the preset's controller",
+    )
+    parser.add_argument("--rate", type=int, metavar="HZ", help="override the tick rate (50-1000)")
+    parser.add_argument("--ticks", type=int, metavar="N", help="stop after answering N ticks")
+    parser.add_argument(
+        "--guard",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="lockstep: wall-clock guard for a missing frame (default 1 s)",
+    )
+    parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ecu.node import EcuNode
+    from ecu.params import ParamError, compile_params, preset
+    from protocol.bus import BusSpecError, open_bus
+    from protocol.node import run_lockstep, run_realtime
+
+    overrides: dict[str, object] = {}
+    if args.controller:
+        overrides["controller"] = args.controller
+    if args.rate:
+        overrides["rate_hz"] = args.rate
+    try:
+        params = compile_params(preset(args.preset, **overrides))
+    except (ParamError, ValueError) as exc:
+        print(f"sil ecu: {exc}", file=sys.stderr)
+        return 2
+    if args.ticks is not None and args.ticks < 1:
+        print("sil ecu: --ticks must be at least 1", file=sys.stderr)
+        return 2
+    node = EcuNode(params, lockstep=args.mode == "lockstep", max_ticks=args.ticks)
+    try:
+        bus = open_bus(args.bus)
+    except BusSpecError as exc:
+        print(f"sil ecu: {exc}", file=sys.stderr)
+        return 2
+    try:
+        if args.mode == "lockstep":
+            stats = run_lockstep(node, bus, guard_s=args.guard)
+        else:
+            stats = run_realtime(node, bus, 1.0 / params.rate_hz)
+    finally:
+        bus.shutdown()
+    o = node.ecu.out
+    summary = {
+        "ticks": node.ticks,
+        "mode": o.mode,
+        "fault_word": o.fault_word,
+        "sat_events": o.sat_events,
+        "frames_received": stats.received,
+        "frames_sent": stats.sent,
+        "guard_timeouts": stats.timeouts,
+        "ticks_without_due_demand": node.demand_waits,
+        "overruns": stats.overruns,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for key, value in summary.items():
+            print(f"{key}: {value}")
+    return 0
