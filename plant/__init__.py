@@ -1,1 +1,8 @@
-"""The engine: aero-thermal turbojet model, gear pump, sensors, faults; the plant node."""
+"""The engine: aero-thermal model, gear pump, sensors, faults; the plant node.
+
+Interface documented in README.md, section "Plant".
+"""
+
+from plant.jit_cache import ensure_fresh
+
+ensure_fresh()

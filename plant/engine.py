@@ -194,7 +194,19 @@ def split_for_stiffness(x: np.ndarray, dt: float, params: EngineParams) -> int:
 
 
 @njit(cache=True, error_model="numpy")
-def _advance(x, v_or_fuel, is_pump, lit, n_steps, dt, model, work):  # noqa: ANN001, ANN202
+def advance(
+    x: np.ndarray,
+    u: float,
+    pump_in_loop: bool,
+    lit: float,
+    n_steps: int,
+    dt: float,
+    model: EngineModel,
+    work: np.ndarray,
+) -> tuple[int, float]:
+    """n_steps RK4 steps of dt with the input u held: the pump voltage when pump_in_loop (fuel
+    flow then follows P3), else the fuel flow. x advances in place; returns (OR of the flags,
+    lit), lit = 0 once the flame is out (latched: no relight without a restart)."""
     flags = 0
     p = model.params
     p2, t2 = intake(p.p0_pa, p.t0_k, p.u0_m_s)  # ambient is constant over the call
@@ -205,15 +217,15 @@ def _advance(x, v_or_fuel, is_pump, lit, n_steps, dt, model, work):  # noqa: ANN
         for _ in range(k):
             for stage in range(STAGES):
                 xt = rk4_stage_point(x, stage, h, work)
-                g_fuel = v_or_fuel
-                if is_pump:
-                    g_fuel, clamped = pump_fuel_flow(xt, v_or_fuel, model)
+                g_fuel = u
+                if pump_in_loop:
+                    g_fuel, clamped = pump_fuel_flow(xt, u, model)
                     if clamped:
                         step_flags |= PUMP_MAP_CLAMPED
                 step_flags |= rates_at(xt, g_fuel, lit, p2, t2, model, work[stage])
             rk4_combine(x, h, work)
         if step_flags & LEAN_LIMIT:
-            lit = 0.0  # flameout latches: no relight without a restart
+            lit = 0.0
         if x[3] < 0.0:
             x[3] = 0.0
         flags |= step_flags
@@ -223,7 +235,6 @@ def _advance(x, v_or_fuel, is_pump, lit, n_steps, dt, model, work):  # noqa: ANN
     return flags, lit
 
 
-@njit(cache=True, error_model="numpy")
 def advance_fuel(
     x: np.ndarray,
     g_fuel: float,
@@ -233,11 +244,10 @@ def advance_fuel(
     model: EngineModel,
     work: np.ndarray,
 ) -> tuple[int, float]:
-    """n_steps RK4 steps of dt with the fuel flow held; returns (OR of flags, lit)."""
-    return _advance(x, g_fuel, False, lit, n_steps, dt, model, work)
+    """advance() with the fuel flow commanded."""
+    return advance(x, g_fuel, False, lit, n_steps, dt, model, work)
 
 
-@njit(cache=True, error_model="numpy")
 def advance_pump(
     x: np.ndarray,
     v_pump: float,
@@ -247,6 +257,5 @@ def advance_pump(
     model: EngineModel,
     work: np.ndarray,
 ) -> tuple[int, float]:
-    """n_steps RK4 steps of dt with the pump voltage held (fuel flow follows P3);
-    returns (OR of flags, lit)."""
-    return _advance(x, v_pump, True, lit, n_steps, dt, model, work)
+    """advance() with the gear pump in the loop at voltage v_pump."""
+    return advance(x, v_pump, True, lit, n_steps, dt, model, work)

@@ -1,0 +1,70 @@
+"""`sil bench plant`: simulated seconds per wall second of both plants.
+
+- ``realtime_factor``: the aero-thermal model alone (compiled RK4 loop, 1 ms steps, gear pump in
+  the loop), the issue's target being >= 500;
+- ``step_api_realtime_factor``: the same through ``AeroThermalPlant.step`` at the default 10 ms
+  ECU period, with sensors, faults and the pump driver (what the SIL harness sees);
+- the same two for the fast engine model of eq. 3.24.
+Each figure is the best of a few repeats (the machine is shared); compilation is excluded.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from plant.aerothermal import AeroThermalPlant
+from plant.engine import advance_pump
+from plant.fast_plant import FastPlant, advance_fast
+from plant.interface import SUBSTEP_S
+
+REPEATS = 3
+
+
+def _best_seconds(run: object, repeats: int = REPEATS) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def run(quick: bool = False) -> dict[str, float]:
+    sim_s = 30.0 if quick else 300.0
+    api_s = 5.0 if quick else 30.0
+    n = int(round(sim_s / SUBSTEP_S))
+
+    aero = AeroThermalPlant()
+    model, x0, v = aero.model, aero.state, aero.trim_pump_voltage
+    work = np.empty((5, 4))
+    advance_pump(x0.copy(), v, 1.0, 1, SUBSTEP_S, model, work)  # load / compile
+    wall = _best_seconds(lambda: advance_pump(x0.copy(), v + 0.5, 1.0, n, SUBSTEP_S, model, work))
+
+    fast = FastPlant()
+    theta = fast.theta
+    advance_fast(np.zeros(2), 0.5, theta, 1, SUBSTEP_S)
+    wall_fast = _best_seconds(lambda: advance_fast(np.zeros(2), 0.5, theta, n, SUBSTEP_S))
+
+    def api(plant: AeroThermalPlant | FastPlant) -> float:
+        ticks = int(round(api_s / plant.config.ecu_period_s))
+        duty = plant.trim_duty
+
+        def loop() -> None:
+            for _ in range(ticks):
+                plant.step(duty)
+
+        return api_s / _best_seconds(loop, 2)
+
+    return {
+        "realtime_factor": round(sim_s / wall, 1),
+        "aero_thermal_us_per_rk4_step": round(wall / n * 1e6, 3),
+        "aero_thermal_simulated_s": sim_s,
+        "step_api_realtime_factor": round(api(aero), 1),
+        "fast_realtime_factor": round(sim_s / wall_fast, 1),
+        "fast_step_api_realtime_factor": round(api(fast), 1),
+        "ecu_period_s": aero.config.ecu_period_s,
+        "load_average_1min": round(os.getloadavg()[0], 2),
+    }
