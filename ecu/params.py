@@ -44,7 +44,9 @@ class EcuParams:
     rate_hz: int = 100
     controller: str = "mrac"
     trim_n_pct: float = 89.68  # N0, the fast model's trim point
-    trim_v: float = 6.0  # V0, pump voltage at trim (depends on the plant's pump table)
+    # V0, pump voltage at trim: 11.56 V delivers the trim's 8 g/s against its P3 in our plant's
+    # pump table (plant.aerothermal: trim_pump_voltage); the fast model is in deviations from it
+    trim_v: float = 11.56
 
     # online estimator (eq. 4.7, 4.31); row 1 of A_p and Theta_f is kinematic and not adapted
     am_row2: tuple[float, float] = (-25.0, -10.0)  # identification model A_m row 2
@@ -88,13 +90,15 @@ class EcuParams:
     idle_pct: float = 35.0
     demand_max_pct: float = 100.0
 
-    # protection (defaults provisional until the aero-thermal running line is available)
+    # protection; EGT defaults from our plant's running line (sil steady-line): a healthy engine
+    # runs 1048 K at 89.68 %N and about 1255 K at 100 %N, hotter than the Olympus spec's 973 K
+    # (see the design brief); the limit sits 25 K above that, the shutdown 75 K above
     limiters_on: bool = True
-    egt_limit_k: float = 1100.0
+    egt_limit_k: float = 1280.0
     egt_kp: float = 0.01  # V per K
     egt_ki: float = 0.02  # V per K s
-    egt_engage_k: float = 30.0  # the EGT loop joins the min-select within this of its limit
-    egt_max_k: float = 1150.0  # shutdown above this ...
+    egt_engage_k: float = 100.0  # the EGT loop joins the min-select within this of its limit
+    egt_max_k: float = 1330.0  # shutdown above this ...
     egt_max_time_s: float = 1.0  # ... for this long
     accel_max_pct_s: float = 20.0
     decel_max_pct_s: float = 30.0
@@ -109,17 +113,22 @@ class EcuParams:
     overspeed_time_s: float = 0.5
     flameout_margin: float = 0.10  # fraction under idle
     flameout_time_s: float = 3.0
-    v_min: float = 0.5
-    v_max: float = 10.0
+    v_min: float = 1.0
+    v_max: float = 20.0  # within 95 % duty of a sagging 6S pack (22.2 V nominal)
     v_slew_v_s: float = 20.0
 
     # pump driver
     duty_min: float = 0.0
     duty_max: float = 0.95
-    supply_nominal_v: float = 12.0  # used while the analog frame is lost
-    pump_stall_ma: float = 6000.0
+    supply_nominal_v: float = 22.2  # 6S pack; used while the analog frame is lost
+    # pump current (our plant's pump: 0.25 A + 0.06 A/V friction, + 4 uA/Pa against pressure):
+    # stalled = seized (current high) or tripped by the driver (current near zero) with voltage
+    # applied; dry = only the friction current (under dry_base + dry_per_v * V)
+    pump_stall_ma: float = 5000.0
+    pump_trip_ma: float = 100.0
     pump_stall_time_s: float = 0.3
-    pump_dry_ma: float = 150.0
+    pump_dry_base_ma: float = 500.0
+    pump_dry_ma_per_v: float = 60.0
     pump_dry_min_v: float = 2.0
     pump_dry_time_s: float = 0.5
 
@@ -314,7 +323,13 @@ def validate(p: EcuParams) -> None:
     _check(p.v_slew_v_s > 0.0, "v_slew_v_s", p.v_slew_v_s, "must be > 0")
     _check(0.0 <= p.duty_min < p.duty_max <= 1.0, "duty_max", p.duty_max, "0 <= min < max <= 1")
     _check(p.supply_nominal_v > p.v_min, "supply_nominal_v", p.supply_nominal_v, "> v_min")
-    _check(p.pump_dry_ma < p.pump_stall_ma, "pump_dry_ma", p.pump_dry_ma, "below stall current")
+    _check(
+        0.0 <= p.pump_trip_ma < p.pump_dry_base_ma < p.pump_stall_ma,
+        "pump_dry_base_ma",
+        p.pump_dry_base_ma,
+        "need pump_trip_ma < pump_dry_base_ma < pump_stall_ma",
+    )
+    _check(p.pump_dry_ma_per_v >= 0.0, "pump_dry_ma_per_v", p.pump_dry_ma_per_v, "must be >= 0")
     _check(0.0 < p.flameout_margin < 0.5, "flameout_margin", p.flameout_margin, "in (0, 0.5)")
     _check(
         p.run_entry_pct >= p.idle_pct * (1.0 - p.flameout_margin),
@@ -362,7 +377,8 @@ class FirmwareParams:
         "n_limit_q24", "n_limit_kp_q24", "n_limit_ki_dt_q24", "overspeed_rpm", "overspeed_ticks",
         "flameout_rpm", "flameout_ticks", "v_min_q24", "v_max_q24", "v_slew_q24",
         "duty_min_cpct", "duty_max_cpct", "supply_nominal_mv",
-        "pump_stall_ma", "pump_stall_ticks", "pump_dry_ma", "pump_dry_min_q24", "pump_dry_ticks",
+        "pump_stall_ma", "pump_trip_ma", "pump_stall_ticks", "pump_dry_base_ma",
+        "pump_dry_ma_per_v", "pump_dry_min_q24", "pump_dry_ticks",
         "speed_valid_max_rpm", "speed_step_max_rpm", "speed_fault_ticks", "speed_stuck_ticks",
         "speed_stuck_dv_q24", "egt_open_high_dk", "egt_open_low_dk", "egt_fault_ticks",
         "egt_fail_demand_q24", "obs_l1_dt_q24", "obs_l2_dt_q24",
@@ -497,7 +513,9 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         supply_nominal_mv=round(p.supply_nominal_v * 1000.0),
         pump_stall_ma=round(p.pump_stall_ma),
         pump_stall_ticks=ticks(p.pump_stall_time_s),
-        pump_dry_ma=round(p.pump_dry_ma),
+        pump_trip_ma=round(p.pump_trip_ma),
+        pump_dry_base_ma=round(p.pump_dry_base_ma),
+        pump_dry_ma_per_v=round(p.pump_dry_ma_per_v),
         pump_dry_min_q24=_q(p.pump_dry_min_v, Q24, "pump_dry_min_v"),
         pump_dry_ticks=ticks(p.pump_dry_time_s),
         speed_valid_max_rpm=round(p.speed_valid_max_rpm),

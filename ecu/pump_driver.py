@@ -27,9 +27,14 @@ def pump_duty(s: EcuState, p: FirmwareParams, v_mv: int, supply_mv: int) -> int:
 
 
 def pump_current_checks(s: EcuState, p: FirmwareParams, pump_ma: int, v_q24: int) -> int:
-    """Stall (current high) and dry running (current low with voltage applied), persistent."""
-    s.pump_stall_cnt = persist(s.pump_stall_cnt, pump_ma > p.pump_stall_ma, p.pump_stall_ticks)
-    dry = pump_ma < p.pump_dry_ma and v_q24 > p.pump_dry_min_q24
+    """Stall (current high: seized; or near zero: the driver tripped) and dry running (only the
+    friction current), with voltage applied, each persistent."""
+    applied = v_q24 > p.pump_dry_min_q24
+    stall = pump_ma > p.pump_stall_ma or (applied and pump_ma < p.pump_trip_ma)
+    s.pump_stall_cnt = persist(s.pump_stall_cnt, stall, p.pump_stall_ticks)
+    v_mv = volts_q24_to_mv(v_q24)
+    dry_ma = p.pump_dry_base_ma + div_trunc(p.pump_dry_ma_per_v * v_mv, 1000)
+    dry = applied and p.pump_trip_ma <= pump_ma < dry_ma
     s.pump_dry_cnt = persist(s.pump_dry_cnt, dry, p.pump_dry_ticks)
     tripped = 0
     if s.pump_stall_cnt >= p.pump_stall_ticks:

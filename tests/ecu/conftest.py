@@ -35,8 +35,9 @@ class Rig:
         return 1.0 / self.params.rate_hz
 
     def egt_steady(self) -> float:
-        """Static EGT line of the rig: 1030 K at trim, 12 K per %N, plus the hot offset."""
-        return 1030.0 + 12.0 * (self.plant.n_pct - 89.68) + self.hot_k
+        """Static EGT line like our plant's running line near trim (1048 K at 89.68 %N, about
+        20 K per %N), plus the hot offset."""
+        return 1048.0 + 20.0 * (self.plant.n_pct - 89.68) + self.hot_k
 
     def step(self, n: int = 1, **override: int) -> EcuOutputs:
         """Run n ticks; keyword arguments pin raw input fields (else they come from the plant)."""
@@ -46,8 +47,9 @@ class Rig:
             i.tick = self.k
             i.speed_rpm = round(self.plant.n_pct * RPM_PER_PCT)
             i.egt_dk = round(self.egt_k * 10.0)
-            i.pump_ma = 300 * self.out.pump_mv // 1000 + 200 if self.out.pump_enable else 0
-            i.supply_mv = 12000
+            # our plant's pump current near trim pressure: 0.25 A + 0.06 A/V + 0.8 A
+            i.pump_ma = 1050 + 60 * self.out.pump_mv // 1000 if self.out.pump_enable else 0
+            i.supply_mv = 22200
             i.arm = 1
             i.stop = 0
             i.sensor_status = i.analog_status = i.demand_status = 0

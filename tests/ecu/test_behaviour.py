@@ -102,7 +102,7 @@ def test_stuck_speed_sensor_is_replaced_by_the_fast_model(rig: Any) -> None:
         else:
             worst_after = max(worst_after, err)
     # until detection the frozen reading pulled the observer; after it the model converges
-    assert worst_during < 2.0 and worst_after < 0.1  # %N
+    assert worst_during < 2.0 and worst_after < 0.15  # %N
     assert abs(rig.plant.n_pct - 88.0) < 0.1  # analytical redundancy keeps control
 
 
@@ -120,12 +120,13 @@ def test_egt_open_circuit_flags_and_caps_demand(rig: Any) -> None:
 
 
 def test_egt_over_maximum_faults(rig: Any) -> None:
-    taken = rig.run_until(lambda o: o.mode == M.FAULT, 200, egt_dk=11_600)
+    taken = rig.run_until(lambda o: o.mode == M.FAULT, 200, egt_dk=13_400)
     assert rig.out.fault_word & F.EGT_OVERTEMP and taken == 100
 
 
 @pytest.mark.parametrize(
-    ("pump_ma", "bit", "ticks"), [(7_000, F.PUMP_STALL, 30), (50, F.PUMP_DRY, 50)]
+    ("pump_ma", "bit", "ticks"),
+    [(7_000, F.PUMP_STALL, 30), (0, F.PUMP_STALL, 30), (800, F.PUMP_DRY, 50)],
 )
 def test_pump_current_checks(rig: Any, pump_ma: int, bit: int, ticks: int) -> None:
     taken = rig.run_until(lambda o: o.mode == M.FAULT, 100, pump_ma=pump_ma)
@@ -134,24 +135,24 @@ def test_pump_current_checks(rig: Any, pump_ma: int, bit: int, ticks: int) -> No
 
 def test_duty_compensates_battery_sag_and_saturates(rig: Any) -> None:
     rig.step(50)
-    o = rig.step(1, supply_mv=12_000)
-    mv, duty12 = o.pump_mv, o.duty_cpct
-    assert duty12 == mv * 10000 // 12_000
-    o = rig.step(1, supply_mv=10_000)
-    assert abs(o.pump_mv - mv) < 5 and abs(o.duty_cpct - o.pump_mv * 10000 // 10_000) <= 1
-    o = rig.step(1, supply_mv=6_000)  # sagged below what the pump needs: duty at its limit
+    o = rig.step(1, supply_mv=22_200)
+    mv, duty = o.pump_mv, o.duty_cpct
+    assert duty == mv * 10000 // 22_200
+    o = rig.step(1, supply_mv=18_000)  # battery sag: more duty for the same voltage
+    assert abs(o.pump_mv - mv) < 5 and abs(o.duty_cpct - o.pump_mv * 10000 // 18_000) <= 1
+    o = rig.step(1, supply_mv=10_000)  # sagged below what the pump needs: duty at its limit
     assert o.duty_cpct == 9500 and o.fault_word & F.PUMP_SATURATED
 
 
 def test_egt_limiter_holds_the_limit_on_a_hot_day(make_rig: Any) -> None:
     std = make_rig()
     std.step(3000, demand_cpct=9500)
-    assert abs(std.plant.n_pct - 95.0) < 0.1 and std.egt_k < 1100.0
-    hot = make_rig(hot_k=60.0)  # hot day / degraded turbine: 60 K hotter at every speed
+    assert abs(std.plant.n_pct - 95.0) < 0.1 and std.egt_k < 1280.0
+    hot = make_rig(hot_k=150.0)  # degraded turbine / hot day: 150 K hotter at every speed
     hot.step(3000, demand_cpct=9500)
     assert hot.out.owner == OWNER_EGT and hot.out.fault_word & F.LIMITER_ACTIVE
-    assert abs(hot.egt_k - 1100.0) < 3.0
-    assert hot.plant.n_pct < 91.0 and hot.out.mode == M.RUN
+    assert abs(hot.egt_k - 1280.0) < 3.0
+    assert hot.plant.n_pct < 94.5 and hot.out.mode == M.RUN
     hot.step(3000, demand_cpct=8700)  # demand back well under the limit: speed loop owns
     assert hot.out.owner == OWNER_SPEED and abs(hot.plant.n_pct - 87.0) < 0.1
     assert hot.out.sat_events == 0  # no store overflowed through the limiting and the release
@@ -195,12 +196,12 @@ def test_pump_failure_is_seen_in_lambda_and_health(rig: Any) -> None:
 
 
 def test_pid_baseline_tracks_and_does_not_wind_up(make_rig: Any) -> None:
-    p = replace(EcuParams(), controller="pid", v_max=7.5)  # 95 %N is out of reach at 7.5 V
+    p = replace(EcuParams(), controller="pid", v_max=13.5)  # 95 %N is out of reach at 13.5 V
     r = make_rig(params=p)
     r.step(2000, demand_cpct=9050)
     assert abs(r.plant.n_pct - 90.5) < 0.05  # integral action: no steady-state error
     r.step(2000, demand_cpct=9500)  # 20 s against the voltage limit
-    assert r.out.pump_mv == 7500 and r.plant.n_pct < 93.5
+    assert r.out.pump_mv == 13500 and r.plant.n_pct < 94.5
     lowest = 100.0
     for _ in range(1000):
         r.step(1, demand_cpct=9050)

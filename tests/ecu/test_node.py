@@ -38,9 +38,9 @@ class FakePlant:
     def _send_tick(self, send) -> None:  # noqa: ANN001
         k = self.k
         if k % 5 == 0:
-            self.analog.pack_raw([k, 12000, 2000])
+            self.analog.pack_raw([k, 22200, 1800])
             send(self.analog.frame_id, self.analog.data)
-        self.sensors.pack_raw([k, round(self.plant.n_pct * 1125), 10300])
+        self.sensors.pack_raw([k, round(self.plant.n_pct * 1125), 10480])
         data = bytearray(self.sensors.data)
         if k == self.corrupt_tick:
             data[5] ^= 0x40  # a flipped bit: WRONGCRC at the ECU
@@ -59,7 +59,7 @@ class FakePlant:
         out = self.ecu_node.ecu.out
         self.demand_q24.append(self.ecu_node.ecu.s.demand_q24)
         self.faults.append(out.fault_word)
-        self.plant.step(mv / 1000.0 - 6.0 if enable else 0.0, 0.01)
+        self.plant.step(mv / 1000.0 - 11.56 if enable else 0.0, 0.01)
         self.k += 1
         if self.k >= self.ticks:
             self.finished = True
@@ -169,7 +169,7 @@ def test_sil_ecu_over_a_python_can_bus(capsys: pytest.CaptureFixture[str]) -> No
                         arbitration_id=demand.frame_id, data=demand.data, is_extended_id=False
                     )
                 )
-                analog.pack_raw([k, 12000, 2000])
+                analog.pack_raw([k, 22200, 1800])
                 plant_bus.send(
                     can.Message(
                         arbitration_id=analog.frame_id, data=analog.data, is_extended_id=False

@@ -60,7 +60,7 @@ def test_presets_carry_the_documents_values() -> None:
         ("init_lambda", 0.0),
         ("v_max", 0.1),
         ("n_limit_pct", 106.0),
-        ("egt_limit_k", 1200.0),
+        ("egt_limit_k", 1400.0),
         ("duty_max", 1.5),
         ("trim_v", float("nan")),
         ("demand_hold_s", 3.0),
