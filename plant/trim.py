@@ -16,12 +16,18 @@ from plant.flags import LEAN_LIMIT
 SCALE = np.array([1e5, 1e5, 1e3, 100.0])  # Pa, Pa, K, %N
 TRIM_GUESS = np.array([294845.0, 162676.0, 1159.0, 89.68])  # eq. 2.32
 DT_S = 0.001
+MIN_RUNNING_N_PCT = 10.0
 
 
 class SteadyState(NamedTuple):
     x: np.ndarray  # [P3 Pa, P5 Pa, T4 K, N %]
     stations: Stations
     residual: float  # max |dx/dt| / SCALE, 1/s
+
+
+def _stopped(x: np.ndarray) -> bool:
+    """True for a stopped engine (below MIN_RUNNING_N_PCT), which is no operating point."""
+    return bool(x[3] < MIN_RUNNING_N_PCT)
 
 
 def _rates(model: EngineModel, g_fuel: float, x: np.ndarray) -> np.ndarray:
@@ -65,6 +71,10 @@ def solve_steady(
     st = Stations(*stations(x, g_fuel, model))
     if not residual <= 1e-6:  # also catches NaN
         raise RuntimeError(f"no steady state found at {g_fuel * 1e3:.2f} g/s (residual {residual})")
+    if _stopped(x):
+        raise ValueError(
+            f"fuel flow {g_fuel * 1e3:.2f} g/s keeps no running engine (it stops: N = {x[3]:.1f} %)"
+        )
     if st.flags & LEAN_LIMIT:
         raise ValueError(
             f"fuel flow {g_fuel * 1e3:.2f} g/s is below the lean limit: the engine flames out"

@@ -1,0 +1,107 @@
+"""Trim at 8 g/s against the published state (eq. 2.32) and the balances that define it."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from plant.engine import EngineParams
+from plant.thermo import cp_air
+from sil.cli import main
+
+
+def test_parameters_are_the_documents(reference):
+    ref = reference["aero_thermal_parameters"]
+    p = EngineParams(nozzle_area_m2=1.0)
+    assert (p.t0_k, p.p0_pa, p.u0_m_s) == (
+        ref["ambient_T0_K"],
+        ref["ambient_P0_Pa"],
+        ref["flight_speed_U0_m_s"],
+    )
+    assert (p.v_pc_m3, p.v_jp_m3) == (
+        ref["compressor_plenum_volume_m3"],
+        ref["jet_pipe_plenum_volume_m3"],
+    )
+    assert p.inertia_kg_m2 == ref["rotor_inertia_kg_m2"]
+    assert (p.cp_fuel, p.lhv) == (ref["fuel_cp_J_kgK"], ref["fuel_LHV_J_kg"])
+    assert (p.eta_loss, p.tau_b, p.eta_b) == (
+        ref["burner_pressure_loss_ratio"],
+        ref["burner_time_constant_s"],
+        ref["burner_efficiency"],
+    )
+    assert (p.eta_n, p.eta_m) == (ref["nozzle_efficiency"], ref["mechanical_efficiency"])
+    assert p.n_max_rpm == reference["engine_spec_amt_olympus"]["max_speed_rpm"]
+
+
+def test_trim_reaches_the_published_state(trim, reference):
+    ref = reference["trim_point_eq_2_32"]
+    p3, p5, t4, n = trim.x
+    assert p3 == pytest.approx(ref["P3_Pa"], rel=0.02)
+    assert p5 == pytest.approx(ref["P5_Pa"], rel=0.02)
+    assert t4 == pytest.approx(ref["T4_K"], rel=0.02)
+    assert n == pytest.approx(ref["N_pct"], abs=0.5)
+    assert trim.residual < 1e-9
+
+
+def test_mass_is_conserved_through_the_components(trim):
+    st = trim.stations
+    assert st.g3 == pytest.approx(st.g2, rel=1e-9)  # compressor plenum, eq. 2.12
+    assert st.g4 == pytest.approx(st.g3 + st.g_fuel, rel=1e-12)  # burner, eq. 2.16
+    assert st.g6 == pytest.approx(st.g4, rel=1e-9)  # jet-pipe plenum, eq. 2.22
+
+
+def test_shaft_power_and_burner_energy_balance(trim, model):
+    st, p = trim.stations, model.params
+    assert p.eta_m * st.power_turbine == pytest.approx(st.power_compressor, rel=1e-9)  # 2.31
+    t4 = trim.x[2]
+    energy_in = st.g3 * cp_air(st.t3) * st.t3 + st.g_fuel * (p.cp_fuel * p.t0_k + p.eta_b * p.lhv)
+    assert energy_in == pytest.approx(st.g4 * cp_air(t4) * t4, rel=1e-9)  # 2.15 at rest
+
+
+def test_trim_matches_the_briefs_energy_balance(trim):
+    """BRIEF: an energy balance at the trim puts air near 0.33 kg/s, EGT near 1030 K, thrust
+    near 175 N; our Cp(T) polynomial gives somewhat less air and thrust."""
+    st = trim.stations
+    assert 0.27 < st.g2 < 0.35
+    assert st.t5 == pytest.approx(1030.0, abs=40.0)
+    assert 140.0 < st.thrust < 190.0
+
+
+def test_sil_trim_json(capsys, reference):
+    assert main(["trim", "--fuel", "0.008", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {
+        "P3_Pa",
+        "P5_Pa",
+        "T4_K",
+        "N_pct",
+        "N_rpm",
+        "EGT_K",
+        "thrust_N",
+        "air_kg_s",
+        "fuel_kg_s",
+    }
+    assert out["N_rpm"] == pytest.approx(out["N_pct"] * 1125.0)
+    assert out["P3_Pa"] == pytest.approx(reference["trim_point_eq_2_32"]["P3_Pa"], rel=0.02)
+
+
+@pytest.mark.parametrize("fuel", ["-0.001", "nan", "inf", "0"])
+def test_sil_trim_refuses_bad_fuel(fuel, capsys):
+    assert main(["trim", "--fuel", fuel]) == 2
+    assert "fuel flow" in capsys.readouterr().err
+
+
+def test_sil_trim_below_the_lean_limit_says_so(capsys):
+    assert main(["trim", "--fuel", "0.0005"]) == 2
+    err = capsys.readouterr().err
+    assert "0.50 g/s" in err
+    assert "flames out" in err or "no running engine" in err
+
+
+def test_ram_compression_raises_delivery_pressure(capsys):
+    assert main(["trim", "--json", "--flight-speed", "150"]) == 0
+    ram = json.loads(capsys.readouterr().out)
+    assert main(["trim", "--json"]) == 0
+    static = json.loads(capsys.readouterr().out)
+    assert ram["P3_Pa"] > static["P3_Pa"] * 1.05
