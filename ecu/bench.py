@@ -38,7 +38,7 @@ def scripted_inputs(n: int, rate_hz: int = 100) -> tuple[array, array, array, ar
         if k < 0:
             continue
         speed[k] = round(n_pct * RPM_PER_PCT) + noise
-        egt[k] = 10300 + round((n_pct - 89.68) * 300) + ((seed >> 8) % 5)
+        egt[k] = 10480 + round((n_pct - 89.68) * 200) + ((seed >> 8) % 5)
         demand[k] = 9200 if up else 8750
         status[k] = 4 if k % 997 == 500 else 0  # one lost sensor frame now and then
     return speed, egt, demand, status
@@ -64,9 +64,9 @@ def new_running_ecu() -> tuple[Ecu, EcuInputs]:
     ecu = Ecu()
     i = EcuInputs()
     i.speed_rpm = 100890
-    i.egt_dk = 10300
-    i.supply_mv = 12000
-    i.pump_ma = 2000
+    i.egt_dk = 10480
+    i.supply_mv = 22200
+    i.pump_ma = 1800
     i.demand_cpct = 8968
     i.arm = 1
     return ecu, i

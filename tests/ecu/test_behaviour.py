@@ -208,3 +208,14 @@ def test_pid_baseline_tracks_and_does_not_wind_up(make_rig: Any) -> None:
         lowest = min(lowest, r.plant.n_pct)
     assert lowest > 90.0  # no wound-up integrator dragging the speed far under the demand
     assert abs(r.plant.n_pct - 90.5) < 0.05
+
+
+def test_analog_frames_are_held_until_their_timeout(rig: Any) -> None:
+    rig.step(1, supply_mv=20_000)  # last valid supply reading
+    for _ in range(15):  # 0.15 s: frames come every 50 ms, a few may be missing
+        o = rig.step(1, analog_status=LOST, supply_mv=10_000)  # not OK: value not used
+        assert not o.fault_word & F.ANALOG_FRAME_LOST
+        assert o.duty_cpct == o.pump_mv * 10000 // 20_000
+    o = rig.step(1, analog_status=LOST, supply_mv=10_000)
+    assert o.fault_word & F.ANALOG_FRAME_LOST  # now the nominal 6S voltage is assumed
+    assert o.duty_cpct == o.pump_mv * 10000 // 22_200 and o.mode == M.RUN
