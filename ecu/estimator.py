@@ -23,7 +23,7 @@ rate noise, and no adaptation when the caller says so (limiter owns the command,
 
 from __future__ import annotations
 
-from ecu.fixedpoint import acc_q40, sat32
+from ecu.fixedpoint import acc_q40, mul_q24, sat32, sub_sat
 from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
 
@@ -35,7 +35,7 @@ def estimator_step(
     th = s.theta_q24
     n_mid = (n0 + n1) >> 1
     v_mid = (v0 + v1) >> 1
-    f1 = sat32((u * n_mid) >> 24)  # f1 = dN dV, mid interval (Q7.24)
+    f1 = mul_q24(u, n_mid)  # f1 = dN dV, mid interval (Q7.24)
     nn_q16 = ((n0 * n0) >> 33) + ((n1 * n1) >> 33)  # (dN0^2 + dN1^2) / 2 (Q15.16)
     f2_q16 = sat32((u * nn_q16) >> 24)  # f2 = dN^2 dV, mid interval (Q15.16)
     # eq. 4.7 row 2 forcing: (A_p-hat - A_m) x + B_p Lambda-hat u + Theta_f-hat f, in %N/s^2;
@@ -56,7 +56,7 @@ def estimator_step(
     s.xh2_q24 = sat32(
         ((p.idm21_q24 * xh1) >> 24) + ((p.idm22_q24 * xh2) >> 24) + ((p.idh2_q24 * c2_q16) >> 16)
     )
-    e2 = sat32(s.xh2_q24 - v1)  # e_I row 2 (eq. 4.8) at the end of the interval
+    e2 = sub_sat(s.xh2_q24, v1)  # e_I row 2 (eq. 4.8) at the end of the interval
     s.e2_q24 = e2
     if not adapt:
         return

@@ -22,7 +22,7 @@ from ecu import faults as F
 from ecu import modes as M
 from ecu.estimator import estimator_step
 from ecu.fast_model import observer_step
-from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, take_sat_events
+from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, sub_sat, take_sat_events
 from ecu.limiters import OWNER_SPEED, reset_loops, select_voltage
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import (
@@ -220,15 +220,13 @@ class Ecu:
             s.speed_seen += 1
         m = p.rate_half_window
         n_q24 = sat32((n_rpm * p.rpm_to_q24_k) >> 16)
-        dn = sat32(n_q24 - p.trim_n_q24)
+        dn = sub_sat(n_q24, p.trim_n_q24)
         if not speed_ok:
             rate = s.obs_v_q24
         elif s.speed_seen > 2 * m:
             rate = self._rate_q24(m)
         else:
             rate = 0
-        s.n_q24 = n_q24
-        s.rate_q24 = rate
 
         # 4. protection trips and mode
         running = 1 if (mode == M.ARMED or mode == M.RUN) else 0
@@ -291,7 +289,7 @@ class Ecu:
                     s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - m - 1) % RATE_BUF_LEN],
                     adapt,
                 )
-            r = sat32(demand - p.trim_n_q24)
+            r = sub_sat(demand, p.trim_n_q24)
             if p.controller == CTRL_MRAC:
                 u = mrac_control(s, p, dn, rate, r)
                 mrac_gain_update(s, p)
@@ -304,7 +302,7 @@ class Ecu:
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, rate
             )
-            u_applied = sat32(v - p.trim_v_q24)
+            u_applied = sub_sat(v, p.trim_v_q24)
             if p.controller == CTRL_PID:
                 pid_track(s, p, sat32(demand - n_q24), rate, u_applied)
             observer_step(s, p, u_applied, dn, speed_ok)

@@ -35,7 +35,6 @@ Q16 = 16  # Q15.16
 Q28 = 28  # Q3.28
 Q40 = 40  # Q7.40 (64-bit increments, split accumulators)
 ONE_Q24 = 1 << Q24
-ONE_Q16 = 1 << Q16
 ACC_EXT_BITS = Q40 - Q24  # bits held in the extension word of a split accumulator
 ACC_EXT_MASK = (1 << ACC_EXT_BITS) - 1
 

@@ -13,7 +13,7 @@ loop's own tracking is done by the controller (PID back-calculation; MRAC has no
 
 from __future__ import annotations
 
-from ecu.fixedpoint import clamp, sat32
+from ecu.fixedpoint import add_sat, clamp, sat32, sub_sat
 from ecu.params import FirmwareParams
 from ecu.state import EcuState
 
@@ -54,21 +54,21 @@ def select_voltage(
                 v = v_egt
                 owner = OWNER_EGT
         s.egt_e_prev_q24 = e
-    e = sat32(p.accel_max_q24 - rate_q24)
+    e = sub_sat(p.accel_max_q24, rate_q24)
     if e < p.rate_engage_q24:
         v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
         if v_acc < v:
             v = v_acc
             owner = OWNER_ACCEL
     s.acc_e_prev_q24 = e
-    e = sat32(p.n_limit_q24 - n_q24)
+    e = sub_sat(p.n_limit_q24, n_q24)
     if e < p.n_limit_engage_q24:
         v_nl = _loop(v_prev, e, s.nlim_e_prev_q24, p.n_limit_kp_q24, p.n_limit_ki_dt_q24)
         if v_nl < v:
             v = v_nl
             owner = OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
-    e = sat32(rate_q24 + p.decel_max_q24)  # margin above the deceleration limit
+    e = add_sat(rate_q24, p.decel_max_q24)  # margin above the deceleration limit
     if e < p.rate_engage_q24:
         v_dec = _loop(v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
         if v_dec > v:

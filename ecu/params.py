@@ -154,7 +154,7 @@ class EcuParams:
 
 
 def _doc_common(**kw: object) -> EcuParams:
-    """Document reproduction: limiters and robustness off, no speed floor or demand clamp."""
+    """Document reproduction: limiters and robustness off, rate over +-1 tick at 100 Hz."""
     base = EcuParams(
         lambda_floor_on=False,
         dead_zone_on=False,

@@ -50,8 +50,8 @@ class EcuState:
         "speed_range_cnt", "speed_rate_cnt", "speed_stuck_cnt", "speed_stuck_v_q24",
         "egt_open_cnt", "egt_over_cnt", "overspeed_cnt", "flameout_cnt",
         "pump_stall_cnt", "pump_dry_cnt",
-        # derived signals of this tick (kept for telemetry)
-        "n_q24", "rate_q24", "speed_failed", "speed_seen",
+        # speed sensor failed (latched) and how many speed samples the history holds
+        "speed_failed", "speed_seen",
         # modes, faults, counters
         "mode", "faults", "sat_events", "ticks",
     )  # fmt: skip
