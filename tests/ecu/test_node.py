@@ -195,3 +195,32 @@ def test_sil_ecu_over_a_python_can_bus(capsys: pytest.CaptureFixture[str]) -> No
     assert not t.is_alive() and result["code"] == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["ticks"] == 40 and summary["mode"] == RUN and answered == 40
+
+
+def test_real_time_node_ticks_on_its_own_clock() -> None:
+    codec = Codec()
+    node = EcuNode(codec=codec, lockstep=False, max_ticks=20)
+    sensors, analog, demand = codec["PlantSensors"], codec["PlantAnalog"], codec["Demand"]
+    actuator = codec["EcuActuator"]
+    sent: list[tuple[int, bytes]] = []
+
+    def send(frame_id: int, data) -> None:  # noqa: ANN001
+        sent.append((frame_id, bytes(data)))
+
+    node.start(send)
+    raw = [0] * 5
+    for k in range(20):
+        if k % 5 == 0:
+            demand.pack_raw([1, 0, 8968, 0, 0])  # DemandTick is not used in real time
+            node.on_frame(demand.frame_id, demand.data, send)
+            analog.pack_raw([0, 22200, 1800])
+            node.on_frame(analog.frame_id, analog.data, send)
+        if k != 10:  # one period without a sensor frame: substituted, flagged
+            sensors.pack_raw([0, 100890, 10480])
+            node.on_frame(sensors.frame_id, sensors.data, send)
+        node.on_period(send)
+        actuator.unpack_raw(sent[-1][1], raw)
+        assert sent[-1][0] == actuator.frame_id and raw[2] == k  # own tick counter
+        if k == 10:
+            assert node.ecu.out.fault_word & F.SENSOR_FRAME_LOST
+    assert node.finished and node.ecu.out.mode == RUN and raw[0] == 1
