@@ -70,9 +70,9 @@ def run_fixed(p: EcuParams, seconds: float) -> RunResult:
     ecu = Ecu(p)
     plant = FastEngine()
     i = EcuInputs()
-    i.egt_dk = 10300
-    i.supply_mv = 12000
-    i.pump_ma = 2000
+    i.egt_dk = 10480  # our plant at trim: 1048 K, a 6S pack, the pump's current at trim
+    i.supply_mv = 22200
+    i.pump_ma = 1800
     i.arm = 1
     n = round(seconds * p.rate_hz)
     dt = 1.0 / p.rate_hz
