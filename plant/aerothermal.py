@@ -61,8 +61,7 @@ class AeroThermalPlant(PlantBase):
         config = PlantConfig() if config is None else config
         self._model = make_model(config.ambient)
         super().__init__(config, self._model.pump, self._model.params.n_max_rpm)
-        for fault in config.faults:
-            self._check_fault(fault)
+        self._refuse_unsupported(config.faults)
         steady = solve_steady(self._model, config.initial_fuel_kg_s)
         self._x = steady.x.copy()
         self._lit = 1.0
@@ -77,8 +76,7 @@ class AeroThermalPlant(PlantBase):
         """Advance one ECU period with the fuel flow commanded directly (pump bypassed, no pump
         voltage or current), as the document's fuel staircases (figs. 2.14-2.17, 3.3)."""
         g_fuel = check_finite("fuel_kg_s", fuel_kg_s, 0.0, 0.05)
-        for fault, starts in self._faults.due(self.time_s):
-            self._apply(fault, starts)
+        self._apply_due_faults()
         flags, self._lit = advance_fuel(
             self._x, g_fuel, self._lit, self._n_sub, SUBSTEP_S, self._model, self._work
         )
@@ -131,8 +129,17 @@ class AeroThermalPlant(PlantBase):
         params = self._model.params._replace(pump_effectiveness=self.delivering_effectiveness)
         self._model = self._model._replace(params=params)
 
-    def _apply_health(self, kind: FaultKind, value: float) -> None:
-        params = self._model.params._replace(**{_HEALTH_FIELD[kind]: float(value)})
+    def _supports(self, kind: FaultKind) -> bool:
+        return True
+
+    def _apply_engine(self, kind: FaultKind, value: float | None) -> None:
+        if kind == FaultKind.AMBIENT_TEMPERATURE:
+            t0 = self.config.ambient.t0_k if value is None else value
+            params = self._model.params._replace(t0_k=float(t0))
+        else:
+            params = self._model.params._replace(
+                **{_HEALTH_FIELD[kind]: 1.0 if value is None else float(value)}
+            )
         self._model = self._model._replace(params=params)
 
     def _voltage_for(self, g_fuel: float) -> float:

@@ -6,7 +6,7 @@ does not have (P3, P5, T4, EGT, thrust, air flow) is read off the aero-thermal r
 the present speed, quasi-steadily. Pump effectiveness scales the input terms theta2..theta4, as
 the document's failure does (sec. 4.2, ch. 6); a dry or stalled pump is effectiveness 0, which in
 this model means "no response to the voltage", not a flameout. Compressor and turbine health
-faults have no counterpart here and are refused.
+and ambient faults have no counterpart here and are refused.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from numba import njit
 
 from plant.aerothermal import default_maps, make_model
 from plant.fast_model import THETA_EQ_3_23, TRIM_N_PCT, fast_model_derivative
-from plant.faults import Fault
+from plant.faults import FaultKind
 from plant.interface import SUBSTEP_S, Ambient, PlantConfig
-from plant.periphery import ENGINE_HEALTH_FAULTS, PlantBase
+from plant.periphery import ENGINE_FAULTS, PlantBase
 from plant.pump import pump_flow
 from plant.steady_line import running_line
 
@@ -55,8 +55,7 @@ class FastPlant(PlantBase):
         maps = default_maps()
         self._params = make_model(config.ambient).params
         super().__init__(config, maps.pump, self._params.n_max_rpm)
-        for fault in config.faults:
-            self._check_fault(fault)
+        self._refuse_unsupported(config.faults)
         self.theta = tuple(float(t) for t in theta)
         self.reference_voltage = maps.trim_pump_voltage  # dV = 0 (aero-thermal trim)
         self._table = _quasi_steady(config.ambient)
@@ -76,12 +75,8 @@ class FastPlant(PlantBase):
         """Copy of x = [dN %, dN' %/s] (deviations from N = 89.68 %)."""
         return self._x.copy()
 
-    def _check_fault(self, fault: Fault) -> None:
-        if fault.kind in ENGINE_HEALTH_FAULTS:
-            raise ValueError(
-                f"fault {fault.kind.value}: the fast engine model (eq. 3.24) has no compressor or "
-                "turbine; use AeroThermalPlant"
-            )
+    def _supports(self, kind: FaultKind) -> bool:
+        return kind not in ENGINE_FAULTS  # no compressor, turbine or thermodynamics here
 
     def _at(self, column: str) -> float:
         n = TRIM_N_PCT + float(self._x[0])

@@ -28,6 +28,7 @@ class FaultKind(StrEnum):
     SPEED_NOISE_BURST = "speed_noise_burst"  # value: extra noise, rpm (1 sigma)
     EGT_OPEN_CIRCUIT = "egt_open_circuit"  # thermocouple reads its upscale burnout value
     BATTERY_VOLTAGE = "battery_voltage"  # value: new open-circuit battery voltage, V
+    AMBIENT_TEMPERATURE = "ambient_temperature"  # value: new ambient temperature T0, K
 
 
 # kinds that need a value, with its allowed range
@@ -40,6 +41,7 @@ _VALUE_RANGE: dict[FaultKind, tuple[float, float]] = {
     FaultKind.TURBINE_FLOW: (0.1, 1.5),
     FaultKind.SPEED_NOISE_BURST: (0.0, 1e5),
     FaultKind.BATTERY_VOLTAGE: (0.0, 100.0),
+    FaultKind.AMBIENT_TEMPERATURE: (180.0, 340.0),
 }
 
 

@@ -10,20 +10,21 @@ from plant.noise import NoiseSource
 from plant.pump import PumpState, PumpTable, supply_and_pump_voltage
 from plant.sensors import SpeedPickup, Thermocouple
 
-ENGINE_HEALTH_FAULTS = (
+ENGINE_FAULTS = (  # handled by the engine side (_apply_engine)
     FaultKind.COMPRESSOR_EFFICIENCY,
     FaultKind.COMPRESSOR_FLOW,
     FaultKind.TURBINE_EFFICIENCY,
     FaultKind.TURBINE_FLOW,
+    FaultKind.AMBIENT_TEMPERATURE,
 )
 
 
 class PlantBase:
     """One ECU period: faults due -> pump driver -> engine (subclass) -> sensors -> outputs.
 
-    Subclasses implement ``_advance(v_pump) -> flags``, ``_truth() -> Truth`` (the engine's
-    present values), ``_pump_outlet_gauge() -> Pa`` and ``_pump_changed()``; engine health faults
-    go to ``_apply_health``.
+    Subclasses implement ``_advance(v_pump) -> flags``, ``_truth()`` (the engine's present
+    values), ``_pump_outlet_gauge() -> Pa``, ``_pump_changed()``, and for ENGINE_FAULTS
+    ``_supports(kind)`` and ``_apply_engine(kind, value or None to end)``.
     """
 
     def __init__(self, config: PlantConfig, pump: PumpTable, n_max_rpm: float) -> None:
@@ -59,8 +60,7 @@ class PlantBase:
         """Advance one ECU period with the pump at ``pump_duty`` (0..1) of the supply voltage;
         ``pump_enabled=False`` removes pump power (duty ignored)."""
         duty = check_finite("pump_duty", pump_duty, 0.0, 1.0) if pump_enabled else 0.0
-        for fault, starts in self._faults.due(self.time_s):
-            self._apply(fault, starts)
+        self._apply_due_faults()
         if self._wear_rate > 0.0:
             self._effectiveness = max(
                 self._effectiveness - self._wear_rate * self.config.ecu_period_s, 0.0
@@ -82,8 +82,9 @@ class PlantBase:
         return self.outputs
 
     def inject(self, fault: Fault) -> None:
-        """Schedule a fault; one whose time has passed applies at the next step."""
-        self._check_fault(fault)
+        """Schedule a fault; one whose time has passed applies at the next step. A fault this
+        plant cannot represent raises ValueError."""
+        self._refuse_unsupported((fault,))
         self._faults.add(fault)
 
     @property
@@ -97,8 +98,16 @@ class PlantBase:
         return self._effectiveness if self._pump_state == PumpState.NORMAL else 0.0
 
     # ---- internals ----------------------------------------------------------------------------
-    def _check_fault(self, fault: Fault) -> None:
-        """Subclasses refuse faults their engine cannot represent."""
+    def _refuse_unsupported(self, faults: tuple[Fault, ...]) -> None:
+        for fault in faults:
+            if not self._supports(fault.kind):
+                raise ValueError(
+                    f"fault {fault.kind.value}: {type(self).__name__} has no such part"
+                )
+
+    def _apply_due_faults(self) -> None:
+        for fault, starts in self._faults.due(self.time_s):
+            self._apply(fault.kind, fault.value, starts)
 
     def _publish(self, flags: int, supply: float, v_pump: float, current: float) -> None:
         c, o = self.config, self.outputs
@@ -128,15 +137,26 @@ class PlantBase:
         o.pump_effectiveness = self._effectiveness
         o.flags = int(flags)
 
-    def _apply(self, fault: Fault, starts: bool) -> None:
-        k = fault.kind
-        if k in ENGINE_HEALTH_FAULTS:
-            self._apply_health(k, fault.value if starts else 1.0)
+    def end_fault(self, kind: FaultKind) -> None:
+        """End a fault of this kind now (its effect returns to the configured value)."""
+        self._apply(FaultKind(kind), None, False)
+
+    def clear_faults(self) -> None:
+        """End every fault now and forget the scheduled ones."""
+        self._faults = FaultSchedule()
+        for kind in FaultKind:
+            if self._supports(kind):
+                self._apply(kind, None, False)
+
+    def _apply(self, k: FaultKind, value: float | None, starts: bool) -> None:
+        """Start (with its value) or end a fault of kind k."""
+        if k in ENGINE_FAULTS:
+            self._apply_engine(k, value if starts else None)
         elif k == FaultKind.PUMP_EFFECTIVENESS:
-            self._effectiveness = fault.value if starts else 1.0
+            self._effectiveness = value if starts else 1.0
             self._pump_changed()
         elif k == FaultKind.PUMP_WEAR:
-            self._wear_rate = fault.value if starts else 0.0
+            self._wear_rate = value if starts else 0.0
         elif k in (FaultKind.PUMP_DRY, FaultKind.PUMP_STALL):
             state = PumpState.DRY if k == FaultKind.PUMP_DRY else PumpState.STALLED
             self._pump_state = state if starts else PumpState.NORMAL
@@ -146,11 +166,11 @@ class PlantBase:
         elif k == FaultKind.SPEED_STUCK:
             self.speed_pickup.stuck = starts
         elif k == FaultKind.SPEED_NOISE_BURST:
-            self.speed_pickup.burst_noise_rpm = fault.value if starts else 0.0
+            self.speed_pickup.burst_noise_rpm = value if starts else 0.0
         elif k == FaultKind.EGT_OPEN_CIRCUIT:
             self.thermocouple.open_circuit = starts
         elif k == FaultKind.BATTERY_VOLTAGE:
-            self._battery_v = fault.value if starts else self.config.battery.voltage_v
+            self._battery_v = value if starts else self.config.battery.voltage_v
 
     def _duty_for(self, v_pump: float) -> float:
         """Duty giving v_pump at the pump terminals now, with the battery sagging under load."""
@@ -180,5 +200,8 @@ class PlantBase:
     def _pump_changed(self) -> None:
         raise NotImplementedError
 
-    def _apply_health(self, kind: FaultKind, value: float) -> None:
+    def _supports(self, kind: FaultKind) -> bool:
+        raise NotImplementedError
+
+    def _apply_engine(self, kind: FaultKind, value: float | None) -> None:
         raise NotImplementedError
