@@ -111,7 +111,7 @@ def plot_run(
     """All plots of one run; returns the files written."""
     if len(trace["time"]) < 2:
         return []
-    open_loop = controller == "open-loop"
+    open_loop = controller == "open_loop"
     written = [
         speed_plot(trace, title, out_dir / "speed.png", open_loop),
         egt_plot(trace, title, out_dir / "egt.png"),

@@ -18,11 +18,11 @@ Shipped scenarios live in ``sil/scenarios/`` and are found by name.
     supply_voltage_V = 12.0
 
     [controller]
-    kind = "mrac"              # mrac | pid | open-loop
-    preset = "sec-5.3"         # an ECU parameter preset (optional)
+    kind = "mrac"              # mrac | pid | open_loop
+    preset = "sec5_3_mrac_aero"  # an ECU parameter preset (ecu.params.PRESETS; optional)
     params = { }               # overrides of ECU parameters by name (optional)
 
-    [command]                  # %N for mrac/pid, volts for open-loop
+    [command]                  # %N for mrac/pid, volts for open_loop
     base = "trim"              # a number, or "trim": 89.68 %N, or the trim pump voltage
     [[command.component]]
     kind = "square"            # step | staircase | square | sine | ramp | csv
@@ -38,16 +38,17 @@ Shipped scenarios live in ``sil/scenarios/`` and are found by name.
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from ecu.params import PRESETS, EcuParams
 from protocol.dbc import load_database
 from sil import profiles
 
 SCENARIO_DIR = Path(__file__).with_name("scenarios")
 PLANT_MODELS = ("aero", "fast")
-CONTROLLERS = ("mrac", "pid", "open-loop")
+CONTROLLERS = ("mrac", "pid", "open_loop")
 
 
 class ScenarioError(ValueError):
@@ -253,8 +254,12 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
 
     c = top.sub("controller")
     kind = c.text("kind", "mrac", choices=CONTROLLERS)
-    preset = c.text("preset", None) if "preset" in c.table else None
+    preset = c.text("preset", choices=tuple(sorted(PRESETS))) if "preset" in c.table else None
     params_reader = c.sub("params")
+    known = {f.name for f in fields(EcuParams)} - {"controller", "rate_hz"}
+    for key in params_reader.table:
+        if key not in known:
+            raise params_reader.fail(key, "an ECU parameter (ecu.params.EcuParams field)", key)
     params = {k: params_reader.number(k) for k in list(params_reader.table)}
     params_reader.done()
     c.done()
