@@ -15,7 +15,7 @@ Shipped scenarios live in ``sil/scenarios/`` and are found by name.
     ambient_temperature_K = 288.15
     ambient_pressure_Pa = 101325
     flight_speed_m_s = 0
-    supply_voltage_V = 12.0
+    supply_voltage_V = 22.2     # pump battery (6S LiPo)
 
     [controller]
     kind = "mrac"              # mrac | pid | open_loop
@@ -61,7 +61,7 @@ class PlantSettings:
     ambient_temperature_K: float = 288.15
     ambient_pressure_Pa: float = 101325.0
     flight_speed_m_s: float = 0.0
-    supply_voltage_V: float = 12.0
+    supply_voltage_V: float = 22.2
 
 
 @dataclass(frozen=True)
@@ -248,7 +248,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
         ambient_temperature_K=p.number("ambient_temperature_K", 288.15, lo=200, hi=350),
         ambient_pressure_Pa=p.number("ambient_pressure_Pa", 101325.0, lo=20_000, hi=110_000),
         flight_speed_m_s=p.number("flight_speed_m_s", 0.0, lo=0, hi=300),
-        supply_voltage_V=p.number("supply_voltage_V", 12.0, lo=1, hi=30),
+        supply_voltage_V=p.number("supply_voltage_V", 22.2, lo=1, hi=60),
     )
     p.done()
 
