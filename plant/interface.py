@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from plant.faults import Fault
+from plant.faults import Fault, FaultKind
 from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
 
 SUBSTEP_S = 0.001  # RK4 step (sec. 2.3)
@@ -120,15 +120,30 @@ class PlantOutputs:
 
 
 class Plant(Protocol):
-    """What the SIL harness and the CAN node need from a plant."""
+    """What the SIL harness and the CAN node need from a plant (AeroThermalPlant, FastPlant)."""
 
     config: PlantConfig
-    outputs: PlantOutputs
+    outputs: PlantOutputs  # the record step() updates in place and returns
+    trim_pump_voltage: float  # pump voltage holding the initial steady state
+    trim_duty: float  # duty giving that voltage from the configured battery
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time: ECU periods stepped so far times the period."""
+        ...
 
     def step(self, pump_duty: float, pump_enabled: bool = True) -> PlantOutputs:
-        """Advance one ECU period with the pump driven at ``pump_duty`` (0..1) of the supply."""
+        """Advance one ECU period with the pump at ``pump_duty`` (0..1) of the supply voltage."""
         ...
 
     def inject(self, fault: Fault) -> None:
         """Schedule a fault (``fault.at_s`` in simulated seconds; past times apply at once)."""
+        ...
+
+    def end_fault(self, kind: FaultKind) -> None:
+        """End a fault of this kind now."""
+        ...
+
+    def clear_faults(self) -> None:
+        """End every fault now and forget the scheduled ones."""
         ...

@@ -1,0 +1,233 @@
+"""The plant as a CAN node: a thin sans-IO layer between the protocol codec and ``Plant.step``.
+
+Follows :mod:`protocol.lockstep`. At tick k the node sends the frames due at k (PlantTruthA/B,
+PlantAnalog), then PlantSensors with SensorTick = k, last. Then:
+
+- lockstep: it waits for EcuActuator with ActuatorTick = k and only then advances the plant one
+  ECU period with that command (k += 1). Actuator frames for other ticks are counted (late or
+  repeated, ahead) and do not advance time. If the driver's wall-clock guard passes first
+  (``on_timeout``: a dead or slow ECU), the tick runs with the last command held;
+- real time: one period per tick of the node's own clock (``on_period``), with whatever
+  actuator command arrived last.
+
+Either way, after ``watchdog_ticks`` ticks in a row without a valid actuator frame the pump
+driver's watchdog removes pump power, as a real one would; a valid frame restores it.
+FaultInject frames schedule faults at their FaultTick (at once when that tick has passed);
+a fault the plant cannot represent, or a value out of range, is counted and ignored.
+The node reuses its buffers: nothing it keeps grows per frame or per tick.
+"""
+
+from __future__ import annotations
+
+from plant import flags as fl
+from plant.faults import Fault, FaultKind
+from plant.interface import Plant
+from protocol.codec import Codec
+from protocol.e2e import E2EStatus
+from protocol.lockstep import TICK_MODULO, every_ticks
+from protocol.node import SendFn
+
+# DBC VAL_ FaultTarget -> what it does (0 = CLEAR_ALL is handled apart)
+FAULT_TARGETS: dict[int, FaultKind] = {
+    1: FaultKind.PUMP_EFFECTIVENESS,
+    2: FaultKind.PUMP_WEAR,
+    3: FaultKind.COMPRESSOR_EFFICIENCY,
+    4: FaultKind.COMPRESSOR_FLOW,
+    5: FaultKind.TURBINE_EFFICIENCY,
+    6: FaultKind.TURBINE_FLOW,
+    7: FaultKind.SPEED_DROPOUT,
+    8: FaultKind.SPEED_STUCK,
+    9: FaultKind.SPEED_NOISE_BURST,
+    10: FaultKind.EGT_OPEN_CIRCUIT,
+    11: FaultKind.BATTERY_VOLTAGE,
+    12: FaultKind.AMBIENT_TEMPERATURE,
+}
+SWITCHED = (
+    FaultKind.SPEED_DROPOUT,
+    FaultKind.SPEED_STUCK,
+    FaultKind.EGT_OPEN_CIRCUIT,
+)  # 1 on, 0 off
+ENDED_BY_ZERO = (FaultKind.SPEED_NOISE_BURST, FaultKind.PUMP_WEAR)
+CLEAR_ALL = 0
+DEFAULT_WATCHDOG_TICKS = 10
+
+
+def _clamp(x: int, lo: int, hi: int) -> int:
+    return lo if x < lo else hi if x > hi else x
+
+
+class PlantNode:
+    """A plant (AeroThermalPlant or FastPlant) on the bus; ``max_ticks`` makes the node finish
+    after that many ECU periods (None: run until stopped)."""
+
+    def __init__(
+        self,
+        plant: Plant,
+        *,
+        lockstep: bool = True,
+        max_ticks: int | None = None,
+        watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS,
+        codec: Codec | None = None,
+    ) -> None:
+        if watchdog_ticks < 1:
+            raise ValueError(f"watchdog_ticks must be >= 1, got {watchdog_ticks!r}")
+        self.plant = plant
+        self.lockstep = lockstep
+        self.max_ticks = max_ticks
+        self.watchdog_ticks = watchdog_ticks
+        codec = codec or Codec()
+        self.sensors = codec["PlantSensors"]
+        self.analog = codec["PlantAnalog"]
+        self.truth_a = codec["PlantTruthA"]
+        self.truth_b = codec["PlantTruthB"]
+        self.actuator = codec["EcuActuator"]
+        self.fault = codec["FaultInject"]
+        self.actuator_check = self.actuator.checker(max_delta=2)
+        self.fault_check = self.fault.checker(max_delta=14)  # event frames: any step forward
+        rate_hz = 1.0 / plant.config.ecu_period_s
+        self.every_analog = every_ticks(self.analog.cycle_time_ms, rate_hz)
+        self.every_truth = every_ticks(self.truth_a.cycle_time_ms, rate_hz)
+        self._actuator_raw = [0] * len(self.actuator.signal_names)
+        self._fault_raw = [0] * len(self.fault.signal_names)
+        self._sensors_raw = [0] * len(self.sensors.signal_names)
+        self._analog_raw = [0] * len(self.analog.signal_names)
+        self._truth_a_raw = [0] * len(self.truth_a.signal_names)
+        self._truth_b_raw = [0] * len(self.truth_b.signal_names)
+        self.actuator_late = 0  # actuator frames for a past tick (repeated or late)
+        self.actuator_ahead = 0  # actuator frames for a tick not yet sent
+        self.tick = 0  # ECU periods stepped (the tick whose command is awaited)
+        self.duty = plant.trim_duty  # held until the first actuator frame
+        self.pump_enabled = True
+        self.fresh = False  # a valid actuator frame for this tick arrived (real time)
+        self.missed = 0  # ticks in a row without a valid actuator frame
+        self.watchdog_trips = 0
+        self.actuator_rejected = 0  # E2E status other than OK
+        self.faults_applied = 0
+        self.faults_rejected = 0
+        self._pending: list[tuple[int, int, float]] = []  # (absolute tick, target, value)
+        self.finished = False
+
+    # -- frames in ---------------------------------------------------------------------------
+    def start(self, send: SendFn) -> None:
+        self._send_tick(send)
+
+    def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        if frame_id == self.actuator.frame_id:
+            self._on_actuator(data, send)
+        elif frame_id == self.fault.frame_id:
+            if self.fault_check.check(data) == E2EStatus.OK:
+                raw = self._fault_raw
+                self.fault.unpack_raw(data, raw)
+                delta = (raw[1] - self.tick) % TICK_MODULO
+                at = self.tick + (delta if delta < TICK_MODULO // 2 else 0)
+                self._pending.append((at, raw[0], raw[2] * 1e-6))
+            else:
+                self.faults_rejected += 1
+
+    def _on_actuator(self, data: bytes | bytearray, send: SendFn) -> None:
+        if self.actuator_check.check(data) != E2EStatus.OK:
+            self.actuator_rejected += 1
+            return
+        raw = self._actuator_raw
+        self.actuator.unpack_raw(data, raw)
+        if not self.lockstep:
+            self._command(raw)
+            return
+        behind = (self.tick - raw[2]) % TICK_MODULO
+        if behind != 0:  # not the answer to this tick: counted, and time does not move
+            if behind < TICK_MODULO // 2:
+                self.actuator_late += 1  # repeated or late
+            else:
+                self.actuator_ahead += 1  # a tick that has not been sent
+            return
+        self._command(raw)
+        self._advance(send)
+
+    def _command(self, raw: list) -> None:
+        self.pump_enabled = bool(raw[0])
+        self.duty = _clamp(raw[3], 0, 10000) * 1e-4  # PumpDuty, 0.01 %
+        self.fresh = True
+
+    def on_timeout(self, send: SendFn) -> None:
+        """Lockstep guard passed without the actuator frame: run the tick on the held command."""
+        self._advance(send)
+
+    def on_period(self, send: SendFn) -> None:
+        """Real time: one ECU period per period of the node's clock."""
+        self._advance(send)
+
+    # -- tick and frames out -----------------------------------------------------------------
+    def _advance(self, send: SendFn) -> None:
+        if self.fresh:
+            self.missed = 0
+        else:
+            self.missed += 1
+            if self.missed == self.watchdog_ticks + 1:
+                self.watchdog_trips += 1
+        self.fresh = False
+        if self._pending:
+            self._apply_faults()
+        powered = self.pump_enabled and self.missed <= self.watchdog_ticks
+        self.plant.step(self.duty if powered else 0.0, powered)
+        self.tick += 1
+        if self.max_ticks is not None and self.tick >= self.max_ticks:
+            self.finished = True
+        self._send_tick(send)
+
+    def _apply_faults(self) -> None:
+        due = [f for f in self._pending if f[0] <= self.tick]
+        self._pending = [f for f in self._pending if f[0] > self.tick]
+        for _, target, value in due:
+            try:
+                if target == CLEAR_ALL:
+                    self.plant.clear_faults()
+                else:
+                    self._apply_fault(FAULT_TARGETS[target], value)
+                self.faults_applied += 1
+            except (KeyError, ValueError):
+                self.faults_rejected += 1
+
+    def _apply_fault(self, kind: FaultKind, value: float) -> None:
+        if kind in SWITCHED or (kind in ENDED_BY_ZERO and value == 0.0):
+            if kind in SWITCHED and value != 0.0:
+                self.plant.inject(Fault(self.plant.time_s, kind))
+            else:
+                self.plant.end_fault(kind)
+            return
+        self.plant.inject(Fault(self.plant.time_s, kind, value))
+
+    def _send_tick(self, send: SendFn) -> None:
+        o = self.plant.outputs
+        k = self.tick
+        tick16 = k % TICK_MODULO
+        if k % self.every_truth == 0:
+            raw = self._truth_a_raw
+            raw[0] = 1 if o.flags & fl.FLAMEOUT else 0
+            clamped = fl.COMPRESSOR_MAP_CLAMPED | fl.TURBINE_MAP_CLAMPED | fl.PUMP_MAP_CLAMPED
+            raw[1] = 1 if o.flags & clamped else 0
+            raw[2] = 1 if o.flags & fl.OVERSPEED else 0
+            raw[3] = 1 if o.flags & fl.OVERTEMPERATURE else 0
+            raw[4] = round(o.p3_pa * 0.1)
+            raw[5] = round(o.p5_pa * 0.1)
+            raw[6] = round(o.t4_k * 10.0)
+            self.truth_a.pack_raw(raw)
+            send(self.truth_a.frame_id, self.truth_a.data)
+            raw = self._truth_b_raw
+            raw[0] = round(o.fuel_kg_s * 1e6)
+            raw[1] = round(o.thrust_n * 20.0)
+            raw[2] = round(o.n_rpm)
+            self.truth_b.pack_raw(raw)
+            send(self.truth_b.frame_id, self.truth_b.data)
+        if k % self.every_analog == 0:
+            raw = self._analog_raw
+            raw[0] = tick16
+            raw[1] = round(o.supply_v * 1000.0)
+            raw[2] = round(o.pump_current_a * 1000.0)
+            self.analog.pack_raw(raw)
+            send(self.analog.frame_id, self.analog.data)
+        raw = self._sensors_raw
+        raw[0] = tick16
+        raw[1] = round(o.speed_rpm)
+        raw[2] = round(o.egt_k * 10.0)
+        self.sensors.pack_raw(raw)
+        send(self.sensors.frame_id, self.sensors.data)

@@ -1,0 +1,134 @@
+"""`sil plant --bus SPEC ...`: the plant as a CAN node (lockstep by default)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+NAME = "plant"
+HELP = "run the simulated engine (aero-thermal or fast model) as a CAN node"
+
+
+def _fault(text: str):  # noqa: ANN202 - argparse type
+    """AT_S:KIND[:VALUE[:DURATION_S]], e.g. 30:pump_effectiveness:0.5 (the document's failure)."""
+    from plant.faults import Fault
+
+    parts = text.split(":")
+    if not 2 <= len(parts) <= 4:
+        raise argparse.ArgumentTypeError(f"fault {text!r}: expected AT_S:KIND[:VALUE[:DURATION_S]]")
+    try:
+        at, kind = float(parts[0]), parts[1]
+        value = float(parts[2]) if len(parts) > 2 and parts[2] != "" else None
+        duration = float(parts[3]) if len(parts) > 3 else None
+        return Fault(at, kind, value, duration)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"fault {text!r}: {exc}") from None
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--bus",
+        metavar="SPEC",
+        help="bus spec (default: vcan0 if up, else a "
+        "loopback multicast bus of this run's own; see protocol.bus)",
+    )
+    parser.add_argument(
+        "--model",
+        choices=("aero", "fast"),
+        default="aero",
+        help="aero-thermal engine (ch. 2) or the fast model of eq. 3.24",
+    )
+    parser.add_argument("--rate-hz", type=int, default=100, help="ECU rate (default 100 Hz)")
+    parser.add_argument("--ticks", type=int, default=None, help="stop after this many ECU periods")
+    parser.add_argument(
+        "--realtime", action="store_true", help="pace by the wall clock instead of lockstep"
+    )
+    parser.add_argument(
+        "--guard-s",
+        type=float,
+        default=1.0,
+        help="lockstep: wall-clock wait for the ECU before holding its command",
+    )
+    parser.add_argument(
+        "--watchdog-ticks",
+        type=int,
+        default=10,
+        help="ticks without an actuator frame before pump power is removed",
+    )
+    parser.add_argument(
+        "--fuel",
+        type=float,
+        default=0.008,
+        help="start at the steady state of this fuel flow, kg/s",
+    )
+    parser.add_argument("--t0", type=float, default=288.15, help="ambient temperature, K")
+    parser.add_argument("--p0", type=float, default=101325.0, help="ambient pressure, Pa")
+    parser.add_argument("--flight-speed", type=float, default=0.0, help="flight speed, m/s")
+    parser.add_argument("--battery-v", type=float, default=22.2, help="battery voltage, V")
+    parser.add_argument("--seed", type=int, default=0, help="sensor noise seed")
+    parser.add_argument(
+        "--fault",
+        type=_fault,
+        action="append",
+        default=[],
+        metavar="AT_S:KIND[:VALUE[:DURATION_S]]",
+        help="scheduled fault, repeatable (kinds: plant.faults.FaultKind)",
+    )
+
+
+def build_node(args: argparse.Namespace):  # noqa: ANN201
+    from plant.aerothermal import AeroThermalPlant
+    from plant.fast_plant import FastPlant
+    from plant.interface import Ambient, Battery, PlantConfig
+    from plant.node import PlantNode
+
+    config = PlantConfig(
+        ecu_period_s=1.0 / args.rate_hz,
+        ambient=Ambient(args.t0, args.p0, args.flight_speed),
+        battery=Battery(args.battery_v),
+        initial_fuel_kg_s=args.fuel,
+        faults=tuple(args.fault),
+        seed=args.seed,
+    )
+    plant = AeroThermalPlant(config) if args.model == "aero" else FastPlant(config)
+    return PlantNode(
+        plant, lockstep=not args.realtime, max_ticks=args.ticks, watchdog_ticks=args.watchdog_ticks
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from protocol.bus import BusSpecError, default_spec, open_bus
+    from protocol.node import run_lockstep, run_realtime
+
+    try:
+        node = build_node(args)
+    except ValueError as exc:
+        print(f"sil plant: error: {exc}", file=sys.stderr)
+        return 2
+    spec = args.bus
+    if spec is None:
+        parsed, why = default_spec()
+        spec = str(parsed)
+        print(why, file=sys.stderr)
+    try:
+        bus = open_bus(spec)
+    except BusSpecError as exc:
+        print(f"sil plant: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        if args.realtime:
+            stats = run_realtime(node, bus, node.plant.config.ecu_period_s)
+        else:
+            stats = run_lockstep(node, bus, guard_s=args.guard_s)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        bus.shutdown()
+    o = node.plant.outputs
+    print(
+        f"plant: {node.tick} ticks, {o.time_s:.2f} s simulated, N = {o.n_pct:.2f} %, "
+        f"EGT = {o.egt_true_k:.0f} K; watchdog trips {node.watchdog_trips}, actuator frames "
+        f"rejected {node.actuator_rejected}, faults applied {node.faults_applied} / rejected "
+        f"{node.faults_rejected}; frames received {stats.received}"
+    )
+    return 0
