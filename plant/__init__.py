@@ -3,6 +3,6 @@
 Interface documented in README.md, section "Plant".
 """
 
-from plant.jit_cache import ensure_fresh
+from plant.jit import ensure_fresh
 
 ensure_fresh()

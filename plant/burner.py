@@ -9,13 +9,14 @@ from __future__ import annotations
 
 from numba import njit
 
+from plant.jit import JIT
 from plant.thermo import cp_air
 
 FAR_STOICHIOMETRIC = 0.068  # kerosene / JP8 in air
 G4_MIN_KG_S = 0.005  # floor of g4 in the denominator of eq. 2.15 (a stopped flow freezes T4)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def burner(
     p3_pa: float,
     t3_k: float,

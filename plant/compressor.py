@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from plant.flags import COMPRESSOR_MAP_CLAMPED, SURGE
+from plant.jit import JIT
 from plant.lookup import interp1, interp2
 from plant.thermo import P_STD_PA, T_STD_K, cp_air, gamma_mean
 
@@ -33,7 +34,7 @@ class CompressorMap(NamedTuple):
     surge_beta: np.ndarray  # surge-line pressure ratio at each n_cor
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def compressor(
     p2_pa: float,
     t2_k: float,
@@ -60,8 +61,9 @@ def compressor(
         flags |= SURGE
     g2 = g_cor * delta / math.sqrt(theta)
     t3 = t2_k
+    ln_beta = math.log(beta)
     for _ in range(2):  # gamma at the mean of T2 and T2p, one fixed-point pass
         g = gamma_mean(t2_k, t3)
-        t3 = t2_k * (1.0 + max(beta ** ((g - 1.0) / g) - 1.0, 0.0) / eta)  # 2.10
+        t3 = t2_k * (1.0 + max(math.expm1(ln_beta * (g - 1.0) / g), 0.0) / eta)  # 2.10
     power = g2 * (cp_air(t3) * t3 - cp_air(t2_k) * t2_k)  # 2.11, absorbed power > 0
     return g2, t3, power, flags

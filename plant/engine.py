@@ -22,6 +22,7 @@ from plant.compressor import CompressorMap, compressor
 from plant.flags import LEAN_LIMIT, NOZZLE_CHOKED, PUMP_MAP_CLAMPED
 from plant.intake import intake
 from plant.integrator import STAGES, rk4_combine, rk4_stage_point
+from plant.jit import JIT
 from plant.nozzle import PR_LINEAR, nozzle
 from plant.plenum import plenum_dp_dt
 from plant.pump import PumpTable, pump_flow
@@ -85,7 +86,7 @@ class Stations(NamedTuple):
     flags: int
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def stations_at(x: np.ndarray, g_fuel: float, p2: float, t2: float, model: EngineModel) -> tuple:
     """All station values at state x, fuel flow g_fuel and compressor inlet (P2, T2)."""
     p = model.params
@@ -108,7 +109,7 @@ def stations_at(x: np.ndarray, g_fuel: float, p2: float, t2: float, model: Engin
     return g2, g3, g4, g6, g_fuel, t3, t5, pwr_c, pwr_t, thrust, flags
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def stations(x: np.ndarray, g_fuel: float, model: EngineModel) -> tuple:
     """All station values at state x and fuel flow g_fuel (see Stations for the order)."""
     p = model.params
@@ -116,7 +117,7 @@ def stations(x: np.ndarray, g_fuel: float, model: EngineModel) -> tuple:
     return stations_at(x, g_fuel, p2, t2, model)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def rates_at(
     x: np.ndarray,
     g_fuel: float,
@@ -157,7 +158,7 @@ def rates_at(
     return flags
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def engine_rates(
     x: np.ndarray, g_fuel: float, lit: float, model: EngineModel, dxdt: np.ndarray
 ) -> int:
@@ -167,7 +168,7 @@ def engine_rates(
     return rates_at(x, g_fuel, lit, p2, t2, model, dxdt)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def pump_fuel_flow(x: np.ndarray, v_pump: float, model: EngineModel) -> tuple[float, bool]:
     """Fuel delivered by the gear pump at voltage v_pump against P3 plus the injector drop."""
     p = model.params
@@ -175,7 +176,7 @@ def pump_fuel_flow(x: np.ndarray, v_pump: float, model: EngineModel) -> tuple[fl
     return pump_flow(v_pump, p_out_gauge, model.pump, p.pump_effectiveness)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def split_for_stiffness(x: np.ndarray, dt: float, params: EngineParams) -> int:
     """How many equal RK4 substeps one step of dt needs to stay stable.
 
@@ -193,7 +194,7 @@ def split_for_stiffness(x: np.ndarray, dt: float, params: EngineParams) -> int:
     return min(max(int(math.ceil(rate * dt / 2.0)), 1), MAX_SPLIT)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT, _nrt=False)  # no reference counting: allocates nothing
 def advance(
     x: np.ndarray,
     u: float,

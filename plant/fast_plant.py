@@ -20,14 +20,15 @@ from plant.aerothermal import default_maps, make_model
 from plant.fast_model import THETA_EQ_3_23, TRIM_N_PCT, fast_model_derivative
 from plant.faults import FaultKind
 from plant.interface import SUBSTEP_S, Ambient, PlantConfig
+from plant.jit import JIT
 from plant.periphery import ENGINE_FAULTS, PlantBase
 from plant.pump import pump_flow
 from plant.steady_line import running_line
 
-_derivative = njit(cache=True, error_model="numpy")(fast_model_derivative)  # the same eq. 3.5
+_derivative = njit(**JIT)(fast_model_derivative)  # the same eq. 3.5
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def advance_fast(x: np.ndarray, dv_volt: float, theta: tuple, n_steps: int, dt: float) -> None:
     """n_steps RK4 steps of eq. 3.24 for x = [dN %, dN' %/s] with dV held (as FastEngine.step)."""
     for _ in range(n_steps):

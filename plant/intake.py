@@ -6,10 +6,11 @@ import math
 
 from numba import njit
 
+from plant.jit import JIT
 from plant.thermo import R_AIR, gamma_air, gamma_mean
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def intake(p0_pa: float, t0_k: float, u0_m_s: float) -> tuple[float, float]:
     """Stagnation (P2, T2) at the intake outlet from ambient (P0, T0) and flight speed U0."""
     p1, t1 = p0_pa, t0_k  # 2.3, 2.4

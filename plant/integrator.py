@@ -11,16 +11,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from plant.jit import JIT
+
 STAGES = 4
 _STAGE_FRACTION = (0.0, 0.5, 0.5, 1.0)  # where each stage evaluates, in steps from x
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def rk4_stage_point(x: np.ndarray, stage: int, dt: float, work: np.ndarray) -> np.ndarray:
     """The state at which stage ``stage`` (0..3) evaluates the derivative (work[4], reused)."""
     xt = work[4]
     if stage == 0:
-        xt[:] = x
+        for i in range(x.shape[0]):
+            xt[i] = x[i]
     else:
         h = _STAGE_FRACTION[stage] * dt
         prev = work[stage - 1]
@@ -29,7 +32,7 @@ def rk4_stage_point(x: np.ndarray, stage: int, dt: float, work: np.ndarray) -> n
     return xt
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def rk4_combine(x: np.ndarray, dt: float, work: np.ndarray) -> None:
     """x += dt/6 (k1 + 2 k2 + 2 k3 + k4) with the slopes in work[0..3]."""
     for i in range(x.shape[0]):

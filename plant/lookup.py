@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from plant.jit import JIT
+
 
 def check_axis(name: str, axis: np.ndarray) -> None:
     """Raise ValueError unless axis is 1-D, increasing and evenly spaced."""
@@ -20,7 +22,7 @@ def check_axis(name: str, axis: np.ndarray) -> None:
         raise ValueError(f"table axis {name} must be increasing and evenly spaced")
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def locate(axis: np.ndarray, x: float) -> tuple[int, float, bool]:
     """Index i and weight w with x = (1 - w) axis[i] + w axis[i + 1]; clamped if outside."""
     n = axis.shape[0]
@@ -33,14 +35,14 @@ def locate(axis: np.ndarray, x: float) -> tuple[int, float, bool]:
     return i, (x - axis[i]) / step, False
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def interp1(axis: np.ndarray, values: np.ndarray, x: float) -> tuple[float, bool]:
     """values(x) by linear interpolation; (value, clamped)."""
     i, w, clamped = locate(axis, x)
     return (1.0 - w) * values[i] + w * values[i + 1], clamped
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def interp2_at(table: np.ndarray, i: int, wx: float, j: int, wy: float) -> float:
     """Bilinear interpolation of table at the cell (i, j) with weights (wx, wy) from ``locate``."""
     v0 = (1.0 - wy) * table[i, j] + wy * table[i, j + 1]
@@ -48,7 +50,7 @@ def interp2_at(table: np.ndarray, i: int, wx: float, j: int, wy: float) -> float
     return (1.0 - wx) * v0 + wx * v1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def interp2(
     x_axis: np.ndarray, y_axis: np.ndarray, table: np.ndarray, x: float, y: float
 ) -> tuple[float, bool]:

@@ -17,12 +17,13 @@ import math
 
 from numba import njit
 
+from plant.jit import JIT
 from plant.thermo import R_AIR, cp_air
 
 PR_LINEAR = 1.03  # P6/P0 below which the nozzle law is linearised in P6 - P0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def _nozzle_compressible(
     p6_pa: float, t6_k: float, p0_pa: float, area_m2: float, eta_n: float
 ) -> tuple[float, float, float, bool]:
@@ -30,10 +31,15 @@ def _nozzle_compressible(
     cp6 = cp_air(t6_k)
     g = cp6 / (cp6 - R_AIR)
     e = (g - 1.0) / g
-    beta_cri = (2.0 / (g + 1.0)) ** (1.0 / e)  # 2.26
-    choked = p0_pa / p6_pa < beta_cri  # 2.25 against the critical ratio
-    p7 = p6_pa * beta_cri if choked else p0_pa
-    u7 = math.sqrt(2.0 * cp6 * t6_k * eta_n * (1.0 - (p7 / p6_pa) ** e))  # 2.27
+    # 2.25 against 2.26, compared as (P0/P6)^e < beta_cri^e = 2/(gamma+1): one power less
+    expansion_e = (p0_pa / p6_pa) ** e
+    choked = expansion_e < 2.0 / (g + 1.0)
+    if choked:
+        expansion_e = 2.0 / (g + 1.0)
+        p7 = p6_pa * (2.0 / (g + 1.0)) ** (1.0 / e)  # 2.26
+    else:
+        p7 = p0_pa
+    u7 = math.sqrt(2.0 * cp6 * t6_k * eta_n * (1.0 - expansion_e))  # 2.27
     t7 = t6_k - u7 * u7 / (2.0 * cp6)
     m7 = u7 / math.sqrt(g * R_AIR * t7)  # 2.29
     flow_fn = (
@@ -45,7 +51,7 @@ def _nozzle_compressible(
     return g7, u7, p7, choked
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def nozzle(
     p6_pa: float, t6_k: float, p0_pa: float, u0_m_s: float, area_m2: float, eta_n: float
 ) -> tuple[float, float, bool]:

@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from plant.jit import JIT
 from plant.lookup import interp2
 
 
@@ -36,7 +37,7 @@ class PumpState(IntEnum):
     STALLED = 2  # gears seized: the driver's over-current trip cuts the motor, no flow, no current
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def pump_flow(
     v_pump: float, p_out_gauge_pa: float, table: PumpTable, effectiveness: float
 ) -> tuple[float, bool]:

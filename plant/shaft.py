@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from numba import njit
 
+from plant.jit import JIT
+
 OMEGA_MIN_RAD_S = 50.0  # floor of the speed in the denominator of eq. 2.31 (about 0.4 % N_max)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def shaft_domega_dt(
     omega_rad_s: float, power_turbine: float, power_compressor: float, eta_m: float, inertia: float
 ) -> float:

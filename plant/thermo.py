@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from numba import njit
 
+from plant.jit import JIT
+
 R_AIR = 287.05  # J/(kg K)
 T_STD_K = 288.15  # eq. 2.9 reference temperature
 P_STD_PA = 101325.0  # eq. 2.9 reference pressure
@@ -21,7 +23,7 @@ CP_T_MIN_K = 200.0
 CP_T_MAX_K = 1600.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def cp_air(t_k: float) -> float:
     """Cp of air at temperature t_k (Horner form of the 4th-order polynomial)."""
     c0, c1, c2, c3, c4 = CP_COEFFS
@@ -29,14 +31,14 @@ def cp_air(t_k: float) -> float:
     return c0 + t_k * (c1 + t_k * (c2 + t_k * (c3 + t_k * c4)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def gamma_air(t_k: float) -> float:
     """gamma = Cp / (Cp - R) at temperature t_k."""
     cp = cp_air(t_k)
     return cp / (cp - R_AIR)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**JIT)
 def gamma_mean(t_in_k: float, t_out_k: float) -> float:
     """gamma at the arithmetic mean of a component's inlet and outlet temperatures."""
     return gamma_air(0.5 * (t_in_k + t_out_k))

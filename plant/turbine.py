@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from plant.flags import TURBINE_MAP_CLAMPED
+from plant.jit import JIT
 from plant.lookup import interp2_at, locate
 from plant.thermo import cp_air, gamma_mean
 
@@ -26,7 +27,7 @@ class TurbineMap(NamedTuple):
     efficiency: np.ndarray  # isentropic efficiency [beta, n_t]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**JIT, inline="always")
 def turbine(
     p4_pa: float,
     t4_k: float,
@@ -46,8 +47,9 @@ def turbine(
     flags = TURBINE_MAP_CLAMPED if (out1 or out2) else 0
     g4 = phi * p4_pa / math.sqrt(t4_k)
     t5 = t4_k
+    ln_beta = math.log(beta)
     for _ in range(2):  # gamma at the mean of T4 and T5, one fixed-point pass
         g = gamma_mean(t4_k, t5)
-        t5 = t4_k * (1.0 - eta * max(1.0 - (1.0 / beta) ** ((g - 1.0) / g), 0.0))  # 2.20
+        t5 = t4_k * (1.0 + eta * min(math.expm1(-ln_beta * (g - 1.0) / g), 0.0))  # 2.20
     power = g4 * (cp_air(t4_k) * t4_k - cp_air(t5) * t5)  # 2.21, delivered power > 0
     return g4, t5, power, flags
