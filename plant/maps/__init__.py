@@ -43,7 +43,12 @@ class EngineMaps(NamedTuple):
 def load_maps(path: Path = MAPS_FILE) -> EngineMaps:
     """Read the tables written by build.py."""
     with np.load(path) as d:
-        a = {k: np.ascontiguousarray(d[k], dtype=np.float64) for k in d.files}
+        return maps_from_arrays({k: d[k] for k in d.files})
+
+
+def maps_from_arrays(arrays: dict[str, np.ndarray]) -> EngineMaps:
+    """The named arrays of olympus_maps.npz as the tables the model reads."""
+    a = {k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()}
     for name in AXES:
         check_axis(name, a[name])
     return EngineMaps(

@@ -17,7 +17,8 @@ Shapes (n = corrected speed / N_max):
   leakage that rises linearly with outlet pressure, the leakage slope flattening as voltage rises.
 Calibration: the trim of eq. 2.32 fixes, through the component equations of ch. 2, the flows,
 the turbine efficiency and the nozzle area; each table is scaled so that its bilinear
-interpolation returns exactly those values at the trim point.
+interpolation returns exactly those values at the trim point, then refine() removes what the
+components' own fixed-point passes on gamma leave over, so that eq. 2.32 is an equilibrium.
 """
 
 from __future__ import annotations
@@ -29,9 +30,9 @@ import math
 import numpy as np
 
 from plant.aerothermal import make_model
-from plant.engine import EngineParams, stations
+from plant.engine import EngineParams, Stations, stations
 from plant.intake import intake
-from plant.maps import MAPS_DIR, MAPS_FILE, EngineMaps, load_maps
+from plant.maps import MAPS_DIR, MAPS_FILE, EngineMaps, load_maps, maps_from_arrays
 from plant.nozzle import nozzle
 from plant.pump import PumpTable
 from plant.thermo import cp_air, gamma_mean
@@ -195,9 +196,35 @@ def build() -> tuple[dict[str, np.ndarray], dict[str, float]]:
         "nozzle_area_m2": np.array([req["nozzle_area_m2"]]),
         "trim_pump_voltage": np.array([v_trim]),
     }
+    refine(arrays)
     req["trim_pump_voltage"] = v_trim
     req["compressor_choke_flow_100pct_kg_s"] = g_ch_100
+    req["nozzle_area_m2"] = float(arrays["nozzle_area_m2"][0])
     return arrays, req
+
+
+def refine(arrays: dict[str, np.ndarray], iterations: int = 12) -> None:
+    """Make the eq. 2.32 state an exact equilibrium of the compiled model (in place).
+
+    trim_requirements() solves the balances with its own passes on gamma; the components take
+    theirs, so a small residual remains. Each pass rescales, from the model's own station values
+    at the trim: the turbine flow table so that the burner is at rest (eq. 2.15 = 0), the
+    compressor flow table so that the compressor plenum is (eq. 2.12), the nozzle area for the
+    jet-pipe plenum (eq. 2.22) and the turbine efficiency table for the shaft (eq. 2.31).
+    """
+    for _ in range(iterations):
+        model = make_model(maps=maps_from_arrays(arrays))
+        p = model.params
+        st = Stations(*stations(TRIM_X, TRIM_FUEL, model))
+        t3, t4 = st.t3, TRIM_X[2]
+        h_in = TRIM_FUEL * (p.cp_fuel * p.t0_k + p.eta_b * p.lhv)
+        g4 = (h_in - TRIM_FUEL * cp_air(t3) * t3) / (cp_air(t4) * t4 - cp_air(t3) * t3)
+        arrays["turb_flow"] = arrays["turb_flow"] * (g4 / st.g4)
+        arrays["comp_flow"] = arrays["comp_flow"] * ((g4 - TRIM_FUEL) / st.g2)
+        arrays["nozzle_area_m2"] = arrays["nozzle_area_m2"] * (st.g4 / st.g6)
+        arrays["turb_efficiency"] = arrays["turb_efficiency"] * (
+            st.power_compressor / (p.eta_m * st.power_turbine)
+        )
 
 
 def _trim_voltage(pump: PumpTable, p_out_gauge: float) -> float:
@@ -275,17 +302,21 @@ def plot(maps: EngineMaps) -> None:
     fig.savefig(MAPS_DIR / "turbine_map.png", dpi=110)
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6, 4.5))
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    amps = ax.twinx()
     for v in (3.0, 6.0, 8.0, 10.0, 12.0):
         i = int(np.searchsorted(p.voltage, v))
-        ax.plot(p.pressure / 1e5, p.flow[i, :] * 1e3, label=f"{v:.0f} V")
+        line = ax.plot(p.pressure / 1e5, p.flow[i, :] * 1e3, label=f"{v:.0f} V")[0]
+        current = p.current_idle_a + p.current_per_volt * v + p.current_per_pa * p.pressure
+        amps.plot(p.pressure / 1e5, current, "--", color=line.get_color())
     ax.set(
         xlabel="outlet gauge pressure, bar",
-        ylabel="fuel flow, g/s",
+        ylabel="fuel flow, g/s (solid)",
         title="gear pump (sec. 2.2, cf. fig. 2.8)",
         ylim=(0, None),
     )
-    ax.legend()
+    amps.set(ylabel="pump current, A (dashed)", ylim=(0, None))
+    ax.legend(loc="upper center")
     fig.tight_layout()
     fig.savefig(MAPS_DIR / "pump_map.png", dpi=110)
     plt.close(fig)
