@@ -12,10 +12,7 @@ from plant.engine import (
     EngineModel,
     EngineParams,
     Stations,
-    advance_fuel,
-    advance_pump,
-    pump_fuel_flow,
-    stations,
+    advance_observed,
 )
 from plant.faults import FaultKind
 from plant.interface import SUBSTEP_S, Ambient, PlantConfig, PlantOutputs, check_finite
@@ -67,7 +64,7 @@ class AeroThermalPlant(PlantBase):
         self._lit = 1.0
         self._work = np.empty((5, 4))
         self._n_sub = config.substeps
-        self._g_fuel = config.initial_fuel_kg_s
+        self._out = np.array(steady.stations, dtype=float)  # stations of the present state
         self.trim_pump_voltage = self._voltage_for(config.initial_fuel_kg_s)
         self.trim_duty = self._duty_for(self.trim_pump_voltage)
         self._start(steady.stations.t5, self.trim_duty)
@@ -77,10 +74,17 @@ class AeroThermalPlant(PlantBase):
         voltage or current), as the document's fuel staircases (figs. 2.14-2.17, 3.3)."""
         g_fuel = check_finite("fuel_kg_s", fuel_kg_s, 0.0, 0.05)
         self._apply_due_faults()
-        flags, self._lit = advance_fuel(
-            self._x, g_fuel, self._lit, self._n_sub, SUBSTEP_S, self._model, self._work
+        flags, self._lit = advance_observed(
+            self._x,
+            g_fuel,
+            False,
+            self._lit,
+            self._n_sub,
+            SUBSTEP_S,
+            self._model,
+            self._work,
+            self._out,
         )
-        self._g_fuel = g_fuel
         self._tick += 1
         self._publish(flags, self._battery_v, 0.0, 0.0)
         return self.outputs
@@ -97,16 +101,24 @@ class AeroThermalPlant(PlantBase):
 
     # ---- engine side --------------------------------------------------------------------------
     def _advance(self, v_pump: float) -> int:
-        flags, self._lit = advance_pump(
-            self._x, v_pump, self._lit, self._n_sub, SUBSTEP_S, self._model, self._work
+        flags, self._lit = advance_observed(
+            self._x,
+            v_pump,
+            True,
+            self._lit,
+            self._n_sub,
+            SUBSTEP_S,
+            self._model,
+            self._work,
+            self._out,
         )
-        self._g_fuel, _ = pump_fuel_flow(self._x, v_pump, self._model)
         return flags
 
     def _truth(
         self, v_pump: float
     ) -> tuple[float, float, float, float, float, float, float, float, int]:
-        st = Stations(*stations(self._x, self._g_fuel, self._model))
+        o = self._out
+        st = Stations(*o[:-1].tolist(), int(o[-1]))
         flags = st.flags | (fl.FLAMEOUT if self._lit == 0.0 else 0)
         x = self._x
         return (

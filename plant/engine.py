@@ -236,6 +236,34 @@ def advance(
     return flags, lit
 
 
+@njit(**JIT, _nrt=False)  # no reference counting: allocates nothing
+def advance_observed(
+    x: np.ndarray,
+    u: float,
+    pump_in_loop: bool,
+    lit: float,
+    n_steps: int,
+    dt: float,
+    model: EngineModel,
+    work: np.ndarray,
+    out: np.ndarray,
+) -> tuple[int, float]:
+    """advance(), then the Stations of the new state into out[:11] (flags as a float):
+    one compiled call per ECU period for the plant."""
+    flags, lit = advance(x, u, pump_in_loop, lit, n_steps, dt, model, work)
+    g_fuel = u
+    if pump_in_loop:
+        g_fuel, _ = pump_fuel_flow(x, u, model)
+    p = model.params
+    p2, t2 = intake(p.p0_pa, p.t0_k, p.u0_m_s)
+    g2, g3, g4, g6, g_fuel, t3, t5, pwr_c, pwr_t, thrust, st_flags = stations_at(
+        x, g_fuel, p2, t2, model
+    )
+    out[0], out[1], out[2], out[3], out[4], out[5] = g2, g3, g4, g6, g_fuel, t3
+    out[6], out[7], out[8], out[9], out[10] = t5, pwr_c, pwr_t, thrust, float(st_flags)
+    return flags, lit
+
+
 def advance_fuel(
     x: np.ndarray,
     g_fuel: float,
