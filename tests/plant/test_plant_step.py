@@ -239,3 +239,20 @@ def test_both_plants_answer_a_volt_alike():
             out = plant.step(duty)
         rises.append(out.n_pct - n0)
     assert rises[1] == pytest.approx(rises[0], rel=0.3)
+
+
+def test_hot_day_fault_and_clearing_all_faults():
+    """A hotter inlet at the same fuel flow: less air, hotter exhaust; clear_faults undoes it."""
+    faults = (
+        Fault(0.0, FaultKind.AMBIENT_TEMPERATURE, 308.15),
+        Fault(0.0, FaultKind.PUMP_EFFECTIVENESS, 0.7),
+    )
+    base, hot = AeroThermalPlant(), AeroThermalPlant(PlantConfig(faults=faults))
+    for _ in range(300):
+        a, b = base.step_fuel(0.008), hot.step_fuel(0.008)
+    assert b.air_kg_s < a.air_kg_s - 0.005
+    assert b.egt_true_k > a.egt_true_k + 20.0
+    assert hot.model.params.t0_k == 308.15 and b.pump_effectiveness == 0.7
+    hot.clear_faults()
+    out = hot.step_fuel(0.008)
+    assert hot.model.params.t0_k == 288.15 and out.pump_effectiveness == 1.0
