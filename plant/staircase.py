@@ -47,3 +47,29 @@ def run(
         _, lit = advance(x, u[k], pump_in_loop, lit, 1, DT_S, model, work)
         states[k] = x
     return np.arange(1, u.size + 1) * DT_S, states, u
+
+
+def plot(t: np.ndarray, states: np.ndarray, fuel: np.ndarray, path: str) -> None:
+    """The four states against time, like the document's figs. 2.14-2.17."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(5, 1, figsize=(8, 10), sharex=True)
+    series = [
+        (fuel * 1e3, "fuel flow, g/s"),
+        (states[:, 0] / 1e5, "P3, bar (fig. 2.14)"),
+        (states[:, 1] / 1e5, "P5, bar (fig. 2.15)"),
+        (states[:, 2], "T4, K (fig. 2.16)"),
+        (states[:, 3], "N, % (fig. 2.17)"),
+    ]
+    for a, (y, label) in zip(ax, series, strict=True):
+        a.plot(t, y, "b-", lw=1)
+        a.set_ylabel(label, fontsize=8)
+        a.grid(alpha=0.3)
+    ax[-1].set_xlabel("time, s")
+    ax[0].set_title("fuel staircase 83 / 90 / 94 / 97 %N and back (secs. 2.3.2, 3.3)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

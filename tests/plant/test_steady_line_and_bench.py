@@ -35,6 +35,7 @@ def test_sil_steady_line_writes_csv_and_png(tmp_path, capsys, running):
         rows = list(csv.DictReader(f))
     assert len(rows) == len(running["N_pct"])
     assert float(rows[0]["N_pct"]) == pytest.approx(running["N_pct"][0], rel=1e-8)
+    assert (tmp_path / "staircase.png").read_bytes()[:4] == b"\x89PNG"
     png = (tmp_path / "steady_line.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
 
