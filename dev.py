@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Set up the project's own environment and run its main jobs.
 
-    python3 dev.py demo     create .venv, install, run the main job (for now the protocol self-check
-                            on the default bus; the SIL demo once the harness lands)
+    python3 dev.py demo     create .venv, install, run the SIL demo on the default bus (MRAC and
+                            PID on the staircase; results and plots in out/demo)
     python3 dev.py test     create .venv, install, lint and run the whole test suite
 
 Both are idempotent: the install step runs again only when pyproject.toml changes.
@@ -52,7 +52,7 @@ def main(argv: list[str]) -> int:
     if job == "setup":
         return 0
     if job == "demo":
-        return _run(BIN / "sil", "selfcheck", *rest)
+        return _run(BIN / "sil", "demo", *rest)
     lint = _run(BIN / "ruff", "check", "--quiet", ".")
     if lint != 0:
         print("dev.py: ruff found problems (see above)", file=sys.stderr)

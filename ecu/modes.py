@@ -1,6 +1,8 @@
 """Mode logic: OFF -> ARMED -> RUN -> SHUTDOWN, with a latched FAULT.
 
-- OFF: pump off. Arm request (and no stop request) -> ARMED.
+- OFF: pump off. Arm request (and no stop request) -> ARMED; or straight to RUN when the engine
+  is already running with a valid demand (warm start: the ECU was reset, or a SIL run starts
+  at a trim point, and resumes control without cutting the fuel).
 - ARMED: pump off, waiting for the starter to bring the engine to ``run_entry_pct`` with a valid
   demand (not older than the hold time) -> RUN. Losing the arm request or a stop request -> OFF.
 - RUN: closed-loop control. Stop request, arm dropped, demand lost for 2 s or flameout ->
@@ -36,7 +38,9 @@ def next_mode(
     if trip_fault and (mode == ARMED or mode == RUN):
         return FAULT
     if mode == OFF:
-        return ARMED if arm and not stop else OFF
+        if not arm or stop:
+            return OFF
+        return RUN if running and demand_fresh else ARMED
     if mode == ARMED:
         if stop or not arm:
             return OFF

@@ -23,9 +23,18 @@ SENSORS = 0x100
 
 
 class CommandNode:
-    def __init__(self, codec: Codec, recorder: Recorder, commands: np.ndarray, *,
-                 ecu_rate_hz: float, open_loop: bool, faults: tuple[Fault, ...] = (),
-                 progress=None) -> None:
+    def __init__(
+        self,
+        codec: Codec,
+        recorder: Recorder,
+        commands: np.ndarray,
+        *,
+        ecu_rate_hz: float,
+        open_loop: bool,
+        faults: tuple[Fault, ...] = (),
+        progress=None,
+        realtime: bool = False,
+    ) -> None:
         self.codec = codec
         self.recorder = recorder
         self.commands = commands  # the command at every tick 0..ticks
@@ -43,13 +52,14 @@ class CommandNode:
             self.faults.setdefault(tick, []).append((targets[f.target], f.value))
         self.injected: list[dict] = []
         self.progress = progress
+        self.realtime = realtime
+        self.own_tick = 0  # real time: the command node's own clock, in ECU periods
         self.finished = False
-        self._sensor_out = [0, 0, 0]
-        self._send: SendFn | None = None
+        self._wall_s: float | None = None
 
     def _sent(self, send: SendFn, frame_id: int, data: bytearray) -> None:
         send(frame_id, data)
-        self.recorder.record(frame_id, data)
+        self.recorder.record(frame_id, data, self._wall_s)
 
     def _play(self, tick: int, send: SendFn) -> None:
         """Send what is due at ``tick``: fault injections first, then the demand."""
@@ -64,13 +74,18 @@ class CommandNode:
 
     def start(self, send: SendFn) -> None:
         self.recorder.command = float(self.commands[0])
+        if self.realtime:
+            return  # real time: demands go out by the node's own clock (on_period)
         for tick in range(0, min(self.lead, self.last_tick + 1), self.every):
             self._play(tick, send)
 
-    def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+    def on_frame(
+        self, frame_id: int, data: bytes | bytearray, send: SendFn, wall_s: float | None = None
+    ) -> None:
         recorder = self.recorder
         tick_before = recorder.tick
-        recorder.record(frame_id, data)
+        self._wall_s = wall_s
+        recorder.record(frame_id, data, wall_s)
         if recorder.tick != tick_before:  # the ECU answered a tick
             if self.progress is not None:
                 self.progress(recorder.tick)
@@ -78,7 +93,7 @@ class CommandNode:
                 self.finished = True
                 return
             recorder.command = float(self.commands[recorder.tick])
-        if frame_id == SENSORS:
+        if frame_id == SENSORS and not self.realtime:
             target = recorder.tick + self.lead
             if target % self.every == 0 and target <= self.last_tick:
                 self._play(target, send)
@@ -86,5 +101,13 @@ class CommandNode:
     def on_timeout(self, send: SendFn) -> None:
         pass
 
-    def on_period(self, send: SendFn) -> None:
-        pass
+    def on_period(self, send: SendFn, wall_s: float | None = None) -> None:
+        """Real time: the demand (and faults) due at this period of the node's own clock."""
+        tick = self.own_tick
+        self._wall_s = wall_s
+        if tick > self.last_tick + self.lead:  # the ECU stopped answering: give up
+            self.finished = True
+            return
+        if tick <= self.last_tick and tick % self.every == 0:
+            self._play(tick, send)
+        self.own_tick = tick + 1

@@ -14,7 +14,7 @@ from collections import Counter
 from pathlib import Path
 from typing import TextIO
 
-from protocol.busload import frame_bits
+from protocol.busload import BitCounter
 from protocol.codec import Codec
 from protocol.e2e import E2EChecker, E2EStatus
 from protocol.lockstep import TickTracker
@@ -42,7 +42,7 @@ class Recorder:
         self.log = CandumpWriter(out_dir / "can.log", channel)
         self.tick = 0  # full tick count (the frames carry it modulo 2**16)
         self._seq = 0
-        self.bits = 0
+        self.bits = BitCounter()
         self.frames = 0
         self.unknown_ids: Counter[int] = Counter()
         self.e2e: dict[str, Counter[str]] = {}
@@ -86,7 +86,7 @@ class Recorder:
         self.log.write(self._timestamp(wall_s), frame_id, data)
         self._seq += 1
         self.frames += 1
-        self.bits += frame_bits(frame_id, data)
+        self.bits.add(frame_id, data)
         message = self.codec.by_id.get(frame_id)
         if message is None or len(data) != message.length:
             self.unknown_ids[frame_id] += 1
@@ -114,12 +114,12 @@ class Recorder:
         v, c = self._values, self._columns
         self._trace.writerow(
             [
-                f"{self.tick * self.period_s:.6f}",
+                round(self.tick * self.period_s, 6),
                 self.tick,
-                f"{self.command:.6g}",
-                f"{100.0 * v[c['TrueSpeed']] / N_MAX_RPM:.7f}",
-                f"{100.0 * v[c['ShaftSpeed']] / N_MAX_RPM:.7f}",
-                *(f"{x:.9g}" for x in v),
+                self.command,
+                100.0 * v[c["TrueSpeed"]] / N_MAX_RPM,
+                100.0 * v[c["ShaftSpeed"]] / N_MAX_RPM,
+                *v,
             ]
         )
         self.rows += 1

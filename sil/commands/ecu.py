@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 NAME = "ecu"
 HELP = "run the ECU firmware as a CAN node on a bus (lockstep: one tick per sensor frame)"
@@ -39,7 +40,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="lockstep: wall-clock guard for a missing frame (default 1 s)",
     )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override one ECU parameter (ecu.params.EcuParams field), repeatable",
+    )
+    parser.add_argument(
+        "--ready-file",
+        type=Path,
+        metavar="PATH",
+        help="create this file once the node listens on the bus (for launchers)",
+    )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
+
+
+def _param(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    try:
+        if not sep:
+            raise ValueError
+        return name.strip(), float(value)
+    except ValueError:
+        raise ValueError(f"--param {text!r}: expected NAME=NUMBER") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,14 +72,18 @@ def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, open_bus
     from protocol.node import run_lockstep, run_realtime
 
-    overrides: dict[str, object] = {}
+    try:
+        overrides: dict[str, object] = dict(_param(p) for p in args.param)
+    except ValueError as exc:
+        print(f"sil ecu: {exc}", file=sys.stderr)
+        return 2
     if args.controller:
         overrides["controller"] = args.controller
     if args.rate:
         overrides["rate_hz"] = args.rate
     try:
         params = compile_params(preset(args.preset, **overrides))
-    except (ParamError, ValueError) as exc:
+    except (ParamError, ValueError, TypeError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
     if args.ticks is not None and args.ticks < 1:
@@ -67,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
     except BusSpecError as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
+    if args.ready_file:
+        args.ready_file.write_text("ready\n")
     try:
         if args.mode == "lockstep":
             stats = run_lockstep(node, bus, guard_s=args.guard)

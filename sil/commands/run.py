@@ -1,0 +1,119 @@
+"""`sil run SCENARIO`: plant and ECU as separate CAN nodes (or in one process), recorded."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from protocol.bus import BusSpecError
+from sil import scenario as scenarios
+from sil.canlog import EXTRA_FORMATS
+
+NAME = "run"
+HELP = "run a scenario: plant and ECU nodes over a bus (or in one process), with results"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenario", help="a shipped scenario's name (sil scenarios) or a file")
+    add_run_options(parser)
+
+
+def add_run_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--bus",
+        metavar="SPEC",
+        help="bus spec (default: vcan0 if up, else a loopback bus of this run's own)",
+    )
+    parser.add_argument(
+        "--mode",
+        choices=("lockstep", "realtime", "inproc"),
+        default="lockstep",
+        help="lockstep (default): the plant owns time; realtime: wall clock; "
+        "inproc: all nodes in this process, no bus",
+    )
+    parser.add_argument("--out", type=Path, help="output folder (default: out/SCENARIO)")
+    parser.add_argument("--seed", type=int, help="noise seed (default: the scenario's)")
+    parser.add_argument(
+        "--log-format",
+        action="append",
+        choices=EXTRA_FORMATS,
+        default=[],
+        help="also write can.log as .asc or .blf (repeatable)",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+def print_summary(summary: dict, out: Path) -> None:
+    keys = (
+        "status",
+        "abort_reason",
+        "mode",
+        "bus",
+        "sim_time_s",
+        "wall_time_s",
+        "realtime_factor",
+        "frames",
+        "bus_load_pct",
+        "missed_ticks",
+        "tracking_rms_pct",
+        "max_egt_K",
+        "egt_limit_time_s",
+    )
+    for key in keys:
+        value = summary.get(key)
+        if value is None:
+            continue
+        print(f"{key:<18} {value:.4g}" if isinstance(value, float) else f"{key:<18} {value}")
+    est = summary.get("estimates", {})
+    if est:
+        print("estimates          " + ", ".join(f"{k}={_fmt(v)}" for k, v in est.items()))
+    for fault in summary.get("faults", []):
+        print(f"fault              {fault['time_s']:.2f} s {fault['fault']}")
+    print(f"results in         {out}")
+
+
+def _fmt(value) -> str:
+    if isinstance(value, list):
+        return "[" + ", ".join(f"{v:.4g}" for v in value) + "]"
+    return f"{value:.4g}"
+
+
+def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None) -> int:
+    from sil.runner import RunOptions
+    from sil.runner import run as run_scenario
+
+    try:
+        scenario = scenarios.load(scenario_ref)
+    except scenarios.ScenarioError as exc:
+        print(f"sil run: {exc}", file=sys.stderr)
+        return 2
+    out = out or args.out or Path("out") / scenario.name
+    options = RunOptions(
+        scenario,
+        out,
+        mode=args.mode,
+        bus=args.bus,
+        seed=args.seed,
+        log_formats=tuple(args.log_format),
+        plots=not args.no_plots,
+    )
+    try:
+        summary = run_scenario(options)
+    except (BusSpecError, ValueError) as exc:
+        print(f"sil run: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(summary, indent=2, default=float))
+    else:
+        print_summary(summary, out)
+    if summary["status"] != "completed":
+        print(f"sil run: aborted: {summary['abort_reason']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    return execute(args.scenario, args)

@@ -1,0 +1,378 @@
+"""Run a scenario: the plant, the ECU and the command node, over a bus or in one process.
+
+- ``lockstep`` (default) and ``realtime``: the plant and the ECU are separate processes
+  (``sil plant``, ``sil ecu``) on the chosen bus; this process is the command node and the
+  recorder. Children die with this process (PR_SET_PDEATHSIG) and are stopped at the end.
+- ``inproc``: the same three nodes in this process through the same codec, with no bus.
+
+If a node process dies, or on Ctrl-C, the run keeps recording for a short grace period (to capture
+the other node's reaction), stops the rest, writes everything recorded so far and marks the
+summary aborted with the reason.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import can
+
+from ecu import faults as ecu_faults
+from ecu.node import EcuNode
+from ecu.params import EcuParams, compile_params, preset
+from plant.aerothermal import AeroThermalPlant
+from plant.fast_plant import FastPlant
+from plant.interface import Ambient, Battery, Plant, PlantConfig
+from plant.node import PlantNode
+from protocol.bus import BusSpec, default_spec, open_bus, parse_spec
+from protocol.busload import bus_load_pct
+from protocol.codec import Codec
+from protocol.node import InProcessBus
+from sil import metrics, plots, profiles
+from sil.canlog import convert
+from sil.command_node import CommandNode
+from sil.recorder import Recorder
+from sil.scenario import Scenario
+
+MODES = ("lockstep", "realtime", "inproc")
+# fault bits listed in the summary: all but the two that only describe the present tick
+REPORTED_FAULTS = {
+    bit: name
+    for bit, name in ecu_faults.NAMES.items()
+    if not bit & (ecu_faults.LIMITER_ACTIVE | ecu_faults.PUMP_SATURATED)
+}
+GRACE_S = 3.0  # recording continues this long after a node died
+
+
+@dataclass
+class RunOptions:
+    scenario: Scenario
+    out_dir: Path
+    mode: str = "lockstep"
+    bus: str | None = None
+    seed: int | None = None
+    log_formats: tuple[str, ...] = ()
+    plots: bool = True
+    progress: bool = True
+
+
+@dataclass
+class RunState:
+    status: str = "completed"
+    abort_reason: str | None = None
+    children: dict[str, subprocess.Popen] = field(default_factory=dict)
+    bus: str = "none (in process)"
+
+
+def plant_config(s: Scenario, seed: int) -> PlantConfig:
+    p = s.plant
+    return PlantConfig(
+        ecu_period_s=1.0 / s.ecu_rate_hz,
+        ambient=Ambient(p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s),
+        battery=Battery(p.supply_voltage_V),
+        seed=seed,
+    )
+
+
+def build_plant(s: Scenario, seed: int) -> Plant:
+    config = plant_config(s, seed)
+    return AeroThermalPlant(config) if s.plant.model == "aero" else FastPlant(config)
+
+
+def ecu_overrides(s: Scenario, trim_v: float) -> dict[str, object]:
+    overrides: dict[str, object] = {
+        "controller": s.controller.kind,
+        "rate_hz": int(round(s.ecu_rate_hz)),
+        "trim_v": trim_v,
+    }
+    overrides.update(s.controller.params)
+    return overrides
+
+
+def ecu_params(s: Scenario, trim_v: float) -> EcuParams:
+    return preset(s.controller.preset or "default", **ecu_overrides(s, trim_v))
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    libc = ctypes.CDLL("libc.so.6", use_errno=True)
+    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
+    log = (out_dir / f"{name}.log").open("w")
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    return subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", *args],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        stdin=subprocess.DEVNULL,
+        env=env,
+        preexec_fn=_die_with_parent if sys.platform == "linux" else None,
+    )
+
+
+def _stop(children: dict[str, subprocess.Popen]) -> None:
+    for proc in children.values():
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + 3.0
+    for proc in children.values():
+        try:
+            proc.wait(max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool, label: str) -> None:
+        self.bar = None
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=total, unit="tick", desc=label, leave=False, mininterval=0.5, smoothing=0.1
+            )
+        self.done = 0
+
+    def __call__(self, tick: int) -> None:
+        if self.bar is not None and tick - self.done >= 200:
+            self.bar.update(tick - self.done)
+            self.done = tick
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def run(opts: RunOptions) -> dict:
+    """Run the scenario, write can.log, trace.csv, summary.json and plots; return the summary."""
+    s = opts.scenario
+    seed = s.seed if opts.seed is None else opts.seed
+    opts.out_dir.mkdir(parents=True, exist_ok=True)
+    if s.path is not None:
+        (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
+    plant = build_plant(s, seed)
+    params = ecu_params(s, plant.trim_pump_voltage)
+    compile_params(params)  # refuse bad overrides before anything starts
+    open_loop = s.controller.kind == "open_loop"
+    trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
+    commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
+    period = 1.0 / s.ecu_rate_hz
+    codec = Codec()
+    recorder = Recorder(opts.out_dir, codec, period, wall_clock=opts.mode == "realtime")
+    progress = _Progress(len(commands), opts.progress, s.name)
+    command = CommandNode(
+        codec,
+        recorder,
+        commands,
+        ecu_rate_hz=s.ecu_rate_hz,
+        open_loop=open_loop,
+        faults=s.faults,
+        progress=progress,
+        realtime=opts.mode == "realtime",
+    )
+    state = RunState()
+    t0 = time.perf_counter()
+    try:
+        if opts.mode == "inproc":
+            # started in this order, as on a bus: demands first, the plant's tick 0 last
+            nodes = [command, EcuNode(compile_params(params)), PlantNode(plant)]
+            InProcessBus(nodes).run(done=lambda: command.finished)
+        else:
+            del plant  # the plant runs in its own process
+            _run_on_bus(opts, s, seed, params, command, recorder, state)
+    except KeyboardInterrupt:
+        state.status, state.abort_reason = "aborted", "interrupted (Ctrl-C)"
+    finally:
+        _stop(state.children)
+        progress.close()
+        recorder.close()
+    wall = time.perf_counter() - t0
+    return _finish(opts, s, seed, recorder, command, state, wall)
+
+
+def _run_on_bus(
+    opts: RunOptions,
+    s: Scenario,
+    seed: int,
+    params: EcuParams,
+    command: CommandNode,
+    recorder: Recorder,
+    state: RunState,
+) -> None:
+    spec: BusSpec
+    if opts.bus:
+        spec = parse_spec(opts.bus)
+    else:
+        spec, why = default_spec()
+        print(why, file=sys.stderr)
+    state.bus = str(spec)
+    ticks = len(command.commands)
+    mode = ["--mode", opts.mode]
+    ready = opts.out_dir / ".ecu-ready"
+    ready.unlink(missing_ok=True)
+    ecu_args = [
+        "ecu",
+        "--bus",
+        str(spec),
+        *mode,
+        "--preset",
+        s.controller.preset or "default",
+        "--ready-file",
+        str(ready),
+        "--json",
+    ]
+    for name, value in ecu_overrides(s, params.trim_v).items():
+        if name == "controller":
+            ecu_args += ["--controller", str(value)]
+        elif name == "rate_hz":
+            ecu_args += ["--rate", str(value)]
+        else:
+            ecu_args += ["--param", f"{name}={value!r}"]
+    p = s.plant
+    plant_args = [
+        "plant",
+        "--bus",
+        str(spec),
+        "--model",
+        p.model,
+        "--rate-hz",
+        str(int(round(s.ecu_rate_hz))),
+        "--ticks",
+        str(ticks + 1),
+        "--t0",
+        repr(p.ambient_temperature_K),
+        "--p0",
+        repr(p.ambient_pressure_Pa),
+        "--flight-speed",
+        repr(p.flight_speed_m_s),
+        "--battery-v",
+        repr(p.supply_voltage_V),
+        "--seed",
+        str(seed),
+    ]
+    if opts.mode == "realtime":
+        plant_args.append("--realtime")
+    with open_bus(spec) as bus:
+        state.children["ecu"] = _spawn("ecu", ecu_args, opts.out_dir)
+        deadline = time.monotonic() + 60.0
+        while not ready.exists():
+            if state.children["ecu"].poll() is not None or time.monotonic() > deadline:
+                state.status = "aborted"
+                state.abort_reason = "ECU process did not come up (see ecu.log)"
+                return
+            time.sleep(0.02)
+        send = _bus_send(bus)
+        command.start(send)
+        state.children["plant"] = _spawn("plant", plant_args, opts.out_dir)
+        _listen(
+            bus,
+            command,
+            recorder,
+            state,
+            send,
+            realtime=opts.mode == "realtime",
+            period=1.0 / s.ecu_rate_hz,
+        )
+
+
+def _bus_send(bus: can.BusABC):
+    def send(frame_id: int, data: bytes | bytearray) -> None:
+        bus.send(can.Message(arbitration_id=frame_id, data=bytes(data), is_extended_id=False))
+
+    return send
+
+
+def _listen(
+    bus: can.BusABC,
+    command: CommandNode,
+    recorder: Recorder,
+    state: RunState,
+    send,
+    *,
+    realtime: bool,
+    period: float,
+) -> None:
+    """The command node's loop: frames in, and a watch on the node processes."""
+    died_at = None
+    start = time.monotonic()
+    next_period = start
+    while not command.finished:
+        now = time.monotonic()
+        if realtime and now >= next_period:
+            command.on_period(send, now - start)
+            next_period += period
+            continue
+        msg = bus.recv(min(0.05, next_period - now) if realtime else 0.05)
+        if msg is not None:
+            if not (msg.is_error_frame or msg.is_fd or msg.is_remote_frame or msg.is_extended_id):
+                command.on_frame(
+                    msg.arbitration_id, msg.data, send, wall_s=time.monotonic() - start
+                )
+            continue
+        if died_at is None:
+            for name, proc in state.children.items():
+                code = proc.poll()
+                if code is not None and not command.finished:
+                    state.status = "aborted"
+                    state.abort_reason = f"{name} process exited with code {code} mid-run"
+                    died_at = time.monotonic()
+        elif time.monotonic() - died_at > GRACE_S:
+            return
+
+
+def _finish(
+    opts: RunOptions,
+    s: Scenario,
+    seed: int,
+    recorder: Recorder,
+    command: CommandNode,
+    state: RunState,
+    wall: float,
+) -> dict:
+    sim_time = recorder.tick / s.ecu_rate_hz
+    trace = metrics.load_trace(opts.out_dir / "trace.csv")
+    summary = {
+        "scenario": s.name,
+        "status": state.status,
+        "abort_reason": state.abort_reason,
+        "mode": opts.mode,
+        "bus": state.bus,
+        "seed": seed,
+        "sim_time_s": sim_time,
+        "wall_time_s": wall,
+        "realtime_factor": sim_time / wall if wall > 0 else math.nan,
+        "frames": recorder.frames,
+        "bus_load_pct": bus_load_pct(recorder.bits.flush(), sim_time),
+        "missed_ticks": recorder.missed_ticks,
+        **metrics.summarize(trace, 1.0 / s.ecu_rate_hz, REPORTED_FAULTS),
+        "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
+        "e2e": {m: dict(c) for m, c in recorder.e2e.items() if set(c) - {"OK"}},
+        "unknown_ids": {f"0x{k:X}": v for k, v in recorder.unknown_ids.items()},
+    }
+    if state.status == "completed" and recorder.tick < len(command.commands):
+        summary["status"] = "aborted"
+        summary["abort_reason"] = summary["abort_reason"] or "the run ended early"
+    for name in ("ecu", "plant"):
+        log = opts.out_dir / f"{name}.log"
+        if log.exists():
+            summary[f"{name}_log"] = log.name
+    for fmt in opts.log_formats:
+        convert(opts.out_dir / "can.log", fmt)
+    if opts.plots:
+        title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
+        summary["plots"] = [
+            p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind)
+        ]
+    (opts.out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    (opts.out_dir / ".ecu-ready").unlink(missing_ok=True)
+    return summary
