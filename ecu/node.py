@@ -82,6 +82,8 @@ class EcuNode:
         self.demand_pending = False  # a valid Demand not yet handed to the firmware
         self.waiting = False  # a sensor frame waits for its Demand (lockstep)
         self.demand_waits = 0  # ticks run without their due Demand after the guard time
+        self.sensor_seen = False  # a sensor frame has come (the plant is, or was, alive)
+        self.timeout_s: float | None = None  # set while the plant is silent (see on_timeout)
         self.finished = False
 
     # -- frames in ---------------------------------------------------------------------------
@@ -91,6 +93,8 @@ class EcuNode:
     def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
         i = self.i
         if frame_id == self.sensors.frame_id:
+            self.sensor_seen = True
+            self.timeout_s = None
             status = self.sensors_check.check(data)
             i.sensor_status = status
             if status == E2E_OK:
@@ -135,9 +139,15 @@ class EcuNode:
         )
 
     def on_timeout(self, send: SendFn) -> None:
-        """Lockstep guard time passed: run the waiting tick without its Demand."""
+        """Lockstep guard time passed: run the waiting tick without its Demand; or, when the
+        plant has fallen silent, tick on the node's own clock (one tick per period of silence)
+        so that the firmware counts the lost sensor frames and reacts within its ticks."""
         if self.waiting:
             self.demand_waits += 1
+            self._run_tick(send)
+        elif self.lockstep and self.sensor_seen:
+            self.timeout_s = 1.0 / self.rate_hz
+            self.tick = (self.tick + 1) % TICK_MODULO
             self._run_tick(send)
 
     def on_period(self, send: SendFn) -> None:

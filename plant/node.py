@@ -19,6 +19,8 @@ The node reuses its buffers: nothing it keeps grows per frame or per tick.
 
 from __future__ import annotations
 
+import copy
+
 from plant import flags as fl
 from plant.faults import Fault, FaultKind
 from plant.interface import Plant
@@ -71,6 +73,9 @@ class PlantNode:
     ) -> None:
         if watchdog_ticks < 1:
             raise ValueError(f"watchdog_ticks must be >= 1, got {watchdog_ticks!r}")
+        # one step of a throwaway copy compiles whatever numba has not cached yet, now rather
+        # than after tick 0 is on the bus, where a stall of seconds would look like a dead plant
+        copy.deepcopy(plant).step(plant.trim_duty)
         self.plant = plant
         self.lockstep = lockstep
         self.max_ticks = max_ticks
@@ -105,6 +110,7 @@ class PlantNode:
         self.faults_applied = 0
         self.faults_rejected = 0
         self._pending: list[tuple[int, int, float]] = []  # (absolute tick, target, value)
+        self.timeout_s: float | None = None  # set while the ECU is silent (see on_timeout)
         self.finished = False
 
     # -- frames in ---------------------------------------------------------------------------
@@ -144,12 +150,16 @@ class PlantNode:
         self._advance(send)
 
     def _command(self, raw: list) -> None:
+        self.timeout_s = None
         self.pump_enabled = bool(raw[0])
         self.duty = _clamp(raw[3], 0, 10000) * 1e-4  # PumpDuty, 0.01 %
         self.fresh = True
 
     def on_timeout(self, send: SendFn) -> None:
-        """Lockstep guard passed without the actuator frame: run the tick on the held command."""
+        """Lockstep guard passed without the actuator frame: run the tick on the held command,
+        and keep running on the node's own clock (one ECU period per period of silence) until
+        actuator frames come back, so the pump driver's watchdog acts within its ticks."""
+        self.timeout_s = self.plant.config.ecu_period_s
         self._advance(send)
 
     def on_period(self, send: SendFn) -> None:

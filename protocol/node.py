@@ -9,6 +9,10 @@ codec buffer that is reused after the call returns: the callee copies it):
     on_timeout(send)                  lockstep only: nothing heard for the guard time (wall clock)
     on_period(send)                   real time only: once per period of the node's own clock
     finished: bool                    true when the node has nothing more to do
+    timeout_s: float | None           optional: lockstep silence before on_timeout, instead of
+                                      the driver's guard (a node whose peer fell silent sets it to
+                                      its own period and so runs on its own clock until frames
+                                      come back)
 
 The same node runs over any python-can bus (:func:`run_lockstep`, :func:`run_realtime`) or, in one
 process with no bus at all, through :class:`protocol.node.InProcessBus` (``sil run --mode inproc``).
@@ -96,7 +100,7 @@ def run_lockstep(
     send = bus_sender(bus, stats)
     node.start(send)
     while not node.finished and not should_stop():
-        msg = bus.recv(guard_s)
+        msg = bus.recv(getattr(node, "timeout_s", None) or guard_s)
         if msg is None:
             stats.timeouts += 1
             node.on_timeout(send)

@@ -7,7 +7,9 @@ interoperates with plain ``udp_multicast`` peers on the same group and port) but
 - sends with multicast TTL 0: a datagram never leaves the host;
 - loops multicast back to local sockets (IP_MULTICAST_LOOP = 1);
 - binds the socket to the multicast group address, not to the wildcard address, so nothing
-  listens on any unicast address of the machine.
+  listens on any unicast address of the machine;
+- does not hear its own frames (multicast loopback delivers them to the sender too): each bus
+  marks what it sends with a channel token of its own and drops frames that carry it.
 
 Only IPv4 administratively scoped groups (239.0.0.0/8) are accepted.
 """
@@ -15,6 +17,7 @@ Only IPv4 administratively scoped groups (239.0.0.0/8) are accepted.
 from __future__ import annotations
 
 import ipaddress
+import os
 import socket
 import struct
 
@@ -72,6 +75,17 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
         self._multicast = _LoopbackMulticastSocket(channel, port, 0)
         self._can_protocol = can.CanProtocol.CAN_20
         self.channel_info = f"udp loopback multicast {channel}:{port}"
+        self._token = f"udp-{os.urandom(6).hex()}"
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        msg.channel = self._token
+        super().send(msg, timeout)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        msg, filtered = super()._recv_internal(timeout)
+        if msg is not None and msg.channel == self._token:
+            return None, False  # our own frame, looped back by the kernel
+        return msg, filtered
 
     @property
     def socket(self) -> socket.socket:

@@ -49,7 +49,8 @@ REPORTED_FAULTS = {
     for bit, name in ecu_faults.NAMES.items()
     if not bit & (ecu_faults.LIMITER_ACTIVE | ecu_faults.PUMP_SATURATED)
 }
-GRACE_S = 3.0  # recording continues this long after a node died
+NODE_GUARD_S = 2.0  # lockstep: silence after which a node runs on its own clock
+GRACE_S = NODE_GUARD_S + 2.0  # recording continues this long after a node died
 
 
 @dataclass
@@ -292,42 +293,35 @@ def _bus_send(bus: can.BusABC):
     return send
 
 
-def _listen(
-    bus: can.BusABC,
-    command: CommandNode,
-    recorder: Recorder,
-    state: RunState,
-    send,
-    *,
-    realtime: bool,
-    period: float,
-) -> None:
+def _listen(bus: can.BusABC, command: CommandNode, recorder: Recorder, state: RunState,
+            send, *, realtime: bool, period: float) -> None:
     """The command node's loop: frames in, and a watch on the node processes."""
     died_at = None
     start = time.monotonic()
-    next_period = start
+    next_period = next_check = start
     while not command.finished:
         now = time.monotonic()
         if realtime and now >= next_period:
             command.on_period(send, now - start)
             next_period += period
             continue
+        if now >= next_check:
+            next_check = now + 0.2
+            if died_at is None:
+                for name, proc in state.children.items():
+                    code = proc.poll()
+                    if code is not None:
+                        state.status = "aborted"
+                        state.abort_reason = f"{name} process exited with code {code} mid-run"
+                        died_at = now
+                        break
+            elif now - died_at > GRACE_S:
+                return
         msg = bus.recv(min(0.05, next_period - now) if realtime else 0.05)
-        if msg is not None:
-            if not (msg.is_error_frame or msg.is_fd or msg.is_remote_frame or msg.is_extended_id):
-                command.on_frame(
-                    msg.arbitration_id, msg.data, send, wall_s=time.monotonic() - start
-                )
-            continue
-        if died_at is None:
-            for name, proc in state.children.items():
-                code = proc.poll()
-                if code is not None and not command.finished:
-                    state.status = "aborted"
-                    state.abort_reason = f"{name} process exited with code {code} mid-run"
-                    died_at = time.monotonic()
-        elif time.monotonic() - died_at > GRACE_S:
-            return
+        if msg is not None and not (msg.is_error_frame or msg.is_fd or msg.is_remote_frame
+                                    or msg.is_extended_id):
+            command.on_frame(msg.arbitration_id, msg.data, send,
+                             wall_s=time.monotonic() - start)
 
 
 def _finish(

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
 from pathlib import Path
 
 NAME = "ecu"
@@ -97,11 +99,14 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.ready_file:
         args.ready_file.write_text("ready\n")
+    stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         if args.mode == "lockstep":
-            stats = run_lockstep(node, bus, guard_s=args.guard)
+            stats = run_lockstep(node, bus, guard_s=args.guard, should_stop=stop.is_set)
         else:
-            stats = run_realtime(node, bus, 1.0 / params.rate_hz)
+            stats = run_realtime(node, bus, 1.0 / params.rate_hz, should_stop=stop.is_set)
     finally:
         bus.shutdown()
     o = node.ecu.out

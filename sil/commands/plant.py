@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 
 NAME = "plant"
 HELP = "run the simulated engine (aero-thermal or fast model) as a CAN node"
@@ -115,11 +117,14 @@ def run(args: argparse.Namespace) -> int:
     except BusSpecError as exc:
         print(f"sil plant: error: {exc}", file=sys.stderr)
         return 2
+    stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         if args.realtime:
-            stats = run_realtime(node, bus, node.plant.config.ecu_period_s)
+            stats = run_realtime(node, bus, node.plant.config.ecu_period_s, should_stop=stop.is_set)
         else:
-            stats = run_lockstep(node, bus, guard_s=args.guard_s)
+            stats = run_lockstep(node, bus, guard_s=args.guard_s, should_stop=stop.is_set)
     except KeyboardInterrupt:
         return 130
     finally:

@@ -86,3 +86,11 @@ def test_virtual_bus():
     with open_bus("virtual:test_bus_py") as a, open_bus("virtual:test_bus_py") as b:
         a.send(can.Message(arbitration_id=0x80, data=b"\x01" * 8, is_extended_id=False))
         assert b.recv(1.0).arbitration_id == 0x80
+
+
+def test_udp_bus_does_not_hear_itself():
+    spec = unique_udp_spec(random.Random(5))
+    with open_bus(spec) as a, open_bus(spec) as b:
+        a.send(can.Message(arbitration_id=0x80, data=bytes(8), is_extended_id=False))
+        assert b.recv(1.0).arbitration_id == 0x80
+        assert a.recv(0.2) is None

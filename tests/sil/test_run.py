@@ -1,0 +1,186 @@
+"""sil run end to end: in one process and as processes over a bus; determinism; robustness."""
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from protocol.codec import Codec
+from sil.metrics import load_trace
+
+SCENARIO = """
+description = "short MRAC staircase for tests"
+duration_s = {duration}
+[plant]
+model = "aero"
+[controller]
+kind = "mrac"
+preset = "sec5_3_mrac_aero"
+params = {{ limiters_on = 1, dead_zone_on = 1, speed_noise_rpm = 20, rate_window_s = 0.05 }}
+[command]
+base = 0
+[[command.component]]
+kind = "staircase"
+levels = [90, 92, 88]
+step_s = 1
+[[fault]]
+time_s = 1.5
+target = "PUMP_EFFECTIVENESS"
+value = 0.8
+"""
+
+
+def _scenario(tmp_path: Path, duration: float = 3.0) -> Path:
+    path = tmp_path / "short.toml"
+    path.write_text(SCENARIO.format(duration=duration))
+    return path
+
+
+def _udp_spec() -> str:
+    rng = random.Random(os.getpid() ^ time.time_ns())
+    return f"udp:239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}@{rng.randrange(20000, 60000)}"
+
+
+def _sil(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sil.cli", *args], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def _no_nodes_left(spec: str) -> bool:
+    found = subprocess.run(["pgrep", "-f", f"--bus {spec}"], capture_output=True, text=True)
+    return found.stdout.strip() == ""
+
+
+def test_inproc_run_writes_everything(tmp_path):
+    out = tmp_path / "run"
+    result = _sil("run", str(_scenario(tmp_path)), "--mode", "inproc", "--out", str(out),
+                  "--json", "--log-format", "blf")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary == json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["abort_reason"] is None
+    assert summary["sim_time_s"] == pytest.approx(3.01)
+    assert summary["missed_ticks"] == 0
+    assert 0 < summary["bus_load_pct"] < 15
+    assert summary["faults_injected"][0]["target"] == 1  # PUMP_EFFECTIVENESS
+    for key in ("realtime_factor", "frames", "tracking_rms_pct", "max_egt_K", "egt_limit_time_s",
+                "faults", "estimates", "wall_time_s"):
+        assert key in summary
+    assert set(summary["estimates"]) == {"Ap_row2", "Lambda", "Theta_row2", "Kx", "Kr", "Kf"}
+    trace = load_trace(out / "trace.csv")
+    assert len(trace["time"]) == 301
+    assert trace["command"][150] == 92.0 and trace["command"][250] == 88.0
+    # the engine answers the steps: up after 1 s, down after 2 s
+    assert trace["speed_true"][190] > trace["speed_true"][90] + 0.5
+    assert trace["speed_true"][290] < trace["speed_true"][190] - 1.0
+    frames = list(can.CanutilsLogReader(str(out / "can.log")))
+    assert len(frames) == summary["frames"]
+    assert len(list(can.BLFReader(str(out / "can.blf")))) == summary["frames"]
+    db = Codec().database
+    sensors = [db.decode_message(f.arbitration_id, f.data) for f in frames
+               if f.arbitration_id == 0x100]
+    assert [s["SensorTick"] for s in sensors[:301]] == list(range(301))
+    assert {p.name for p in out.glob("*.png")} >= {"speed.png", "egt.png", "estimates.png",
+                                                   "gains.png"}
+
+
+@pytest.mark.slow
+def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
+    scenario = _scenario(tmp_path)
+    logs = []
+    for i in range(2):
+        out = tmp_path / f"run{i}"
+        spec = _udp_spec()
+        result = _sil("run", str(scenario), "--bus", spec, "--out", str(out), "--no-plots",
+                      "--seed", "7")
+        assert result.returncode == 0, result.stderr + (out / "ecu.log").read_text()
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["missed_ticks"] == 0 and summary["bus"] == spec
+        logs.append((out / "can.log").read_bytes())
+        assert _no_nodes_left(spec)
+    assert logs[0] == logs[1]
+    # the in-process run goes through the same codec and lockstep rules: the same frames
+    out = tmp_path / "inproc"
+    assert _sil("run", str(scenario), "--mode", "inproc", "--out", str(out), "--no-plots",
+                "--seed", "7").returncode == 0
+    assert (out / "can.log").read_bytes() == logs[0]
+
+
+def _start_run(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path]:
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "sil.cli", "run",
+                             str(_scenario(tmp_path, duration=300)), "--bus", spec, "--out",
+                             str(out), "--no-plots"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        trace = out / "trace.csv"
+        if trace.exists() and trace.stat().st_size > 200_000:
+            return proc, out
+        time.sleep(0.2)
+    proc.kill()
+    raise AssertionError("the run did not get going within 120 s")
+
+
+def _kill_node(spec: str, node: str) -> None:
+    found = subprocess.run(["pgrep", "-f", f"sil.cli {node} --bus {spec}"], capture_output=True,
+                           text=True).stdout.split()
+    assert found, f"no {node} process for {spec}"
+    for pid in found:
+        os.kill(int(pid), signal.SIGKILL)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("victim", ["plant", "ecu"])
+def test_a_killed_node_aborts_the_run_and_keeps_the_records(tmp_path, victim):
+    spec = _udp_spec()
+    proc, out = _start_run(tmp_path, spec)
+    _kill_node(spec, victim)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "aborted"
+    assert f"{victim} process exited" in summary["abort_reason"]
+    assert summary["sim_time_s"] > 1.0
+    assert len(load_trace(out / "trace.csv")["time"]) > 100
+    assert _no_nodes_left(spec)
+    frames = list(can.CanutilsLogReader(str(out / "can.log")))
+    db = Codec().database
+    if victim == "plant":
+        # the ECU noticed the lost sensor frames and went to FAULT (mode 4) with pump off
+        status = [db.decode_message(0x200, f.data) for f in frames if f.arbitration_id == 0x200]
+        assert status[-1]["EcuMode"] == "FAULT"
+        ecu_log = (out / "ecu.log").read_text()
+        assert "mode" in ecu_log
+    else:
+        # the plant's watchdog removed pump power: no fuel at the end
+        truth = [db.decode_message(0x301, f.data) for f in frames if f.arbitration_id == 0x301]
+        assert truth[-1]["FuelFlow"] == 0.0
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_everything_and_keeps_the_records(tmp_path):
+    spec = _udp_spec()
+    proc, out = _start_run(tmp_path, spec)
+    proc.send_signal(signal.SIGINT)
+    proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "aborted" and "interrupted" in summary["abort_reason"]
+    assert _no_nodes_left(spec)
+
+
+def test_bad_scenario_is_refused_before_anything_starts(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("duration_s = 5\n[controller]\nkind = 'fuzzy'\n[command]\n")
+    result = _sil("run", str(bad), "--out", str(tmp_path / "out"))
+    assert result.returncode == 2
+    assert "bad.toml: field 'controller.kind'" in result.stderr
+    assert not (tmp_path / "out").exists()
