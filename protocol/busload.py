@@ -26,8 +26,16 @@ def frames_bits(ids: np.ndarray, dlc: int, data: np.ndarray) -> np.ndarray:
     n = len(ids)
     id_bits = ((ids[:, None].astype(np.uint16) >> np.arange(10, -1, -1)) & 1).astype(np.uint8)
     dlc_bits = np.broadcast_to(np.array([(dlc >> i) & 1 for i in (3, 2, 1, 0)], np.uint8), (n, 4))
-    body = np.concatenate([np.zeros((n, 1), np.uint8), id_bits, np.zeros((n, 3), np.uint8),
-                           dlc_bits, np.unpackbits(data[:, :dlc], axis=1)], axis=1)
+    body = np.concatenate(
+        [
+            np.zeros((n, 1), np.uint8),
+            id_bits,
+            np.zeros((n, 3), np.uint8),
+            dlc_bits,
+            np.unpackbits(data[:, :dlc], axis=1),
+        ],
+        axis=1,
+    )
     crc = np.zeros(n, np.int32)
     for column in body.T:  # CRC-15, one bit position at a time for every frame
         feedback = column ^ ((crc >> 14) & 1)

@@ -293,8 +293,16 @@ def _bus_send(bus: can.BusABC):
     return send
 
 
-def _listen(bus: can.BusABC, command: CommandNode, recorder: Recorder, state: RunState,
-            send, *, realtime: bool, period: float) -> None:
+def _listen(
+    bus: can.BusABC,
+    command: CommandNode,
+    recorder: Recorder,
+    state: RunState,
+    send,
+    *,
+    realtime: bool,
+    period: float,
+) -> None:
     """The command node's loop: frames in, and a watch on the node processes."""
     died_at = None
     start = time.monotonic()
@@ -318,10 +326,10 @@ def _listen(bus: can.BusABC, command: CommandNode, recorder: Recorder, state: Ru
             elif now - died_at > GRACE_S:
                 return
         msg = bus.recv(min(0.05, next_period - now) if realtime else 0.05)
-        if msg is not None and not (msg.is_error_frame or msg.is_fd or msg.is_remote_frame
-                                    or msg.is_extended_id):
-            command.on_frame(msg.arbitration_id, msg.data, send,
-                             wall_s=time.monotonic() - start)
+        if msg is not None and not (
+            msg.is_error_frame or msg.is_fd or msg.is_remote_frame or msg.is_extended_id
+        ):
+            command.on_frame(msg.arbitration_id, msg.data, send, wall_s=time.monotonic() - start)
 
 
 def _finish(

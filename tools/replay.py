@@ -9,7 +9,7 @@ timing error well under a millisecond on an idle machine.
 from __future__ import annotations
 
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -189,3 +189,94 @@ def play(
             break
         base += last + 1e-3  # the next pass starts right after this one
     return PlaybackReport(len(errors), clock() - start, np.asarray(errors))
+
+
+ECU_INPUTS = ("PlantSensors", "PlantAnalog", "Demand")
+ECU_OUTPUTS = ("EcuActuator", "EcuStatus", "EcuTelemetry")
+
+
+@dataclass
+class EcuComparison:
+    """Recorded ECU frames against the ones the emulator produced from the same inputs."""
+
+    ticks: int = 0
+    compared: int = 0
+    differing: int = 0
+    missing: int = 0  # recorded frames the emulator did not produce
+    extra: int = 0  # frames the emulator produced beyond the recording
+    first_divergent_tick: int | None = None
+    max_difference: dict[str, float] = field(default_factory=dict)
+    series: dict[str, tuple[list[float], list[float], list[float]]] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {
+            "ticks": self.ticks,
+            "frames_compared": self.compared,
+            "frames_differing": self.differing,
+            "frames_missing": self.missing,
+            "frames_extra": self.extra,
+            "first_divergent_tick": self.first_divergent_tick,
+            "max_difference": {k: v for k, v in self.max_difference.items() if v},
+        }
+
+
+def into_ecu(
+    path: Path, node, *, trace_signals: tuple[str, ...] = ("PumpVoltageTarget",)
+) -> EcuComparison:
+    """Drive an ECU node with a log's sensor, analog and demand frames, in recorded order, and
+    compare every frame it sends with the ECU frames recorded in the log (n-th with n-th, by ID).
+
+    ``node`` is a sans-IO ECU node (:class:`ecu.node.EcuNode`) in lockstep mode.
+    """
+    codec = Codec()
+    inputs = {codec[name].frame_id for name in ECU_INPUTS}
+    outputs = {codec[name].frame_id: codec[name] for name in ECU_OUTPUTS}
+    produced: dict[int, deque] = {fid: deque() for fid in outputs}
+    actuator_id = codec["EcuActuator"].frame_id
+
+    def send(frame_id: int, data: bytes | bytearray) -> None:
+        if frame_id in produced:
+            produced[frame_id].append(bytes(data))
+
+    report = EcuComparison()
+    a, b = [0.0] * 16, [0.0] * 16
+    node.start(send)
+    for msg in read_frames(path):
+        if skip_reason(msg) is not None or msg.is_extended_id:
+            continue
+        frame_id = msg.arbitration_id
+        if frame_id in inputs:
+            node.on_frame(frame_id, msg.data, send)
+            continue
+        message = outputs.get(frame_id)
+        if message is None:
+            continue
+        queue = produced[frame_id]
+        if not queue:
+            report.missing += 1
+            continue
+        mine = queue.popleft()
+        report.compared += 1
+        message.unpack(msg.data, a)
+        message.unpack(mine, b)
+        names = message.signal_names
+        if message.multiplexed:
+            names = (names[0], message.mux_signals[int(a[0])].name)
+        if bytes(msg.data[1:]) != mine[1:]:  # byte 0 is the CRC, which follows the rest
+            report.differing += 1
+            if report.first_divergent_tick is None:
+                report.first_divergent_tick = report.ticks
+            for i, name in enumerate(names):
+                report.max_difference[name] = max(
+                    report.max_difference.get(name, 0.0), abs(a[i] - b[i])
+                )
+        for i, name in enumerate(names):
+            if name in trace_signals:
+                t, rec, emu = report.series.setdefault(name, ([], [], []))
+                t.append(msg.timestamp)
+                rec.append(a[i])
+                emu.append(b[i])
+        if frame_id == actuator_id:
+            report.ticks += 1
+    report.extra = sum(len(q) for q in produced.values())
+    return report

@@ -13,7 +13,10 @@ from sil.canlog import LogReadError, read_frames
 from tools import replay
 
 NAME = "replay"
-HELP = "decode a CAN log (candump, ASC, BLF, TRC, CSV) or play it onto a bus in real time"
+HELP = (
+    "decode a CAN log (candump, ASC, BLF, TRC, CSV), play it onto a bus in real time, or "
+    "into the ECU emulator"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,6 +31,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--skip-gaps", type=float, metavar="SECONDS", help="shorten pauses longer than this to this"
     )
     parser.add_argument("--ids", metavar="FILTER", help="only these IDs: 0x100,0x110-0x1FF")
+    parser.add_argument(
+        "--into-ecu",
+        action="store_true",
+        help="drive the ECU emulator with the log's sensor and demand frames "
+        "and compare its frames with the recorded ones",
+    )
+    parser.add_argument(
+        "--scenario",
+        type=Path,
+        help="--into-ecu: the run's scenario for the ECU parameters (default: "
+        "scenario.toml beside the log)",
+    )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="--into-ecu: change an ECU parameter (e.g. to check a change)",
+    )
+    parser.add_argument("--out", type=Path, help="--into-ecu: folder for report.json and a plot")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
@@ -71,6 +94,60 @@ def _dry_run(args: argparse.Namespace, keep) -> int:
     return 0
 
 
+def _into_ecu(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from ecu.node import EcuNode
+    from ecu.params import ParamError, compile_params
+    from sil import scenario as scenarios
+    from sil.commands.ecu import _param
+    from sil.runner import build_plant, ecu_params
+
+    path = args.scenario or args.log.parent / "scenario.toml"
+    try:
+        s = scenarios.load(path)
+        params = ecu_params(s, build_plant(s, s.seed).trim_pump_voltage)
+        changes = dict(_param(p) for p in args.param)
+        params = compile_params(replace(params, **changes))
+        report = replay.into_ecu(args.log, EcuNode(params))
+    except (scenarios.ScenarioError, ParamError, ValueError, TypeError) as exc:
+        print(f"sil replay: {exc}", file=sys.stderr)
+        return 2
+    except LogReadError as exc:
+        print(f"sil replay: {exc}", file=sys.stderr)
+        return 1
+    result = {"log": str(args.log), "scenario": str(path), "changed": changes, **report.as_dict()}
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "report.json").write_text(json.dumps(result, indent=2) + "\n")
+        _plot_comparison(report, args.out / "into_ecu.png", args.log.name)
+    _print_report(result, args.json)
+    return 0
+
+
+def _plot_comparison(report: replay.EcuComparison, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t, recorded, replayed = report.series.get("PumpVoltageTarget", ([], [], []))
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    ax.plot(t, recorded, lw=1, label="recorded ECU")
+    ax.plot(t, replayed, "--", lw=1, label="ECU emulator now")
+    ax.set_ylabel("pump voltage [V]")
+    ax.set_title(f"{title}: first divergent tick {report.first_divergent_tick}")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    ax2.plot(t, [b - a for a, b in zip(recorded, replayed, strict=True)], color="tab:red", lw=1)
+    ax2.set_ylabel("difference [V]")
+    ax2.set_xlabel("time [s]")
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def run(args: argparse.Namespace) -> int:
     if not args.log.is_file():
         print(f"sil replay: {args.log}: no such file", file=sys.stderr)
@@ -82,6 +159,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.dry_run:
         return _dry_run(args, keep)
+    if args.into_ecu:
+        return _into_ecu(args)
     try:
         if args.bus:
             spec = parse_spec(args.bus)

@@ -32,8 +32,9 @@ def _reference_bits(frame_id: int, data: bytes) -> int:
     return len(stuffed) + 13
 
 
-frames = st.lists(st.tuples(st.integers(0, 0x7FF), st.binary(min_size=0, max_size=8)),
-                  min_size=1, max_size=40)
+frames = st.lists(
+    st.tuples(st.integers(0, 0x7FF), st.binary(min_size=0, max_size=8)), min_size=1, max_size=40
+)
 
 
 @settings(max_examples=200)

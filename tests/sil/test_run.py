@@ -45,12 +45,14 @@ def _scenario(tmp_path: Path, duration: float = 3.0) -> Path:
 
 def _udp_spec() -> str:
     rng = random.Random(os.getpid() ^ time.time_ns())
-    return f"udp:239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}@{rng.randrange(20000, 60000)}"
+    group = f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}"
+    return f"udp:{group}@{rng.randrange(20000, 60000)}"
 
 
 def _sil(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "sil.cli", *args], capture_output=True,
-                          text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
 
 
 def _no_nodes_left(spec: str) -> bool:
@@ -60,8 +62,17 @@ def _no_nodes_left(spec: str) -> bool:
 
 def test_inproc_run_writes_everything(tmp_path):
     out = tmp_path / "run"
-    result = _sil("run", str(_scenario(tmp_path)), "--mode", "inproc", "--out", str(out),
-                  "--json", "--log-format", "blf")
+    result = _sil(
+        "run",
+        str(_scenario(tmp_path)),
+        "--mode",
+        "inproc",
+        "--out",
+        str(out),
+        "--json",
+        "--log-format",
+        "blf",
+    )
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary == json.loads((out / "summary.json").read_text())
@@ -70,8 +81,16 @@ def test_inproc_run_writes_everything(tmp_path):
     assert summary["missed_ticks"] == 0
     assert 0 < summary["bus_load_pct"] < 15
     assert summary["faults_injected"][0]["target"] == 1  # PUMP_EFFECTIVENESS
-    for key in ("realtime_factor", "frames", "tracking_rms_pct", "max_egt_K", "egt_limit_time_s",
-                "faults", "estimates", "wall_time_s"):
+    for key in (
+        "realtime_factor",
+        "frames",
+        "tracking_rms_pct",
+        "max_egt_K",
+        "egt_limit_time_s",
+        "faults",
+        "estimates",
+        "wall_time_s",
+    ):
         assert key in summary
     assert set(summary["estimates"]) == {"Ap_row2", "Lambda", "Theta_row2", "Kx", "Kr", "Kf"}
     trace = load_trace(out / "trace.csv")
@@ -84,11 +103,16 @@ def test_inproc_run_writes_everything(tmp_path):
     assert len(frames) == summary["frames"]
     assert len(list(can.BLFReader(str(out / "can.blf")))) == summary["frames"]
     db = Codec().database
-    sensors = [db.decode_message(f.arbitration_id, f.data) for f in frames
-               if f.arbitration_id == 0x100]
+    sensors = [
+        db.decode_message(f.arbitration_id, f.data) for f in frames if f.arbitration_id == 0x100
+    ]
     assert [s["SensorTick"] for s in sensors[:301]] == list(range(301))
-    assert {p.name for p in out.glob("*.png")} >= {"speed.png", "egt.png", "estimates.png",
-                                                   "gains.png"}
+    assert {p.name for p in out.glob("*.png")} >= {
+        "speed.png",
+        "egt.png",
+        "estimates.png",
+        "gains.png",
+    }
 
 
 @pytest.mark.slow
@@ -98,8 +122,9 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
     for i in range(2):
         out = tmp_path / f"run{i}"
         spec = _udp_spec()
-        result = _sil("run", str(scenario), "--bus", spec, "--out", str(out), "--no-plots",
-                      "--seed", "7")
+        result = _sil(
+            "run", str(scenario), "--bus", spec, "--out", str(out), "--no-plots", "--seed", "7"
+        )
         assert result.returncode == 0, result.stderr + (out / "ecu.log").read_text()
         summary = json.loads((out / "summary.json").read_text())
         assert summary["missed_ticks"] == 0 and summary["bus"] == spec
@@ -108,17 +133,34 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
     assert logs[0] == logs[1]
     # the in-process run goes through the same codec and lockstep rules: the same frames
     out = tmp_path / "inproc"
-    assert _sil("run", str(scenario), "--mode", "inproc", "--out", str(out), "--no-plots",
-                "--seed", "7").returncode == 0
+    assert (
+        _sil(
+            "run", str(scenario), "--mode", "inproc", "--out", str(out), "--no-plots", "--seed", "7"
+        ).returncode
+        == 0
+    )
     assert (out / "can.log").read_bytes() == logs[0]
 
 
 def _start_run(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path]:
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "sil.cli", "run",
-                             str(_scenario(tmp_path, duration=300)), "--bus", spec, "--out",
-                             str(out), "--no-plots"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sil.cli",
+            "run",
+            str(_scenario(tmp_path, duration=300)),
+            "--bus",
+            spec,
+            "--out",
+            str(out),
+            "--no-plots",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         trace = out / "trace.csv"
@@ -130,8 +172,9 @@ def _start_run(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path]:
 
 
 def _kill_node(spec: str, node: str) -> None:
-    found = subprocess.run(["pgrep", "-f", f"sil.cli {node} --bus {spec}"], capture_output=True,
-                           text=True).stdout.split()
+    found = subprocess.run(
+        ["pgrep", "-f", f"sil.cli {node} --bus {spec}"], capture_output=True, text=True
+    ).stdout.split()
     assert found, f"no {node} process for {spec}"
     for pid in found:
         os.kill(int(pid), signal.SIGKILL)
@@ -184,3 +227,34 @@ def test_bad_scenario_is_refused_before_anything_starts(tmp_path):
     assert result.returncode == 2
     assert "bad.toml: field 'controller.kind'" in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_replay_into_the_ecu_finds_no_difference_and_then_the_changed_parameter(tmp_path):
+    out = tmp_path / "run"
+    assert (
+        _sil(
+            "run", str(_scenario(tmp_path)), "--mode", "inproc", "--out", str(out), "--no-plots"
+        ).returncode
+        == 0
+    )
+    same = _sil("replay", str(out / "can.log"), "--into-ecu", "--json")
+    assert same.returncode == 0, same.stderr
+    report = json.loads(same.stdout)
+    assert report["ticks"] == 301 and report["frames_compared"] > 600
+    assert report["frames_differing"] == 0 and report["first_divergent_tick"] is None
+    assert report["frames_missing"] == report["frames_extra"] == 0
+    changed = _sil(
+        "replay",
+        str(out / "can.log"),
+        "--into-ecu",
+        "--param",
+        "gamma_r=0.3",
+        "--out",
+        str(tmp_path / "cmp"),
+        "--json",
+    )
+    report = json.loads(changed.stdout)
+    assert report["frames_differing"] > 0 and report["first_divergent_tick"] >= 0
+    assert report["max_difference"]["Gain_Kr"] > 0
+    assert (tmp_path / "cmp" / "into_ecu.png").exists()
+    assert json.loads((tmp_path / "cmp" / "report.json").read_text()) == report

@@ -69,9 +69,11 @@ MINIMAL = "duration_s = 10\n[command]\nbase = 90\n"
         (MINIMAL + "colour = 'red'\n", "unknown field 'command.colour'"),
         ("duration_s = 10\n[command]\nbase = 'idle'\n", "field 'command.base'"),
         ("duration_s = = 1", "not valid TOML"),
-    (MINIMAL + "[controller]\npreset = 'sec9'\n", "field 'controller.preset': expected one of"),
-    ("duration_s = 10\n[controller.params]\nwarp = 9\n[command]\n",
-     "field 'controller.params.warp': expected an ECU parameter"),
+        (MINIMAL + "[controller]\npreset = 'sec9'\n", "field 'controller.preset': expected one of"),
+        (
+            "duration_s = 10\n[controller.params]\nwarp = 9\n[command]\n",
+            "field 'controller.params.warp': expected an ECU parameter",
+        ),
         (
             MINIMAL + "[[command.component]]\nkind = 'staircase'\nlevels = []\nstep_s = 1\n",
             "field 'command.component[0].levels': expected a non-empty list",
