@@ -9,7 +9,6 @@ Everything is written as it goes, so an aborted run keeps what it recorded.
 
 from __future__ import annotations
 
-import csv
 from collections import Counter
 from pathlib import Path
 from typing import TextIO
@@ -70,10 +69,11 @@ class Recorder:
         self._values = [float("nan")] * len(names)
         self._scratch = [0.0] * 16
         self._trace_file: TextIO = (out_dir / "trace.csv").open("w", newline="")
-        self._trace = csv.writer(self._trace_file)
         header = ["time[s]", "tick[-]", "command[%N or V]", "speed_true[%]", "speed_meas[%]"]
         header += [f"{n}[{u or '-'}]" for n, u in zip(names, units, strict=True)]
-        self._trace.writerow(header)
+        self._trace_file.write(",".join(header) + "\n")
+        # one preformatted row: %-formatting is several times faster than csv's float repr
+        self._row_format = "%.6f,%d,%.9g,%.9g,%.9g," + ",".join(["%.9g"] * len(names)) + "\n"
         self.rows = 0
 
     def _timestamp(self, wall_s: float | None) -> float:
@@ -112,15 +112,16 @@ class Recorder:
 
     def _end_tick(self) -> None:
         v, c = self._values, self._columns
-        self._trace.writerow(
-            [
-                round(self.tick * self.period_s, 6),
+        self._trace_file.write(
+            self._row_format
+            % (
+                self.tick * self.period_s,
                 self.tick,
                 self.command,
                 100.0 * v[c["TrueSpeed"]] / N_MAX_RPM,
                 100.0 * v[c["ShaftSpeed"]] / N_MAX_RPM,
                 *v,
-            ]
+            )
         )
         self.rows += 1
         if self.rows % 1000 == 0:
