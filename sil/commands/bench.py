@@ -15,6 +15,7 @@ TARGETS = {
     "plant": "plant.bench",
     "ecu": "ecu.bench",
     "replay": "tools.replay_bench",
+    "sil": "sil.bench",
 }
 
 
