@@ -168,6 +168,7 @@ class Identification:
     trim: Trim
     window: int
     derived: dict[str, float | list[str]]
+    skip_steps: bool = True
     nrmse_pct: float | None = None
 
     def as_dict(self) -> dict:
@@ -176,6 +177,7 @@ class Identification:
             "theta": self.theta,
             "trim": {"N_pct": self.trim.n_pct, "V": self.trim.v},
             "smoothing_window_samples": self.window,
+            "steps_skipped": self.skip_steps,
             **self.derived,
             "nrmse_pct": self.nrmse_pct,
         }
@@ -209,34 +211,44 @@ def candidate_windows(rec: Recording) -> list[int]:
 
 
 def identify(
-    rec: Recording, *, order: str = "second", trim: Trim | None = None, window: int | None = None
+    rec: Recording,
+    *,
+    order: str = "second",
+    trim: Trim | None = None,
+    window: int | None = None,
+    skip_steps: bool | None = None,
 ) -> Identification:
     """Least squares of the chosen model on a recording (deviations from ``trim``).
 
-    Without a window, each of :func:`candidate_windows` is tried and the one whose identified
-    model, simulated on the recording, fits it best is kept.
+    ``skip_steps`` leaves out the samples whose smoothing window holds a voltage step (see
+    :func:`smooth_input`): right for densely sampled data, where the rest still holds the
+    transients, wrong for slow logs, where mostly steady states would be left. Without a window
+    (or with ``skip_steps`` None), every candidate window (:func:`candidate_windows`), with and
+    without skipping, is tried and the model that, simulated on the recording, fits it best is
+    kept.
     """
     if len(rec.t) < 20:
         raise ValueError(f"{rec.source}: {len(rec.t)} samples are too few to identify a model")
     trim = trim or estimate_trim(rec)
-    if window is None:
+    if window is None or skip_steps is None:
         tried = []
-        for w in candidate_windows(rec):
-            try:
-                ident = identify(rec, order=order, trim=trim, window=w)
-            except ValueError:
-                continue
-            tried.append((validate(ident, rec), w, ident))
+        for w in candidate_windows(rec) if window is None else [window]:
+            for skip in (True, False) if skip_steps is None else (skip_steps,):
+                try:
+                    ident = identify(rec, order=order, trim=trim, window=w, skip_steps=skip)
+                except ValueError:
+                    continue
+                tried.append((validate(ident, rec), w, not skip, ident))
         if not tried:
             raise ValueError(f"{rec.source}: no smoothing window fits this record")
-        fit, _, best = min(tried, key=lambda item: (item[0], item[1]))
+        fit, *_, best = min(tried, key=lambda item: item[:3])
         best.nrmse_pct = fit
         return best
     d = derivatives(rec, window)
     dn, dv = d.n - trim.n_pct, rec.v - trim.v
     x = regressors(dn, d.n_dot, dv, order)
     y = d.n_ddot if order == "second" else d.n_dot
-    keep = smooth_input(rec.v, d.window)
+    keep = smooth_input(rec.v, d.window) if skip_steps else np.ones(len(y), bool)
     if keep.sum() < x.shape[1] * 5:
         raise ValueError(
             f"{rec.source}: the voltage changes too often for the smoothing window "
@@ -244,7 +256,12 @@ def identify(
         )
     theta = least_squares(x[keep], y[keep])
     return Identification(
-        order, [float(v) for v in theta], trim, d.window, derived_parameters(theta, order)
+        order,
+        [float(v) for v in theta],
+        trim,
+        d.window,
+        derived_parameters(theta, order),
+        skip_steps,
     )
 
 
