@@ -34,6 +34,9 @@ class CandumpWriter:
         if self.frames % self.flush_every == 0:
             self._file.flush()
 
+    def flush(self) -> None:
+        self._file.flush()
+
     def close(self) -> None:
         if not self._file.closed:
             self._file.close()

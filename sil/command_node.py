@@ -73,7 +73,6 @@ class CommandNode:
         self._sent(send, self.demand.frame_id, self.demand.data)
 
     def start(self, send: SendFn) -> None:
-        self.recorder.command = float(self.commands[0])
         if self.realtime:
             return  # real time: demands go out by the node's own clock (on_period)
         for tick in range(0, min(self.lead, self.last_tick + 1), self.every):
@@ -92,9 +91,8 @@ class CommandNode:
             if recorder.tick > self.last_tick:
                 self.finished = True
                 return
-            recorder.command = float(self.commands[recorder.tick])
         if frame_id == SENSORS and not self.realtime:
-            target = recorder.tick + self.lead
+            target = recorder.latest_sensor_tick + self.lead
             if target % self.every == 0 and target <= self.last_tick:
                 self._play(target, send)
 

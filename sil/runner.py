@@ -169,7 +169,9 @@ def run(opts: RunOptions) -> dict:
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     period = 1.0 / s.ecu_rate_hz
     codec = Codec()
-    recorder = Recorder(opts.out_dir, codec, period, wall_clock=opts.mode == "realtime")
+    recorder = Recorder(
+        opts.out_dir, codec, period, commands=commands, wall_clock=opts.mode == "realtime"
+    )
     progress = _Progress(len(commands), opts.progress, s.name)
     command = CommandNode(
         codec,
