@@ -136,7 +136,10 @@ class Recorder:
             return
         else:  # the command node's frames (and foreign ones) go with the newest sensor tick
             self._slot(self.latest_sensor_tick).command.append((frame_id, data))
-        self._flush_ready()
+        if frame_id != SENSORS:
+            # a tick completed by its sensor frame waits for the next frame: the command node's
+            # answers to that sensor frame come first and belong to the tick
+            self._flush_ready()
 
     def _slot(self, k: int) -> _Tick:
         slot = self._ticks.get(k)

@@ -113,9 +113,14 @@ def test_frames_arriving_out_of_order_are_logged_in_canonical_order(tmp_path):
     for name, sequence in (("a", in_order), ("b", shuffled)):
         (tmp_path / name).mkdir()
         rec = Recorder(tmp_path / name, Codec(), period_s=0.01)
+        demand = Codec()["Demand"]
         for frame_id, data in sequence:
             rec.record(frame_id, data)
+            if frame_id == 0x100:  # the command node answers each sensor frame at once
+                demand.pack([1, 0, 90.0, 0.0, data[2] + 5])
+                rec.record(demand.frame_id, demand.data)
         rec.close()
         assert rec.tick == 3 and rec.missed_ticks == 0
         logs.append((tmp_path / name / "can.log").read_text())
     assert logs[0] == logs[1]
+    assert logs[0].count("vcan0 080#") == 3  # every demand kept, each in its tick
