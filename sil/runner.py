@@ -25,6 +25,7 @@ from pathlib import Path
 
 import can
 
+from ecu import commissioning
 from ecu import faults as ecu_faults
 from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params, preset
@@ -63,6 +64,7 @@ class RunOptions:
     log_formats: tuple[str, ...] = ()
     plots: bool = True
     progress: bool = True
+    commission: Path | None = None  # `sil identify --export` file for the ECU
 
 
 @dataclass
@@ -163,6 +165,8 @@ def run(opts: RunOptions) -> dict:
         (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
     plant = build_plant(s, seed)
     params = ecu_params(s, plant.trim_pump_voltage)
+    if opts.commission is not None:
+        params = commissioning.apply(params, commissioning.load(opts.commission))
     compile_params(params)  # refuse bad overrides before anything starts
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
@@ -232,8 +236,12 @@ def _run_on_bus(
         s.controller.preset or "default",
         "--ready-file",
         str(ready),
+        "--guard",
+        str(NODE_GUARD_S),
         "--json",
     ]
+    if opts.commission is not None:
+        ecu_args += ["--commission", str(opts.commission)]
     for name, value in ecu_overrides(s, params.trim_v).items():
         if name == "controller":
             ecu_args += ["--controller", str(value)]
@@ -262,6 +270,8 @@ def _run_on_bus(
         repr(p.supply_voltage_V),
         "--seed",
         str(seed),
+        "--guard-s",
+        str(NODE_GUARD_S),
     ]
     if opts.mode == "realtime":
         plant_args.append("--realtime")

@@ -50,6 +50,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="override one ECU parameter (ecu.params.EcuParams field), repeatable",
     )
     parser.add_argument(
+        "--commission",
+        type=Path,
+        metavar="FILE",
+        help="trim point and initial estimates from `sil identify --export` (read at start)",
+    )
+    parser.add_argument(
         "--ready-file",
         type=Path,
         metavar="PATH",
@@ -69,6 +75,7 @@ def _param(text: str) -> tuple[str, float]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ecu import commissioning
     from ecu.node import EcuNode
     from ecu.params import ParamError, compile_params, preset
     from protocol.bus import BusSpecError, open_bus
@@ -84,7 +91,10 @@ def run(args: argparse.Namespace) -> int:
     if args.rate:
         overrides["rate_hz"] = args.rate
     try:
-        params = compile_params(preset(args.preset, **overrides))
+        params = preset(args.preset, **overrides)
+        if args.commission:
+            params = commissioning.apply(params, commissioning.load(args.commission))
+        params = compile_params(params)
     except (ParamError, ValueError, TypeError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2

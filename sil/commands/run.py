@@ -42,6 +42,12 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         default=[],
         help="also write can.log as .asc or .blf (repeatable)",
     )
+    parser.add_argument(
+        "--commission",
+        type=Path,
+        metavar="FILE",
+        help="ECU trim point and initial estimates (sil identify --export)",
+    )
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
@@ -98,6 +104,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         bus=args.bus,
         seed=args.seed,
         log_formats=tuple(args.log_format),
+        commission=args.commission,
         plots=not args.no_plots,
     )
     try:

@@ -267,3 +267,50 @@ def test_replay_into_the_ecu_finds_no_difference_and_then_the_changed_parameter(
     assert report["max_difference"]["Gain_Kr"] > 0
     assert (tmp_path / "cmp" / "into_ecu.png").exists()
     assert json.loads((tmp_path / "cmp" / "report.json").read_text()) == report
+
+
+def test_commissioning_from_identify_reaches_the_ecu(tmp_path):
+    commission = tmp_path / "engine.json"
+    commission.write_text(
+        json.dumps(
+            {
+                "format": "turbojet-sil commissioning 1",
+                "trim_N_pct": 89.68,
+                "trim_V": 11.56,
+                "Ap_row2": [-1.8054, -2.336],
+                "Lambda": 4.822,
+                "Theta_row2": [-0.1835, -0.0001],
+            }
+        )
+    )
+    out = tmp_path / "run"
+    result = _sil(
+        "run",
+        str(_scenario(tmp_path, duration=2.0)),
+        "--mode",
+        "inproc",
+        "--out",
+        str(out),
+        "--no-plots",
+        "--commission",
+        str(commission),
+        "--json",
+    )
+    assert result.returncode == 0, result.stderr
+    trace = load_trace(out / "trace.csv")
+    # the telemetry shows the commissioned estimates and the matching gains of eq. 5.9
+    assert trace["Est_Lambda"][30] == pytest.approx(4.822, rel=0.01)
+    assert trace["Gain_Kx1"][30] == pytest.approx(-4.809, rel=0.02)
+    assert trace["Gain_Kr"][30] == pytest.approx(5.185, rel=0.02)
+    commission.write_text('{"format": "turbojet-sil commissioning 1", "Lambda": -1}')
+    bad = _sil(
+        "run",
+        str(_scenario(tmp_path)),
+        "--mode",
+        "inproc",
+        "--out",
+        str(out),
+        "--commission",
+        str(commission),
+    )
+    assert bad.returncode == 2 and "engine.json: field 'trim_N_pct'" in bad.stderr
