@@ -314,3 +314,28 @@ def test_commissioning_from_identify_reaches_the_ecu(tmp_path):
         str(commission),
     )
     assert bad.returncode == 2 and "engine.json: field 'trim_N_pct'" in bad.stderr
+
+
+def test_compare_two_runs(tmp_path):
+    mrac = _scenario(tmp_path)
+    pid = tmp_path / "pid.toml"
+    pid.write_text(
+        mrac.read_text().replace('kind = "mrac"\npreset = "sec5_3_mrac_aero"\n', 'kind = "pid"\n')
+    )
+    for name, path in (("a", mrac), ("b", pid)):
+        assert (
+            _sil(
+                "run", str(path), "--mode", "inproc", "--out", str(tmp_path / name), "--no-plots"
+            ).returncode
+            == 0
+        )
+    result = _sil("compare", str(tmp_path / "a"), str(tmp_path / "b"), "--json")
+    assert result.returncode == 0, result.stderr
+    table = json.loads(result.stdout)
+    rows = {r["field"]: (r["a"], r["b"]) for r in table["rows"]}
+    a = json.loads((tmp_path / "a" / "summary.json").read_text())
+    b = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert rows["tracking_rms_pct"] == (a["tracking_rms_pct"], b["tracking_rms_pct"])
+    assert (tmp_path / "b" / "compare.png").stat().st_size > 10_000
+    missing = _sil("compare", str(tmp_path / "a"), str(tmp_path / "nowhere"))
+    assert missing.returncode == 2 and "no summary.json" in missing.stderr
