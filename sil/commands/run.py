@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from protocol.bus import BusSpecError
@@ -87,6 +89,18 @@ def _fmt(value) -> str:
     return f"{value:.4g}"
 
 
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _interrupt_on_signals() -> None:
+    """Ctrl-C and SIGTERM end the run cleanly (aborted summary, nodes stopped), even when the
+    shell that started us ignores SIGINT, as non-interactive shells do for background jobs."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _raise_interrupt)
+        signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
 def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None) -> int:
     from sil.runner import RunOptions
     from sil.runner import run as run_scenario
@@ -107,6 +121,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         commission=args.commission,
         plots=not args.no_plots,
     )
+    _interrupt_on_signals()
     try:
         summary = run_scenario(options)
     except (BusSpecError, ValueError) as exc:
