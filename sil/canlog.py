@@ -66,7 +66,6 @@ class LogReadError(Exception):
         )
 
 
-FORMATS = ("candump", "asc", "blf", "trc", "csv")
 _CSV_HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"
 
 

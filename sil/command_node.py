@@ -16,10 +16,8 @@ import numpy as np
 from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, demand_lead_ticks, every_ticks
 from protocol.node import SendFn
-from sil.recorder import Recorder
+from sil.recorder import SENSORS, Recorder
 from sil.scenario import Fault, fault_targets
-
-SENSORS = 0x100
 
 
 class CommandNode:

@@ -243,10 +243,6 @@ class Recorder:
             for t in (self.sensor_ticks, self.actuator_ticks)
         )
 
-    def value(self, name: str) -> float:
-        """The latest value of a DBC signal (as written so far)."""
-        return self._values[self._columns[name]]
-
     def close(self) -> None:
         """Write whatever is still pending, in tick order, and close the files."""
         for k in sorted(self._ticks):

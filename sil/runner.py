@@ -43,7 +43,6 @@ from sil.command_node import CommandNode
 from sil.recorder import Recorder
 from sil.scenario import Scenario
 
-MODES = ("lockstep", "realtime", "inproc")
 # fault bits listed in the summary: all but the two that only describe the present tick
 REPORTED_FAULTS = {
     bit: name
