@@ -21,11 +21,11 @@ from plant.periphery import PlantBase
 from plant.pump import pump_flow
 from plant.trim import solve_steady
 
-_HEALTH_FIELD = {
-    FaultKind.COMPRESSOR_EFFICIENCY: "comp_eff_scale",
-    FaultKind.COMPRESSOR_FLOW: "comp_flow_scale",
-    FaultKind.TURBINE_EFFICIENCY: "turb_eff_scale",
-    FaultKind.TURBINE_FLOW: "turb_flow_scale",
+_HEALTH_FIELD = {  # fault kind -> (engine parameter, as-built value in PlantConfig)
+    FaultKind.COMPRESSOR_EFFICIENCY: ("comp_eff_scale", "compressor_efficiency"),
+    FaultKind.COMPRESSOR_FLOW: ("comp_flow_scale", "compressor_flow"),
+    FaultKind.TURBINE_EFFICIENCY: ("turb_eff_scale", "turbine_efficiency"),
+    FaultKind.TURBINE_FLOW: ("turb_flow_scale", "turbine_flow"),
 }
 
 
@@ -56,8 +56,11 @@ class AeroThermalPlant(PlantBase):
 
     def __init__(self, config: PlantConfig | None = None) -> None:
         config = PlantConfig() if config is None else config
-        self._model = make_model(config.ambient)
+        model = make_model(config.ambient)
+        as_built = {param: getattr(config, field) for param, field in _HEALTH_FIELD.values()}
+        self._model = model._replace(params=model.params._replace(**as_built))
         super().__init__(config, self._model.pump, self._model.params.n_max_rpm)
+        self._pump_changed()
         self._refuse_unsupported(config.faults)
         steady = solve_steady(self._model, config.initial_fuel_kg_s)
         self._x = steady.x.copy()
@@ -149,8 +152,9 @@ class AeroThermalPlant(PlantBase):
             t0 = self.config.ambient.t0_k if value is None else value
             params = self._model.params._replace(t0_k=float(t0))
         else:
+            param, as_built = _HEALTH_FIELD[kind]
             params = self._model.params._replace(
-                **{_HEALTH_FIELD[kind]: 1.0 if value is None else float(value)}
+                **{param: getattr(self.config, as_built) if value is None else float(value)}
             )
         self._model = self._model._replace(params=params)
 

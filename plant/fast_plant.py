@@ -19,7 +19,7 @@ from numba import njit
 from plant.aerothermal import default_maps, make_model
 from plant.fast_model import THETA_EQ_3_23, TRIM_N_PCT, fast_model_derivative
 from plant.faults import FaultKind
-from plant.interface import SUBSTEP_S, Ambient, PlantConfig
+from plant.interface import HEALTH_FIELDS, SUBSTEP_S, Ambient, PlantConfig
 from plant.jit import JIT
 from plant.periphery import ENGINE_FAULTS, PlantBase
 from plant.pump import pump_flow
@@ -57,6 +57,9 @@ class FastPlant(PlantBase):
         self._params = make_model(config.ambient).params
         super().__init__(config, maps.pump, self._params.n_max_rpm)
         self._refuse_unsupported(config.faults)
+        for name in HEALTH_FIELDS:
+            if getattr(config, name) != 1.0:
+                raise ValueError(f"{name}: FastPlant has no compressor or turbine (aero only)")
         self.theta = tuple(float(t) for t in theta)
         self.reference_voltage = maps.trim_pump_voltage  # dV = 0 (aero-thermal trim)
         self._table = _quasi_steady(config.ambient)
@@ -65,6 +68,7 @@ class FastPlant(PlantBase):
         )
         self._x = np.array([n0 - TRIM_N_PCT, 0.0])
         self._theta_eff = self.theta
+        self._pump_changed()  # the pump's gain (config.pump_gain)
         t0, _, t2, t3, t4 = self.theta
         dn = self._x[0]
         self.trim_pump_voltage = self.reference_voltage - t0 * dn / (t2 + t3 * dn + t4 * dn * dn)

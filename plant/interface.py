@@ -14,6 +14,7 @@ from plant.faults import Fault, FaultKind
 from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
 
 SUBSTEP_S = 0.001  # RK4 step (sec. 2.3)
+HEALTH_FIELDS = ("compressor_efficiency", "compressor_flow", "turbine_efficiency", "turbine_flow")
 
 
 def check_finite(
@@ -74,6 +75,14 @@ class PlantConfig:
     thermocouple: ThermocoupleConfig = field(default_factory=ThermocoupleConfig)
     overspeed_pct: float = 100.0  # reported above this speed (rated maximum, 112,500 rpm)
     overtemperature_egt_k: float = 1300.0  # reported above this EGT (see plant/__init__.py)
+    # engine-to-engine variation, as built (the initial steady state is solved with it): health
+    # scalars of the compressor and turbine maps (aero-thermal plant only) and the pump's gain
+    # (delivered / table fuel flow, the new pump's effectiveness), all 1.0 for the nominal engine
+    compressor_efficiency: float = 1.0
+    compressor_flow: float = 1.0
+    turbine_efficiency: float = 1.0
+    turbine_flow: float = 1.0
+    pump_gain: float = 1.0
 
     def __post_init__(self) -> None:
         check_finite("ecu_period_s", self.ecu_period_s, SUBSTEP_S, 1.0)
@@ -85,6 +94,9 @@ class PlantConfig:
         check_finite("initial_fuel_kg_s", self.initial_fuel_kg_s, 1e-4, 0.05)
         check_finite("overspeed_pct", self.overspeed_pct, 0.0)
         check_finite("overtemperature_egt_k", self.overtemperature_egt_k, 0.0)
+        for name in HEALTH_FIELDS:
+            check_finite(name, getattr(self, name), 0.1, 1.5)
+        check_finite("pump_gain", self.pump_gain, 0.1, 2.0)
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
 

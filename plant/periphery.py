@@ -35,7 +35,7 @@ class PlantBase:
         self._tick = 0
         self._battery_v = config.battery.voltage_v
         self._pump_state = PumpState.NORMAL
-        self._effectiveness = 1.0
+        self._effectiveness = config.pump_gain
         self._wear_rate = 0.0
         self.speed_pickup = SpeedPickup(config.speed_pickup, NoiseSource(config.seed))
         self.outputs = PlantOutputs()
@@ -153,7 +153,8 @@ class PlantBase:
         if k in ENGINE_FAULTS:
             self._apply_engine(k, value if starts else None)
         elif k == FaultKind.PUMP_EFFECTIVENESS:
-            self._effectiveness = value if starts else 1.0
+            gain = self.config.pump_gain  # the fault's value is relative to the new pump
+            self._effectiveness = value * gain if starts else gain
             self._pump_changed()
         elif k == FaultKind.PUMP_WEAR:
             self._wear_rate = value if starts else 0.0

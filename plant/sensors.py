@@ -27,10 +27,12 @@ class SpeedPickupConfig:
     resolution_rpm: float = 10.0
     noise_rpm: float = 20.0  # 1 sigma
     dropout_probability: float = 0.0  # per reading
+    bias_rpm: float = 0.0  # calibration offset of the reading
 
     def __post_init__(self) -> None:
         _check("resolution_rpm", self.resolution_rpm)
         _check("noise_rpm", self.noise_rpm)
+        _check("bias_rpm", self.bias_rpm, -math.inf)
         if not 0.0 <= self.dropout_probability <= 1.0:
             raise ValueError(
                 f"dropout_probability must be in [0, 1], got {self.dropout_probability!r}"
@@ -42,10 +44,12 @@ class ThermocoupleConfig:
     time_constant_s: float = 0.5
     noise_k: float = 1.0  # 1 sigma
     open_circuit_k: float = 1638.3  # upscale burnout: full scale of the EGT signal
+    bias_k: float = 0.0  # calibration offset of the reading
 
     def __post_init__(self) -> None:
         _check("time_constant_s", self.time_constant_s)
         _check("noise_k", self.noise_k)
+        _check("bias_k", self.bias_k, -math.inf)
         _check("open_circuit_k", self.open_circuit_k)
 
 
@@ -65,7 +69,7 @@ class SpeedPickup:
         # draw every sample on every reading so that faults do not shift the noise sequence
         z, u = self._noise.normal(), self._noise.uniform()
         sigma = math.hypot(c.noise_rpm, self.burst_noise_rpm)
-        value = max(n_rpm + sigma * z, 0.0)
+        value = max(n_rpm + c.bias_rpm + sigma * z, 0.0)
         if c.resolution_rpm > 0.0:
             value = round(value / c.resolution_rpm) * c.resolution_rpm
         if self.dropout or u < c.dropout_probability:
@@ -94,4 +98,4 @@ class Thermocouple:
             self.probe_k = egt_k
         if self.open_circuit:
             return c.open_circuit_k
-        return self.probe_k + c.noise_k * z
+        return self.probe_k + c.bias_k + c.noise_k * z
