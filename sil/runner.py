@@ -20,7 +20,7 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import can
@@ -31,17 +31,21 @@ from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params, preset
 from plant.aerothermal import AeroThermalPlant
 from plant.fast_plant import FastPlant
+from plant.faults import Fault, FaultKind
 from plant.interface import Ambient, Battery, Plant, PlantConfig
 from plant.node import PlantNode
+from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
 from protocol.bus import BusSpec, default_spec, open_bus, parse_spec
 from protocol.busload import bus_load_pct
 from protocol.codec import Codec
 from protocol.node import InProcessBus
 from sil import metrics, plots, profiles
+from sil.busfault.injector import Injector
+from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
 from sil.command_node import CommandNode
 from sil.recorder import Recorder
-from sil.scenario import Scenario
+from sil.scenario import HEALTH, Scenario
 
 # fault bits listed in the summary: all but the two that only describe the present tick
 REPORTED_FAULTS = {
@@ -72,21 +76,40 @@ class RunState:
     abort_reason: str | None = None
     children: dict[str, subprocess.Popen] = field(default_factory=dict)
     bus: str = "none (in process)"
+    bus_fault_events: list[dict] = field(default_factory=list)
 
 
-def plant_config(s: Scenario, seed: int) -> PlantConfig:
+def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfig:
+    """The scenario's plant; ``nominal``: the same without its engine-to-engine variation."""
     p = s.plant
-    return PlantConfig(
+    config = PlantConfig(
         ecu_period_s=1.0 / s.ecu_rate_hz,
         ambient=Ambient(p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s),
         battery=Battery(p.supply_voltage_V),
         seed=seed,
     )
+    if nominal or not p.varied:
+        return config
+    return replace(
+        config,
+        **{k: getattr(p, k) for k in HEALTH},
+        pump_gain=p.pump_gain,
+        faults=(Fault(0.0, FaultKind.PUMP_WEAR, p.pump_wear_per_s),) if p.pump_wear_per_s else (),
+        speed_pickup=SpeedPickupConfig(noise_rpm=p.speed_noise_rpm, bias_rpm=p.speed_bias_rpm),
+        thermocouple=ThermocoupleConfig(noise_k=p.egt_noise_K, bias_k=p.egt_bias_K),
+    )
 
 
-def build_plant(s: Scenario, seed: int) -> Plant:
-    config = plant_config(s, seed)
+def build_plant(s: Scenario, seed: int, *, nominal: bool = False) -> Plant:
+    config = plant_config(s, seed, nominal=nominal)
     return AeroThermalPlant(config) if s.plant.model == "aero" else FastPlant(config)
+
+
+def ecu_trim_voltage(s: Scenario, plant: Plant) -> float:
+    """The ECU's trim voltage: the nominal engine's (the ECU is not told how its engine varies)."""
+    if not s.plant.varied:
+        return plant.trim_pump_voltage
+    return build_plant(s, 0, nominal=True).trim_pump_voltage
 
 
 def ecu_overrides(s: Scenario, trim_v: float) -> dict[str, object]:
@@ -162,8 +185,13 @@ def run(opts: RunOptions) -> dict:
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     if s.path is not None:
         (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
+    if opts.mode != "inproc" and (s.plant.varied or s.bus_faults):
+        raise ValueError(
+            f"{s.name}: engine variation and [[bus_fault]] need --mode inproc "
+            "(on a bus, put sil.busfault.bridge between the nodes)"
+        )
     plant = build_plant(s, seed)
-    params = ecu_params(s, plant.trim_pump_voltage)
+    params = ecu_params(s, ecu_trim_voltage(s, plant))
     if opts.commission is not None:
         params = commissioning.apply(params, commissioning.load(opts.commission))
     compile_params(params)  # refuse bad overrides before anything starts
@@ -192,7 +220,12 @@ def run(opts: RunOptions) -> dict:
         if opts.mode == "inproc":
             # started in this order, as on a bus: demands first, the plant's tick 0 last
             nodes = [command, EcuNode(compile_params(params)), PlantNode(plant)]
-            InProcessBus(nodes).run(done=lambda: command.finished)
+            if s.bus_faults:
+                injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, codec)
+                FaultyInProcessBus(*nodes, injector).run(done=lambda: command.finished)
+                state.bus_fault_events = injector.events
+            else:
+                InProcessBus(nodes).run(done=lambda: command.finished)
         else:
             del plant  # the plant runs in its own process
             _run_on_bus(opts, s, seed, params, command, recorder, state)
@@ -369,6 +402,7 @@ def _finish(
         "missed_ticks": recorder.missed_ticks,
         **metrics.summarize(trace, 1.0 / s.ecu_rate_hz, REPORTED_FAULTS),
         "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
+        "bus_faults_injected": state.bus_fault_events,
         "e2e": {m: dict(c) for m, c in recorder.e2e.items() if set(c) - {"OK"}},
         "unknown_ids": {f"0x{k:X}": v for k, v in recorder.unknown_ids.items()},
     }

@@ -33,6 +33,26 @@ Shipped scenarios live in ``sil/scenarios/`` and are found by name.
     time_s = 30
     target = "PUMP_EFFECTIVENESS"   # a FaultTarget of the DBC
     value = 0.5
+
+    [[bus_fault]]              # faults between the nodes (sil.busfault.spec; inproc mode)
+    kind = "drop"
+    ids = ["PlantSensors"]
+    start_s = 20
+    duration_s = 0.5
+
+Engine-to-engine variation, as built (all optional, nominal by default; ``sil run --mode inproc``):
+
+    [plant]
+    compressor_efficiency = 1.0  # health scalars of the maps (aero plant), 0.1..1.5
+    compressor_flow = 1.0
+    turbine_efficiency = 1.0
+    turbine_flow = 1.0
+    pump_gain = 1.0            # delivered / table fuel flow, 0.1..2.0
+    pump_wear_per_s = 0.0      # pump effectiveness lost per second from the start
+    speed_noise_rpm = 20       # speed pickup noise (1 sigma) and offset
+    speed_bias_rpm = 0
+    egt_noise_K = 1            # thermocouple noise (1 sigma) and offset
+    egt_bias_K = 0
 """
 
 from __future__ import annotations
@@ -42,9 +62,12 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from ecu import faults as ecu_faults
+from ecu import modes as ecu_modes
 from ecu.params import PRESETS, EcuParams
 from protocol.dbc import load_database
 from sil import profiles
+from sil.busfault.spec import KINDS, RATED, BusFault, Expectation
 
 SCENARIO_DIR = Path(__file__).with_name("scenarios")
 PLANT_MODELS = ("aero", "fast")
@@ -62,6 +85,31 @@ class PlantSettings:
     ambient_pressure_Pa: float = 101325.0
     flight_speed_m_s: float = 0.0
     supply_voltage_V: float = 22.2
+    compressor_efficiency: float = 1.0
+    compressor_flow: float = 1.0
+    turbine_efficiency: float = 1.0
+    turbine_flow: float = 1.0
+    pump_gain: float = 1.0
+    pump_wear_per_s: float = 0.0
+    speed_noise_rpm: float = 20.0
+    speed_bias_rpm: float = 0.0
+    egt_noise_K: float = 1.0
+    egt_bias_K: float = 0.0
+
+    @property
+    def varied(self) -> bool:
+        """True when the engine differs from the nominal one in anything but ambient and supply."""
+        nominal = PlantSettings(
+            self.model,
+            self.ambient_temperature_K,
+            self.ambient_pressure_Pa,
+            self.flight_speed_m_s,
+            self.supply_voltage_V,
+        )
+        return self != nominal
+
+
+HEALTH = ("compressor_efficiency", "compressor_flow", "turbine_efficiency", "turbine_flow")
 
 
 @dataclass(frozen=True)
@@ -91,6 +139,7 @@ class Scenario:
     command_base: float | str  # a number or "trim"
     command_components: tuple[profiles.Component, ...]
     faults: tuple[Fault, ...]
+    bus_faults: tuple[BusFault, ...] = ()
 
     def profile(self, trim_value: float) -> profiles.Profile:
         """The command profile, with ``trim_value`` standing for a base of "trim"."""
@@ -227,6 +276,76 @@ def _component(r: _Reader, base_dir: Path) -> profiles.Component:
     return c
 
 
+def _integer(r: _Reader, key: str, default: int, lo: int, hi: int) -> int:
+    value = r.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise r.fail(key, f"an integer in {lo}..{hi}", value)
+    return value
+
+
+def _frame_ids(r: _Reader, key: str) -> tuple[int, ...]:
+    db = load_database()
+    value = r.get(key, [])
+    if not isinstance(value, list):
+        raise r.fail(key, "a list of message names or frame IDs", value)
+    ids = []
+    for item in value:
+        if isinstance(item, str) and item in {m.name for m in db.messages}:
+            ids.append(db.get_message_by_name(item).frame_id)
+        elif isinstance(item, int) and not isinstance(item, bool) and 0 <= item <= 0x7FF:
+            ids.append(item)
+        else:
+            names = ", ".join(m.name for m in db.messages)
+            raise r.fail(key, f"message names ({names}) or 11-bit frame IDs", item)
+    return tuple(ids)
+
+
+def _bus_fault(r: _Reader, duration: float) -> BusFault:
+    kind = r.text("kind", choices=KINDS)
+    ids = _frame_ids(r, "ids")
+    if not ids and kind != "bus_off":
+        raise r.fail("ids", "at least one message (only bus_off applies to every frame)", [])
+    start = r.number("start_s", lo=0, hi=duration)
+    length = r.number("duration_s", positive=True)
+    rate = r.number("rate", 1.0, lo=0, hi=1)
+    if kind not in RATED and "rate" in r.table:
+        raise r.fail("rate", f"no rate for {kind} (only {', '.join(RATED)})", rate)
+    detect = r.get("detect", None)
+    bits = ("E2E", *ecu_faults.NAMES.values())
+    if detect is not None and detect not in bits:
+        raise r.fail("detect", "one of " + ", ".join(bits), detect)
+    within = r.get("within_ticks", None)
+    if detect is not None or within is not None:
+        within = _integer(r, "within_ticks", 0, 0, 1_000_000)
+    mode = r.text("fallback_mode", choices=ecu_modes.NAMES) if "fallback_mode" in r.table else None
+    recover = r.get("recover_within_ticks", None)
+    if recover is not None:
+        recover = _integer(r, "recover_within_ticks", 0, 0, 1_000_000)
+        if detect in (None, "E2E"):
+            raise r.fail("recover_within_ticks", "a detect fault bit to clear", detect)
+    starve = r.get("starve", False)
+    if not isinstance(starve, bool):
+        raise r.fail("starve", "true or false", starve)
+    fault = BusFault(
+        kind,
+        ids,
+        start,
+        length,
+        rate=rate,
+        burst=_integer(r, "burst", 1, 1, 10_000),
+        delay_ticks=_integer(r, "delay_ticks", 0, 0, 10_000),
+        jitter_ticks=_integer(r, "jitter_ticks", 0, 0, 10_000),
+        bits=_integer(r, "bits", 1, 1, 8),
+        flood_per_tick=_integer(r, "flood_per_tick", 1, 1, 100),
+        starve=starve,
+        expect=Expectation(detect, within, mode, recover),
+    )
+    if kind == "delay" and fault.delay_ticks + fault.jitter_ticks == 0:
+        raise r.fail("delay_ticks", "a delay of at least one tick", 0)
+    r.done()
+    return fault
+
+
 def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> Scenario:
     """Check and build a scenario from TOML text; ``source`` names it in errors."""
     try:
@@ -249,7 +368,20 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
         ambient_pressure_Pa=p.number("ambient_pressure_Pa", 101325.0, lo=20_000, hi=110_000),
         flight_speed_m_s=p.number("flight_speed_m_s", 0.0, lo=0, hi=300),
         supply_voltage_V=p.number("supply_voltage_V", 22.2, lo=1, hi=60),
+        **{k: p.number(k, 1.0, lo=0.1, hi=1.5) for k in HEALTH},
+        pump_gain=p.number("pump_gain", 1.0, lo=0.1, hi=2.0),
+        pump_wear_per_s=p.number("pump_wear_per_s", 0.0, lo=0, hi=1),
+        speed_noise_rpm=p.number("speed_noise_rpm", 20.0, lo=0, hi=10_000),
+        speed_bias_rpm=p.number("speed_bias_rpm", 0.0, lo=-10_000, hi=10_000),
+        egt_noise_K=p.number("egt_noise_K", 1.0, lo=0, hi=100),
+        egt_bias_K=p.number("egt_bias_K", 0.0, lo=-200, hi=200),
     )
+    if plant.model == "fast":
+        for k in HEALTH:
+            if getattr(plant, k) != 1.0:
+                raise p.fail(
+                    k, "1.0: the fast plant has no compressor or turbine", getattr(plant, k)
+                )
     p.done()
 
     c = top.sub("controller")
@@ -279,6 +411,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
             raise r.fail("time_s", f"a time within the run (0..{duration:g} s)", time_s)
         faults.append(Fault(time_s, r.text("target", choices=targets), r.number("value", 0.0)))
         r.done()
+    bus_faults = tuple(_bus_fault(r, duration) for r in top.tables("bus_fault"))
     top.done()
     return Scenario(
         name,
@@ -292,6 +425,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
         base if base == "trim" else float(base),
         components,
         tuple(sorted(faults, key=lambda f: f.time_s)),
+        bus_faults,
     )
 
 
