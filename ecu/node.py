@@ -43,11 +43,13 @@ class EcuNode:
         self,
         params: EcuParams | FirmwareParams | None = None,
         *,
+        ecu: Ecu | None = None,
         lockstep: bool = True,
         max_ticks: int | None = None,
         codec: Codec | None = None,
     ) -> None:
-        self.ecu = Ecu(params)
+        # the tick implementation: the Python firmware from params, or one given (ecu.port: C)
+        self.ecu = ecu if ecu is not None else Ecu(params)
         self.rate_hz = self.ecu.p.rate_hz
         self.lockstep = lockstep
         self.max_ticks = max_ticks

@@ -1,0 +1,294 @@
+"""Golden vectors: the Python firmware's every tick (inputs, outputs, digest of the whole state)
+in closed loop, for the C port to replay and match integer for integer.
+
+Sources:
+- SIL scenarios run in one process (command node, ECU, plant as in ``sil run --mode inproc``),
+  cut to their first ticks: MRAC, PID and open loop on the aero-thermal plant, plant and sensor
+  faults, limit loops on a hot day;
+- a scripted sequence for what the SIL never does (it arms once and runs): OFF, ARMED, RUN,
+  SHUTDOWN and a latched FAULT, lost and corrupt frames, pump current faults.
+
+File layout (``.gv``, little-endian int32 words, read by ``ecu/port/replay.c``): ``EGV1``, the
+counts of parameter, input and output words and of ticks, the parameter words, then per tick the
+inputs, the outputs and the state digest (FNV-1a over the state words in ``EcuState`` order).
+
+    python -m ecu.golden OUT_DIR [NAME ...]     write the vectors (all when no NAME)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import tempfile
+from array import array
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from ecu import modes
+from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, Ecu, EcuInputs, EcuOutputs
+from ecu.node import EcuNode
+from ecu.params import EcuParams, FirmwareParams, compile_params
+from ecu.port.core import param_words
+from ecu.state import EcuState
+
+MAGIC = 0x31564745  # "EGV1"
+INPUT_FIELDS = EcuInputs.__slots__
+OUTPUT_FIELDS = EcuOutputs.__slots__
+ROW_WORDS = len(INPUT_FIELDS) + len(OUTPUT_FIELDS) + 1
+_FNV_OFFSET = 2166136261
+_FNV_PRIME = 16777619
+
+
+class GoldenError(ValueError):
+    """A golden-vector file that cannot be read (names the file and what is wrong)."""
+
+
+@dataclass
+class Golden:
+    """Parameters and, per tick, inputs + outputs + state digest (ROW_WORDS int32 words)."""
+
+    name: str
+    params: FirmwareParams
+    rows: array  # 'i', ticks * ROW_WORDS
+
+    @property
+    def ticks(self) -> int:
+        return len(self.rows) // ROW_WORDS
+
+
+def state_digest(s: EcuState) -> int:
+    """FNV-1a (32-bit) over the state's int32 words, in slot order (arrays expanded)."""
+    h = _FNV_OFFSET
+    for name in EcuState.__slots__:
+        value = getattr(s, name)
+        for w in value if isinstance(value, array) else (value,):
+            h = ((h ^ (w & 0xFFFFFFFF)) * _FNV_PRIME) & 0xFFFFFFFF
+    return h
+
+
+def _signed(u: int) -> int:
+    return u - (1 << 32) if u >= 1 << 31 else u
+
+
+class RecordingEcu(Ecu):
+    """The Python firmware, appending every tick's row to ``rows``."""
+
+    def __init__(self, params: EcuParams | FirmwareParams | None = None) -> None:
+        super().__init__(params)
+        self.rows = array("i")
+
+    def tick(self, i: EcuInputs) -> EcuOutputs:
+        rows = self.rows
+        rows.extend(getattr(i, name) for name in INPUT_FIELDS)
+        o = super().tick(i)
+        rows.extend(getattr(o, name) for name in OUTPUT_FIELDS)
+        rows.append(_signed(state_digest(self.s)))
+        return o
+
+
+def record_scenario(name: str, scenario_text: str, ticks: int) -> Golden:
+    """Run a scenario (TOML text or a shipped name) in process for ``ticks`` ticks, recording."""
+    from plant.node import PlantNode
+    from protocol.codec import Codec
+    from protocol.node import InProcessBus
+    from sil import profiles, runner, scenario
+    from sil.command_node import CommandNode
+    from sil.recorder import Recorder
+
+    if "\n" in scenario_text:
+        s = scenario.parse(scenario_text, name, Path("."))
+    else:
+        s = scenario.load(scenario_text)
+    s = dataclasses.replace(s, duration_s=ticks / s.ecu_rate_hz)
+    plant = runner.build_plant(s, s.seed)
+    params = compile_params(runner.ecu_params(s, plant.trim_pump_voltage))
+    open_loop = s.controller.kind == "open_loop"
+    trim_value = plant.trim_pump_voltage if open_loop else runner.ecu_params(s, 0.0).trim_n_pct
+    commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
+    ecu = RecordingEcu(params)
+    codec = Codec()
+    with tempfile.TemporaryDirectory() as tmp:
+        recorder = Recorder(Path(tmp), codec, 1.0 / s.ecu_rate_hz, commands=commands)
+        command = CommandNode(
+            codec,
+            recorder,
+            commands,
+            ecu_rate_hz=s.ecu_rate_hz,
+            open_loop=open_loop,
+            faults=s.faults,
+        )
+        node = EcuNode(ecu=ecu)
+        InProcessBus([command, node, PlantNode(plant)]).run(done=lambda: command.finished)
+        recorder.close()
+    return Golden(name, params, ecu.rows)
+
+
+def record_modes(ticks: int = 2400) -> Golden:
+    """Scripted inputs through every mode, with lost and corrupt frames and a pump fault.
+
+    One phase per 100 ticks: OFF; arm, the starter spools up (ARMED), RUN; demand frames lost
+    (hold, idle) and corrupt sensor frames; analog frames lost; stop (SHUTDOWN), spool down,
+    disarm (OFF); arm again, supply sag; demand lost past the shutdown time; disarm, re-arm;
+    a stalled pump (FAULT, latched). Speed follows the eq. 3.24 fast model while the ECU runs.
+    """
+    from plant.fast_model import FastEngine
+
+    p = EcuParams()
+    ecu = RecordingEcu(p)
+    engine = FastEngine()
+    i = EcuInputs()
+    n_pct = 5.0
+    dt = 1.0 / p.rate_hz
+    for k in range(ticks):
+        phase, j = divmod(k, 100)
+        arm = 0 if phase in (0, 6, 7, 8, 15, 16) else 1
+        stop = 1 if phase == 5 else 0
+        mode = ecu.out.mode
+        if mode == modes.RUN:
+            engine.step(ecu.out.pump_mv / 1000.0 - p.trim_v, dt)
+            n_pct = engine.n_pct
+        elif mode == modes.ARMED or (mode == modes.OFF and arm and not stop):
+            n_pct += (engine.trim_n_pct - n_pct) * dt / 0.8  # the starter brings it up
+            engine.dn_pct, engine.dn_dot = n_pct - engine.trim_n_pct, 0.0
+        else:
+            n_pct -= n_pct * dt / 0.6  # spool down
+        i.tick = k % 65536
+        i.speed_rpm = max(0, round(n_pct * 1125.0) + (k * 7919) % 41 - 20)  # with noise
+        i.egt_dk = 10480 + round(200 * (n_pct - 89.68))
+        i.supply_mv = 22200 - (3000 if phase == 11 else 0)
+        i.pump_ma = (1050 + 60 * ecu.out.pump_mv // 1000) if ecu.out.pump_enable else 0
+        if phase >= 19:
+            i.pump_ma = 6000  # seized pump: over current
+        i.demand_cpct = 8968 + (300 if phase % 2 else -200)
+        i.open_loop_mv = 0
+        i.arm, i.stop = arm, stop
+        i.sensor_status = E2E_OK
+        i.analog_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        i.demand_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        if phase == 3:  # demand frames lost for a second, some sensor frames corrupt
+            i.demand_status = E2E_NONEWDATA
+            if j % 7 == 3:
+                i.sensor_status = E2E_WRONGCRC
+        if phase == 4 and j < 60:
+            i.analog_status = E2E_NONEWDATA  # analog lost: nominal supply assumed
+        if phase in (12, 13, 14):
+            i.demand_status = E2E_NONEWDATA  # demand lost beyond the shutdown time
+        ecu.tick(i)
+    return Golden("modes", compile_params(p), ecu.rows)
+
+
+_HOT_LIMITS = """
+description = "MRAC on a hot day, steps up to the speed limit and down fast: limit loops engage"
+duration_s = 40
+[plant]
+model = "aero"
+ambient_temperature_K = 318
+[controller]
+kind = "mrac"
+params = { egt_limit_k = 1060, accel_max_pct_s = 5, decel_max_pct_s = 6 }
+[command]
+base = 0
+[[command.component]]
+kind = "staircase"
+levels = [90, 100, 80, 95, 85]
+step_s = 5
+"""
+
+_FAULTS = """
+description = "MRAC with plant and sensor faults: pump halves, speed noise, stuck, EGT open"
+duration_s = 40
+[plant]
+model = "aero"
+[controller]
+kind = "mrac"
+[command]
+base = "trim"
+[[command.component]]
+kind = "square"
+amplitude = 2.0
+frequency_hz = 0.2
+[[fault]]
+time_s = 3
+target = "PUMP_EFFECTIVENESS"
+value = 0.5
+[[fault]]
+time_s = 8
+target = "SPEED_NOISE"
+value = 800
+[[fault]]
+time_s = 12
+target = "SPEED_STUCK"
+value = 1
+[[fault]]
+time_s = 20
+target = "EGT_OPEN_CIRCUIT"
+value = 1
+"""
+
+# name -> how to record it (the default tick counts keep the regeneration test short)
+SOURCES: dict[str, Callable[[], Golden]] = {
+    "mrac-aero": lambda: record_scenario("mrac-aero", "thesis-5.3-mrac-aero", 2500),
+    "mrac-staircase": lambda: record_scenario("mrac-staircase", "thesis-5.4-staircase", 2500),
+    "pid-staircase": lambda: record_scenario("pid-staircase", "thesis-6.2-staircase-pid", 2500),
+    "open-loop-estimator": lambda: record_scenario(
+        "open-loop-estimator", "thesis-4.3-estimator-aero", 2500
+    ),
+    "limiters-hot": lambda: record_scenario("limiters-hot", _HOT_LIMITS, 2500),
+    "faults": lambda: record_scenario("faults", _FAULTS, 2500),
+    "modes": record_modes,
+}
+
+
+def write(g: Golden, path: Path) -> None:
+    words = param_words(g.params)
+    head = array("i", [MAGIC, len(words), len(INPUT_FIELDS), len(OUTPUT_FIELDS), g.ticks])
+    data = head + array("i", words) + g.rows
+    if sys.byteorder != "little":
+        data.byteswap()
+    path.write_bytes(data.tobytes())
+
+
+def read_rows(path: Path) -> tuple[list[int], array]:
+    """The parameter words and the tick rows of a ``.gv`` file."""
+    data = array("i")
+    raw = path.read_bytes()
+    if len(raw) % 4:
+        raise GoldenError(f"{path}: length {len(raw)} is not a whole number of int32 words")
+    data.frombytes(raw)
+    if sys.byteorder != "little":
+        data.byteswap()
+    if len(data) < 5 or data[0] != MAGIC:
+        raise GoldenError(f"{path}: not a golden-vector file (no EGV1 header)")
+    _, n_params, n_in, n_out, ticks = data[:5]
+    if (n_in, n_out) != (len(INPUT_FIELDS), len(OUTPUT_FIELDS)):
+        raise GoldenError(f"{path}: {n_in} input / {n_out} output words, expected "
+                          f"{len(INPUT_FIELDS)} / {len(OUTPUT_FIELDS)}")  # fmt: skip
+    if len(data) != 5 + n_params + ticks * ROW_WORDS:
+        raise GoldenError(f"{path}: {len(data)} words, the header announces {ticks} ticks")
+    return list(data[5 : 5 + n_params]), data[5 + n_params :]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if not args:
+        print(__doc__.strip().splitlines()[-1].strip(), file=sys.stderr)
+        return 2
+    out = Path(args[0])
+    names = args[1:] or list(SOURCES)
+    unknown = [n for n in names if n not in SOURCES]
+    if unknown:
+        print(
+            f"ecu.golden: unknown vectors {unknown}; known: {', '.join(SOURCES)}", file=sys.stderr
+        )
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        g = SOURCES[name]()
+        write(g, out / f"{name}.gv")
+        print(f"{out / f'{name}.gv'}: {g.ticks} ticks")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,104 @@
+"""Build the C port: the host shared library (for ctypes), the host golden-vector replayer and the
+Cortex-M4 replay firmware (for QEMU). Outputs go to a build directory keyed by a hash of the
+sources and flags, so an edited source is rebuilt on the next use and never reused stale.
+
+The warning flags are the issue's: ``-std=c99 -Wall -Wextra -Wconversion -pedantic -Werror``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+PORT_DIR = Path(__file__).resolve().parent
+BUILD_DIR = Path(os.environ.get("ECU_PORT_BUILD_DIR", PORT_DIR / "build"))
+WARNINGS = ("-std=c99", "-Wall", "-Wextra", "-Wconversion", "-pedantic", "-Werror")
+CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c")
+HEADERS = ("ecu_core.h", "ecu_frames.h", "generated/turbojet.h")
+ARM_CC = "arm-none-eabi-gcc"
+ARM_FLAGS = ("-mcpu=cortex-m4", "-mthumb", "-Os", "-ffunction-sections", "-fdata-sections")
+
+
+class PortBuildError(RuntimeError):
+    """The C port could not be built (no compiler, or the compiler refused the sources)."""
+
+
+def host_compiler() -> str:
+    """The host C compiler: $CC, else cc, gcc or clang on PATH."""
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return name
+    raise PortBuildError(
+        "no C compiler found for the C port of the ECU (looked for $CC, cc, gcc, clang); "
+        "install one, e.g. apt-get install gcc"
+    )
+
+
+def _key(cc: str, flags: tuple[str, ...], sources: tuple[str, ...]) -> str:
+    h = hashlib.sha256(" ".join((cc, *flags)).encode())
+    for name in (*sources, *HEADERS):
+        h.update(name.encode())
+        h.update((PORT_DIR / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _compile(cc: str, flags: tuple[str, ...], sources: tuple[str, ...], out_name: str) -> Path:
+    """Compile ``sources`` into BUILD_DIR/<hash>/<out_name> unless that exists already."""
+    out = BUILD_DIR / _key(cc, flags, sources) / out_name
+    if out.exists():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out_name}.")
+    os.close(fd)
+    cmd = [cc, *flags, f"-I{PORT_DIR}", *(str(PORT_DIR / s) for s in sources), "-o", tmp]
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        Path(tmp).unlink(missing_ok=True)
+        raise PortBuildError(f"{' '.join(cmd)} failed:\n{proc.stderr.strip()}")
+    os.replace(tmp, out)  # atomic: concurrent builders never see a half-written file
+    return out
+
+
+def host_library(cc: str | None = None) -> Path:
+    """The core and frame codec as a shared library for ctypes (with field names)."""
+    cc = cc or host_compiler()
+    flags = (*WARNINGS, "-O2", "-fPIC", "-shared", "-DECU_WITH_NAMES")
+    return _compile(cc, flags, CORE_SOURCES, "libecu_port.so")
+
+
+def host_replayer(cc: str | None = None) -> Path:
+    """The golden-vector replayer for the host: ``replay FILE`` (exit 0 when every tick matches)."""
+    cc = cc or host_compiler()
+    flags = (*WARNINGS, "-O2", "-DECU_WITH_NAMES")
+    return _compile(cc, flags, (*CORE_SOURCES, "replay.c"), "replay")
+
+
+def arm_replayer() -> Path:
+    """The replayer for a Cortex-M4 (mps2-an386 under QEMU), reading vectors by semihosting."""
+    if not shutil.which(ARM_CC):
+        raise PortBuildError(
+            f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
+        )
+    flags = (
+        *WARNINGS,
+        *ARM_FLAGS,
+        "--specs=rdimon.specs",
+        "-Wl,--gc-sections",
+        f"-T{PORT_DIR / 'mps2_an386.ld'}",
+    )
+    sources = (*CORE_SOURCES, "replay.c", "startup_cm4.s")
+    return _compile(ARM_CC, flags, sources, "replay-cm4.elf")
+
+
+def arm_objects() -> dict[str, Path]:
+    """The control core and the frame codec compiled alone for the Cortex-M4 (for sizes)."""
+    if not shutil.which(ARM_CC):
+        raise PortBuildError(
+            f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
+        )
+    flags = (*WARNINGS, *ARM_FLAGS, "-c")
+    return {s: _compile(ARM_CC, flags, (s,), Path(s).stem + ".o") for s in CORE_SOURCES}

@@ -1,0 +1,755 @@
+/*
+ * ecu_core.c - the ECU tick, function by function as in the Python modules (named above each
+ * group). See ecu_core.h for the API and ecu/fixedpoint.py for the arithmetic conventions.
+ */
+#include "ecu_core.h"
+
+#if (-1 >> 1) != -1
+#error "ecu_core needs arithmetic right shift of negative values"
+#endif
+
+/* ---- ecu/fixedpoint.py --------------------------------------------------------------------- */
+
+#define ACC_EXT_BITS 16 /* Q7.40 split accumulator: 16 bits below the Q7.24 word */
+#define ONE_Q24 ((int64_t)1 << 24)
+
+static int32_t sat32(ecu_t *e, int64_t x)
+{
+    if (x > INT32_MAX) {
+        e->sat_pending++;
+        return INT32_MAX;
+    }
+    if (x < INT32_MIN) {
+        e->sat_pending++;
+        return INT32_MIN;
+    }
+    return (int32_t)x;
+}
+
+/* a control limit, not an overflow: not counted */
+static int64_t clamp(int64_t x, int64_t lo, int64_t hi)
+{
+    return x < lo ? lo : (x > hi ? hi : x);
+}
+
+/* a / b truncated toward zero, saturated; b == 0 saturates with the dividend's sign */
+static int32_t div_trunc(ecu_t *e, int64_t a, int64_t b)
+{
+    if (b == 0) {
+        e->sat_pending++;
+        return a > 0 ? INT32_MAX : (a < 0 ? INT32_MIN : 0);
+    }
+    return sat32(e, a / b);
+}
+
+/* (a * b) >> s exactly where a * b itself may exceed 64 bits (|a| < 2^55 for b of 32 bits):
+ * split a at k = min(s, 24) bits, a = hi 2^k + lo, and shift the two partial products */
+static int64_t mul_wide_shr(int64_t a, int32_t b, unsigned s)
+{
+    unsigned k = s < 24u ? s : 24u;
+    int64_t hi = a >> k;
+    int64_t lo = a & (((int64_t)1 << k) - 1);
+    return (hi * b + ((lo * b) >> k)) >> (s - k);
+}
+
+/* split accumulator (hi, lo) = Q7.40 in two int32 words, plus a Q7.40 increment */
+static void acc_q40(ecu_t *e, int32_t *hi, int32_t *lo, int64_t inc_q40)
+{
+    int64_t total = (int64_t)*hi * ((int64_t)1 << ACC_EXT_BITS) + *lo + inc_q40;
+    int64_t h = total >> ACC_EXT_BITS;
+    if (h > INT32_MAX || h < INT32_MIN) {
+        *hi = sat32(e, h);
+        *lo = 0;
+        return;
+    }
+    *hi = (int32_t)h;
+    *lo = (int32_t)(total & (((int64_t)1 << ACC_EXT_BITS) - 1));
+}
+
+static int32_t mul_q24(ecu_t *e, int32_t a, int32_t b)
+{
+    return sat32(e, ((int64_t)a * b) >> 24);
+}
+
+/* ---- ecu/faults.py ------------------------------------------------------------------------- */
+
+#define F_SPEED_RANGE (1 << 0)
+#define F_SPEED_RATE (1 << 1)
+#define F_SPEED_STUCK (1 << 2)
+#define F_SPEED_SUBSTITUTED (1 << 3)
+#define F_EGT_OPEN (1 << 4)
+#define F_EGT_OVERTEMP (1 << 5)
+#define F_OVERSPEED (1 << 6)
+#define F_FLAMEOUT (1 << 7)
+#define F_PUMP_STALL (1 << 8)
+#define F_PUMP_DRY (1 << 9)
+#define F_PUMP_HEALTH (1 << 10)
+#define F_DEMAND_LOST (1 << 11)
+#define F_SENSOR_FRAME_LOST (1 << 12)
+#define F_ANALOG_FRAME_LOST (1 << 13)
+#define F_LIMITER_ACTIVE (1 << 14)
+#define F_PUMP_SATURATED (1 << 15)
+#define F_TRANSIENT (F_LIMITER_ACTIVE | F_PUMP_SATURATED | F_SENSOR_FRAME_LOST | \
+                     F_ANALOG_FRAME_LOST | F_PUMP_HEALTH)
+#define F_TRIP (F_OVERSPEED | F_EGT_OVERTEMP | F_PUMP_STALL | F_PUMP_DRY)
+
+static int32_t persist(int32_t count, int bad, int32_t limit)
+{
+    if (bad) {
+        return count < limit ? count + 1 : limit;
+    }
+    return count > 0 ? count - 1 : 0;
+}
+
+static int32_t speed_checks(ecu_t *e, int32_t rpm, int32_t prev_rpm, int32_t v_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int64_t step = (int64_t)rpm - prev_rpm;
+    int32_t tripped = 0;
+    s->speed_range_cnt = persist(s->speed_range_cnt, rpm < 0 || rpm > p->speed_valid_max_rpm,
+                                 p->speed_fault_ticks);
+    s->speed_rate_cnt = persist(s->speed_rate_cnt,
+                                step > p->speed_step_max_rpm || step < -(int64_t)p->speed_step_max_rpm,
+                                p->speed_fault_ticks);
+    if (rpm != prev_rpm) {
+        s->speed_stuck_cnt = 0;
+        s->speed_stuck_v_q24 = v_q24;
+    } else {
+        int64_t dv = (int64_t)v_q24 - s->speed_stuck_v_q24;
+        int moved = dv > p->speed_stuck_dv_q24 || dv < -(int64_t)p->speed_stuck_dv_q24;
+        s->speed_stuck_cnt = persist(s->speed_stuck_cnt, moved, p->speed_stuck_ticks);
+    }
+    if (s->speed_range_cnt >= p->speed_fault_ticks) {
+        tripped |= F_SPEED_RANGE;
+    }
+    if (s->speed_rate_cnt >= p->speed_fault_ticks) {
+        tripped |= F_SPEED_RATE;
+    }
+    if (s->speed_stuck_cnt >= p->speed_stuck_ticks) {
+        tripped |= F_SPEED_STUCK;
+    }
+    return tripped;
+}
+
+static int32_t egt_open_check(ecu_t *e, int32_t egt_dk)
+{
+    const ecu_params_t *p = e->p;
+    int bad = egt_dk > p->egt_open_high_dk || egt_dk < p->egt_open_low_dk;
+    e->s.egt_open_cnt = persist(e->s.egt_open_cnt, bad, p->egt_fault_ticks);
+    return e->s.egt_open_cnt >= p->egt_fault_ticks ? F_EGT_OPEN : 0;
+}
+
+/* ---- ecu/pump_driver.py -------------------------------------------------------------------- */
+
+static int32_t volts_q24_to_mv(int32_t v_q24)
+{
+    return (int32_t)(((int64_t)v_q24 * 1000 + (1 << 23)) >> 24);
+}
+
+static int32_t pump_duty(ecu_t *e, int32_t v_mv, int32_t supply_mv)
+{
+    const ecu_params_t *p = e->p;
+    int32_t duty = supply_mv > 0 ? div_trunc(e, (int64_t)v_mv * 10000, supply_mv)
+                                 : p->duty_max_cpct;
+    int32_t limited = (int32_t)clamp(duty, p->duty_min_cpct, p->duty_max_cpct);
+    if (limited != duty) {
+        e->s.v_saturated = 1;
+    }
+    return limited;
+}
+
+static int32_t pump_current_checks(ecu_t *e, int32_t pump_ma, int32_t v_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int applied = v_q24 > p->pump_dry_min_q24;
+    int stall = pump_ma > p->pump_stall_ma || (applied && pump_ma < p->pump_trip_ma);
+    int64_t dry_ma;
+    int dry;
+    int32_t tripped = 0;
+    s->pump_stall_cnt = persist(s->pump_stall_cnt, stall, p->pump_stall_ticks);
+    dry_ma = (int64_t)p->pump_dry_base_ma +
+             div_trunc(e, (int64_t)p->pump_dry_ma_per_v * volts_q24_to_mv(v_q24), 1000);
+    dry = applied && p->pump_trip_ma <= pump_ma && pump_ma < dry_ma;
+    s->pump_dry_cnt = persist(s->pump_dry_cnt, dry, p->pump_dry_ticks);
+    if (s->pump_stall_cnt >= p->pump_stall_ticks) {
+        tripped |= F_PUMP_STALL;
+    }
+    if (s->pump_dry_cnt >= p->pump_dry_ticks) {
+        tripped |= F_PUMP_DRY;
+    }
+    return tripped;
+}
+
+/* ---- ecu/estimator.py (eq. 4.7, 4.31) ------------------------------------------------------ */
+
+static void estimator_step(ecu_t *e, int32_t n0, int32_t v0, int32_t n1, int32_t v1, int32_t u,
+                           int adapt)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t *th = s->theta_q24;
+    int32_t *ext = s->theta_ext;
+    int32_t n_mid = (int32_t)(((int64_t)n0 + n1) >> 1);
+    int32_t v_mid = (int32_t)(((int64_t)v0 + v1) >> 1);
+    int32_t f1 = mul_q24(e, u, n_mid);
+    int64_t nn_q16 = (((int64_t)n0 * n0) >> 33) + (((int64_t)n1 * n1) >> 33);
+    int32_t f2_q16 = sat32(e, (u * nn_q16) >> 24);
+    int32_t c2_q16 = sat32(e, ((((int64_t)th[ECU_AP21] - p->am21_q24) * n_mid) >> 32) +
+                                  ((((int64_t)th[ECU_AP22] - p->am22_q24) * v_mid) >> 32) +
+                                  (((int64_t)th[ECU_LAM] * u) >> 32) +
+                                  (((int64_t)th[ECU_TH1] * f1) >> 32) +
+                                  (((int64_t)th[ECU_TH2] * f2_q16) >> 24));
+    int32_t xh1 = s->xh1_q24;
+    int32_t xh2 = s->xh2_q24;
+    int32_t e2;
+    s->xh1_q24 = sat32(e, (((int64_t)p->idm11_q24 * xh1) >> 24) +
+                              (((int64_t)p->idm12_q24 * xh2) >> 24) +
+                              (((int64_t)p->idh1_q24 * c2_q16) >> 16));
+    s->xh2_q24 = sat32(e, (((int64_t)p->idm21_q24 * xh1) >> 24) +
+                              (((int64_t)p->idm22_q24 * xh2) >> 24) +
+                              (((int64_t)p->idh2_q24 * c2_q16) >> 16));
+    e2 = sat32(e, (int64_t)s->xh2_q24 - v1);
+    s->e2_q24 = e2;
+    if (!adapt) {
+        return;
+    }
+    if (p->dead_zone_on && -p->dead_zone_q24 < e2 && e2 < p->dead_zone_q24) {
+        return;
+    }
+    acc_q40(e, &th[ECU_AP21], &ext[ECU_AP21],
+            (-(int64_t)sat32(e, ((int64_t)n_mid * e2) >> 24) * p->g_a1_q28) >> 12);
+    acc_q40(e, &th[ECU_AP22], &ext[ECU_AP22],
+            (-(int64_t)sat32(e, ((int64_t)v_mid * e2) >> 24) * p->g_a2_q28) >> 12);
+    acc_q40(e, &th[ECU_LAM], &ext[ECU_LAM],
+            (-(int64_t)sat32(e, ((int64_t)u * e2) >> 24) * p->g_lam_q28) >> 12);
+    acc_q40(e, &th[ECU_TH1], &ext[ECU_TH1],
+            (-(int64_t)sat32(e, ((int64_t)f1 * e2) >> 24) * p->g_th1_q28) >> 12);
+    acc_q40(e, &th[ECU_TH2], &ext[ECU_TH2],
+            (-(int64_t)sat32(e, ((int64_t)f2_q16 * e2) >> 16) * p->g_th2_q28) >> 12);
+    if (p->lambda_floor_on && th[ECU_LAM] < p->lambda_floor_q24) {
+        th[ECU_LAM] = p->lambda_floor_q24;
+        ext[ECU_LAM] = 0;
+    }
+}
+
+/* ---- ecu/mrac.py (eq. 5.4, 5.15-5.16, 5.18-5.19) ------------------------------------------- */
+
+static int32_t mrac_control(ecu_t *e, int32_t dn, int32_t dv, int32_t r)
+{
+    const int32_t *th = e->s.theta_q24;
+    int32_t num = sat32(e, (((int64_t)th[ECU_KX1] * dn) >> 24) +
+                               (((int64_t)th[ECU_KX2] * dv) >> 24) +
+                               (((int64_t)th[ECU_KR] * r) >> 24));
+    int64_t kf2_dn = ((int64_t)th[ECU_KF2] * dn) >> 24;
+    int32_t den = sat32(e, ONE_Q24 - (((int64_t)th[ECU_KF1] * dn) >> 24) -
+                               mul_wide_shr(kf2_dn, dn, 24));
+    if (den < e->p->u_den_min_q24) {
+        den = e->p->u_den_min_q24;
+    }
+    return div_trunc(e, (int64_t)num * ONE_Q24, den);
+}
+
+static void mrac_gain_update(ecu_t *e)
+{
+    const ecu_params_t *p = e->p;
+    int32_t *th = e->s.theta_q24;
+    int32_t *ext = e->s.theta_ext;
+    int64_t lam = th[ECU_LAM];
+    int32_t eps;
+    eps = sat32(e, (int64_t)th[ECU_AP21] - p->ref_am21_q24 + ((lam * th[ECU_KX1]) >> 24));
+    acc_q40(e, &th[ECU_KX1], &ext[ECU_KX1], (-(int64_t)eps * p->g_x1_q28) >> 12);
+    eps = sat32(e, (int64_t)th[ECU_AP22] - p->ref_am22_q24 + ((lam * th[ECU_KX2]) >> 24));
+    acc_q40(e, &th[ECU_KX2], &ext[ECU_KX2], (-(int64_t)eps * p->g_x2_q28) >> 12);
+    eps = sat32(e, -(int64_t)p->ref_bm2_q24 + ((lam * th[ECU_KR]) >> 24));
+    acc_q40(e, &th[ECU_KR], &ext[ECU_KR], (-(int64_t)eps * p->g_r_q28) >> 12);
+    eps = sat32(e, (int64_t)th[ECU_TH1] + ((lam * th[ECU_KF1]) >> 24));
+    acc_q40(e, &th[ECU_KF1], &ext[ECU_KF1], (-(int64_t)eps * p->g_f1_q28) >> 12);
+    eps = sat32(e, (int64_t)th[ECU_TH2] + ((lam * th[ECU_KF2]) >> 24));
+    acc_q40(e, &th[ECU_KF2], &ext[ECU_KF2], (-(int64_t)eps * p->g_f2_q28) >> 12);
+}
+
+static void reference_model_step(ecu_t *e, int32_t r)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int64_t xm1 = s->xm1_q24;
+    int64_t xm2 = s->xm2_q24;
+    s->xm1_q24 = sat32(e, ((p->refm11_q24 * xm1) >> 24) + ((p->refm12_q24 * xm2) >> 24) +
+                              (((int64_t)p->refh1_q24 * r) >> 24));
+    s->xm2_q24 = sat32(e, ((p->refm21_q24 * xm1) >> 24) + ((p->refm22_q24 * xm2) >> 24) +
+                              (((int64_t)p->refh2_q24 * r) >> 24));
+}
+
+/* ---- ecu/pid.py ---------------------------------------------------------------------------- */
+
+static int32_t pid_control(ecu_t *e, int32_t err, int32_t dv)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    acc_q40(e, &s->theta_q24[ECU_PID_I], &s->theta_ext[ECU_PID_I],
+            ((int64_t)err * p->pid_ki_dt_q28) >> 12);
+    return sat32(e, (((int64_t)p->pid_kp_q24 * err) >> 24) + s->theta_q24[ECU_PID_I] -
+                        (((int64_t)p->pid_kd_q24 * dv) >> 24));
+}
+
+static void pid_track(ecu_t *e, int32_t err, int32_t dv, int32_t u_applied)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    s->theta_q24[ECU_PID_I] = sat32(e, (int64_t)u_applied - (((int64_t)p->pid_kp_q24 * err) >> 24) +
+                                           (((int64_t)p->pid_kd_q24 * dv) >> 24));
+    s->theta_ext[ECU_PID_I] = 0;
+}
+
+/* ---- ecu/limiters.py ----------------------------------------------------------------------- */
+
+enum { OWNER_SPEED, OWNER_EGT, OWNER_ACCEL, OWNER_NLIMIT, OWNER_DECEL };
+
+static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_prev, int32_t kp_q24,
+                          int32_t ki_dt_q24)
+{
+    return sat32(e, v_prev + ((kp_q24 * (err - err_prev)) >> 24) + ((ki_dt_q24 * err) >> 24));
+}
+
+static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, int egt_ok,
+                              int32_t n_q24, int32_t rate_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t v_prev, v, owner, err, v_loop, v_lim;
+    if (!p->limiters_on) {
+        s->owner = OWNER_SPEED;
+        s->v_saturated = 0;
+        s->v_applied_q24 = v_speed;
+        return v_speed;
+    }
+    v_prev = s->v_applied_q24;
+    v = v_speed;
+    owner = OWNER_SPEED;
+    if (egt_ok) {
+        err = egt_err_q24;
+        if (err < p->egt_engage_q24) {
+            v_loop = limit_loop(e, v_prev, err, s->egt_e_prev_q24, p->egt_kp_q24, p->egt_ki_dt_q24);
+            if (v_loop < v) {
+                v = v_loop;
+                owner = OWNER_EGT;
+            }
+        }
+        s->egt_e_prev_q24 = err;
+    }
+    err = sat32(e, (int64_t)p->accel_max_q24 - rate_q24);
+    if (err < p->rate_engage_q24) {
+        v_loop = limit_loop(e, v_prev, err, s->acc_e_prev_q24, p->rate_kp_q24, p->rate_ki_dt_q24);
+        if (v_loop < v) {
+            v = v_loop;
+            owner = OWNER_ACCEL;
+        }
+    }
+    s->acc_e_prev_q24 = err;
+    err = sat32(e, (int64_t)p->n_limit_q24 - n_q24);
+    if (err < p->n_limit_engage_q24) {
+        v_loop = limit_loop(e, v_prev, err, s->nlim_e_prev_q24, p->n_limit_kp_q24,
+                            p->n_limit_ki_dt_q24);
+        if (v_loop < v) {
+            v = v_loop;
+            owner = OWNER_NLIMIT;
+        }
+    }
+    s->nlim_e_prev_q24 = err;
+    err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above the decel limit */
+    if (err < p->rate_engage_q24) {
+        v_loop = limit_loop(e, v_prev, -(int64_t)err, -(int64_t)s->dec_e_prev_q24, p->rate_kp_q24,
+                            p->rate_ki_dt_q24);
+        if (v_loop > v) {
+            v = v_loop;
+            owner = OWNER_DECEL;
+        }
+    }
+    s->dec_e_prev_q24 = err;
+    v_lim = (int32_t)clamp(v, p->v_min_q24, p->v_max_q24);
+    s->v_saturated = v_lim != v ? 1 : 0;
+    v_lim = (int32_t)clamp(v_lim, (int64_t)v_prev - p->v_slew_q24, (int64_t)v_prev + p->v_slew_q24);
+    s->owner = owner;
+    s->v_applied_q24 = v_lim;
+    return v_lim;
+}
+
+static void reset_loops(ecu_state_t *s, int32_t v_q24)
+{
+    s->v_applied_q24 = v_q24;
+    s->egt_e_prev_q24 = 0;
+    s->acc_e_prev_q24 = 0;
+    s->dec_e_prev_q24 = 0;
+    s->nlim_e_prev_q24 = 0;
+    s->owner = OWNER_SPEED;
+    s->v_saturated = 0;
+}
+
+/* ---- ecu/fast_model.py (eq. 3.5 as an observer) ------------------------------------------- */
+
+static void observer_step(ecu_t *e, int32_t u, int32_t dn_meas, int valid)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    const int32_t *th = s->theta_q24;
+    int32_t n = s->obs_n_q24;
+    int32_t v = s->obs_v_q24;
+    int64_t innov = valid ? sat32(e, (int64_t)dn_meas - n) : 0;
+    int64_t th2_n = ((int64_t)th[ECU_TH2] * n) >> 24;
+    int32_t acc_q16 = sat32(e, (((int64_t)th[ECU_AP21] * n) >> 32) +
+                                   (((int64_t)th[ECU_AP22] * v) >> 32) +
+                                   (((int64_t)th[ECU_LAM] * u) >> 32) +
+                                   mul_wide_shr(((int64_t)th[ECU_TH1] * n) >> 24, u, 32) +
+                                   mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32));
+    s->obs_n_q24 = sat32(e, (int64_t)n + (((int64_t)p->dt_q24 * v) >> 24) +
+                                ((p->obs_l1_dt_q24 * innov) >> 24));
+    s->obs_v_q24 = sat32(e, (int64_t)v + (((int64_t)p->dt_q24 * acc_q16) >> 16) +
+                                ((p->obs_l2_dt_q24 * innov) >> 24));
+}
+
+/* ---- ecu/modes.py -------------------------------------------------------------------------- */
+
+static int32_t next_mode(int32_t mode, int arm, int stop, int running, int demand_fresh,
+                         int trip_fault, int trip_shutdown, int spooled_down)
+{
+    if (mode == ECU_FAULT) {
+        return ECU_FAULT;
+    }
+    if (trip_fault && (mode == ECU_ARMED || mode == ECU_RUN)) {
+        return ECU_FAULT;
+    }
+    if (mode == ECU_OFF || mode == ECU_ARMED) {
+        if (stop || !arm) {
+            return ECU_OFF;
+        }
+        return running && demand_fresh ? ECU_RUN : ECU_ARMED;
+    }
+    if (mode == ECU_RUN) {
+        return trip_shutdown || stop || !arm ? ECU_SHUTDOWN : ECU_RUN;
+    }
+    return spooled_down && !arm ? ECU_OFF : ECU_SHUTDOWN;
+}
+
+/* ---- ecu/firmware.py ----------------------------------------------------------------------- */
+
+#define RPM_PER_PCT 1125 /* 112,500 rpm = 100 %N */
+#define AGE_MAX (1 << 30)
+
+static int32_t ring(int32_t idx) /* (idx + RATE_BUF_LEN) % RATE_BUF_LEN for idx > -LEN */
+{
+    return (idx + ECU_RATE_BUF_LEN) % ECU_RATE_BUF_LEN;
+}
+
+/* central difference of speed at the sample `age` ticks old, %N/s (Q7.24) */
+static int32_t rate_q24(ecu_t *e, int32_t age)
+{
+    const ecu_params_t *p = e->p;
+    const ecu_state_t *s = &e->s;
+    int32_t m = p->rate_half_window;
+    int64_t d_rpm = (int64_t)s->n_hist_rpm[ring(s->hist_idx - age + m)] -
+                    s->n_hist_rpm[ring(s->hist_idx - age - m)];
+    return div_trunc(e, mul_wide_shr(d_rpm * p->rpm_to_q24_k, p->rate_hz, 16), 2 * (int64_t)m);
+}
+
+static int32_t dn_q24(ecu_t *e, int32_t age)
+{
+    const ecu_state_t *s = &e->s;
+    int64_t rpm = s->n_hist_rpm[ring(s->hist_idx - age)];
+    return sat32(e, ((rpm * e->p->rpm_to_q24_k) >> 16) - e->p->trim_n_q24);
+}
+
+static int32_t q24_to_cpct(int64_t x_q24)
+{
+    return (int32_t)((x_q24 * 100 + (1 << 23)) >> 24);
+}
+
+static int32_t age(int32_t a)
+{
+    return a < AGE_MAX ? a + 1 : AGE_MAX;
+}
+
+void ecu_init(ecu_t *e, const ecu_params_t *p)
+{
+    int32_t *w = (int32_t *)(void *)&e->s;
+    int k;
+    for (k = 0; k < ECU_STATE_WORDS; k++) {
+        w[k] = 0;
+    }
+    w = (int32_t *)(void *)&e->o;
+    for (k = 0; k < ECU_OUTPUT_WORDS; k++) {
+        w[k] = 0;
+    }
+    e->p = p;
+    for (k = 0; k < ECU_N_THETA; k++) {
+        e->s.theta_q24[k] = p->init_theta_q24[k];
+    }
+    e->s.supply_mv = p->supply_nominal_mv;
+    e->s.demand_q24 = p->idle_q24;
+    e->s.mode = ECU_OFF;
+    e->sat_pending = 0;
+}
+
+const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    ecu_outputs_t *o = &e->o;
+    int32_t *th = s->theta_q24;
+    int32_t faults = s->faults & ~F_TRANSIENT;
+    int32_t mode = s->mode;
+    int32_t m = p->rate_half_window;
+    int32_t n_rpm, n_q24, dn, rate, demand, new_mode, pump_mv, duty, enable, health;
+    int speed_ok, egt_ok, analog_fresh, running, trip_fault, trip_shutdown;
+    int64_t pending;
+
+    s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
+
+    /* 1-2. sensor frame: speed and EGT */
+    if (in->sensor_status == ECU_E2E_OK) {
+        s->sensor_age = 0;
+        if (s->speed_seen) {
+            faults |= speed_checks(e, in->speed_rpm, s->speed_rpm, s->v_applied_q24);
+        }
+        s->speed_rpm = in->speed_rpm;
+        s->egt_dk = in->egt_dk;
+        faults |= egt_open_check(e, in->egt_dk);
+    } else {
+        s->sensor_age = age(s->sensor_age);
+        faults |= F_SENSOR_FRAME_LOST;
+    }
+    if (faults & (F_SPEED_RANGE | F_SPEED_RATE | F_SPEED_STUCK)) {
+        s->speed_failed = 1;
+    }
+    speed_ok = s->speed_failed == 0 && s->sensor_age == 0;
+    if (speed_ok) {
+        n_rpm = s->speed_rpm;
+    } else {
+        n_rpm = (int32_t)((((int64_t)s->obs_n_q24 + p->trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24);
+        if (s->speed_failed) {
+            faults |= F_SPEED_SUBSTITUTED;
+        }
+    }
+    egt_ok = (faults & F_EGT_OPEN) == 0;
+
+    /* analog frame: supply voltage and pump current */
+    analog_fresh = in->analog_status == ECU_E2E_OK;
+    if (analog_fresh) {
+        s->analog_age = 0;
+        s->supply_mv = in->supply_mv;
+        s->pump_ma = in->pump_ma;
+    } else {
+        s->analog_age = age(s->analog_age);
+        if (s->analog_age > p->analog_loss_ticks) {
+            s->supply_mv = p->supply_nominal_mv;
+            faults |= F_ANALOG_FRAME_LOST;
+        }
+    }
+
+    /* demand frame: hold, then idle, shut down later */
+    if (in->demand_status == ECU_E2E_OK) {
+        s->demand_age = 0;
+        s->demand_q24 = (int32_t)clamp(div_trunc(e, (int64_t)in->demand_cpct * ONE_Q24, 100),
+                                       p->idle_q24, p->demand_max_q24);
+        s->open_loop_q24 = div_trunc(e, (int64_t)in->open_loop_mv * ONE_Q24, 1000);
+        s->arm = in->arm ? 1 : 0;
+        s->stop = in->stop ? 1 : 0;
+    } else {
+        s->demand_age = age(s->demand_age);
+    }
+    demand = s->demand_q24;
+    if (s->demand_age > p->demand_hold_ticks) {
+        demand = p->idle_q24;
+        faults |= F_DEMAND_LOST;
+    }
+    if (!egt_ok && demand > p->egt_fail_demand_q24) {
+        demand = p->egt_fail_demand_q24;
+    }
+
+    /* 3. speed history (raw rpm) and derived signals */
+    s->hist_idx = (s->hist_idx + 1) % ECU_RATE_BUF_LEN;
+    s->n_hist_rpm[s->hist_idx] = n_rpm;
+    s->u_hist_q24[s->hist_idx] = 0;
+    if (s->speed_seen < ECU_RATE_BUF_LEN) {
+        s->speed_seen++;
+    }
+    n_q24 = sat32(e, ((int64_t)n_rpm * p->rpm_to_q24_k) >> 16);
+    dn = sat32(e, (int64_t)n_q24 - p->trim_n_q24);
+    if (!speed_ok) {
+        rate = s->obs_v_q24;
+    } else if (s->speed_seen > 2 * m) {
+        rate = rate_q24(e, m);
+    } else {
+        rate = 0;
+    }
+
+    /* 4. protection trips and mode */
+    running = mode == ECU_ARMED || mode == ECU_RUN;
+    s->overspeed_cnt = persist(s->overspeed_cnt, running && n_rpm > p->overspeed_rpm,
+                               p->overspeed_ticks);
+    if (s->overspeed_cnt >= p->overspeed_ticks) {
+        faults |= F_OVERSPEED;
+    }
+    s->flameout_cnt = persist(s->flameout_cnt, mode == ECU_RUN && n_rpm < p->flameout_rpm,
+                              p->flameout_ticks);
+    if (s->flameout_cnt >= p->flameout_ticks) {
+        faults |= F_FLAMEOUT;
+    }
+    s->egt_over_cnt = persist(s->egt_over_cnt, running && egt_ok && s->egt_dk > p->egt_max_dk,
+                              p->egt_max_ticks);
+    if (s->egt_over_cnt >= p->egt_max_ticks) {
+        faults |= F_EGT_OVERTEMP;
+    }
+    if (mode == ECU_RUN && analog_fresh) {
+        faults |= pump_current_checks(e, s->pump_ma, s->v_applied_q24);
+    }
+    trip_fault = (faults & F_TRIP) != 0 || (running && s->sensor_age > p->sensor_loss_ticks);
+    trip_shutdown = (faults & F_FLAMEOUT) != 0 || s->demand_age >= p->demand_shutdown_ticks;
+    new_mode = next_mode(mode, s->arm, s->stop, n_rpm >= p->run_entry_rpm,
+                         s->demand_age <= p->demand_hold_ticks, trip_fault, trip_shutdown,
+                         n_rpm < p->shutdown_done_rpm);
+    if (new_mode == ECU_RUN && mode != ECU_RUN) { /* bumpless start at trim voltage */
+        reset_loops(s, p->trim_v_q24);
+        s->hist_fill = 0;
+        th[ECU_PID_I] = 0;
+        s->theta_ext[ECU_PID_I] = 0;
+        s->xm1_q24 = dn;
+        s->xm2_q24 = 0;
+        s->obs_n_q24 = dn;
+        s->obs_v_q24 = rate;
+    }
+    s->mode = new_mode;
+
+    /* 5. control */
+    if (new_mode == ECU_RUN) {
+        int adapt = speed_ok;
+        int32_t r, u, e_dk, v, u_applied;
+        if (s->hist_fill < ECU_RATE_BUF_LEN) {
+            s->hist_fill++;
+        }
+        if (p->freeze_on && (s->owner != OWNER_SPEED || s->v_saturated)) {
+            adapt = 0;
+        }
+        if (speed_ok && s->hist_fill > m + 1 && s->speed_seen > 2 * m + 1) {
+            estimator_step(e, dn_q24(e, m + 1), rate_q24(e, m + 1), dn_q24(e, m), rate_q24(e, m),
+                           s->u_hist_q24[ring(s->hist_idx - m - 1)], adapt);
+        }
+        r = sat32(e, (int64_t)demand - p->trim_n_q24);
+        if (p->controller == ECU_CTRL_MRAC) {
+            u = mrac_control(e, dn, rate, r);
+            mrac_gain_update(e);
+        } else if (p->controller == ECU_CTRL_PID) {
+            u = pid_control(e, sat32(e, (int64_t)demand - n_q24), rate);
+        } else {
+            u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
+        }
+        reference_model_step(e, r);
+        e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - s->egt_dk, -1000, 1000);
+        v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
+                           div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, rate);
+        u_applied = sat32(e, (int64_t)v - p->trim_v_q24);
+        if (p->controller == ECU_CTRL_PID) {
+            pid_track(e, sat32(e, (int64_t)demand - n_q24), rate, u_applied);
+        }
+        observer_step(e, u_applied, dn, speed_ok);
+        s->u_hist_q24[s->hist_idx] = u_applied;
+        pump_mv = volts_q24_to_mv(v);
+        duty = pump_duty(e, pump_mv, s->supply_mv);
+        enable = 1;
+        if (s->owner != OWNER_SPEED) {
+            faults |= F_LIMITER_ACTIVE;
+        }
+        if (s->v_saturated) {
+            faults |= F_PUMP_SATURATED;
+        }
+    } else {
+        s->v_applied_q24 = 0;
+        s->xm1_q24 = dn;
+        s->xm2_q24 = 0;
+        s->obs_n_q24 = dn;
+        s->obs_v_q24 = rate;
+        pump_mv = 0;
+        duty = 0;
+        enable = 0;
+    }
+
+    /* 6. health, telemetry, fault word */
+    health = div_trunc(e, (int64_t)th[ECU_LAM] * 1000, p->lambda_comm_q24);
+    if (health < p->health_alarm_pm) {
+        faults |= F_PUMP_HEALTH;
+    }
+    s->faults = faults;
+    pending = e->sat_pending;
+    e->sat_pending = 0;
+    s->sat_events = sat32(e, s->sat_events + pending);
+    o->tick = in->tick;
+    o->duty_cpct = duty;
+    o->pump_mv = pump_mv;
+    o->pump_enable = enable;
+    o->mode = new_mode;
+    o->fault_word = faults & 0xFFFF;
+    o->sat_events = s->sat_events;
+    o->ap21_q24 = th[ECU_AP21];
+    o->ap22_q24 = th[ECU_AP22];
+    o->lambda_q24 = th[ECU_LAM];
+    o->theta21_q24 = th[ECU_TH1];
+    o->theta22_q24 = th[ECU_TH2];
+    o->kx1_q24 = th[ECU_KX1];
+    o->kx2_q24 = th[ECU_KX2];
+    o->kr_q24 = th[ECU_KR];
+    o->kf1_q24 = th[ECU_KF1];
+    o->kf2_q24 = th[ECU_KF2];
+    o->pump_health_pm = health;
+    o->nref_cpct = q24_to_cpct((int64_t)s->xm1_q24 + p->trim_n_q24);
+    o->n_cpct = q24_to_cpct(n_q24);
+    o->owner = s->owner;
+    return o;
+}
+
+/* ---- state digest and parameter load ------------------------------------------------------- */
+
+uint32_t ecu_state_digest(const ecu_state_t *s)
+{
+    const int32_t *w = (const int32_t *)(const void *)s;
+    uint32_t h = 2166136261u;
+    int k;
+    for (k = 0; k < ECU_STATE_WORDS; k++) {
+        h = (h ^ (uint32_t)w[k]) * 16777619u;
+    }
+    return h;
+}
+
+int ecu_params_load(ecu_params_t *p, const int32_t *words, size_t n)
+{
+    int32_t *dst = (int32_t *)(void *)p;
+    size_t k;
+    if (n != (size_t)ECU_PARAM_WORDS) {
+        return ECU_PARAM_WORDS;
+    }
+    for (k = 0; k < n; k++) {
+        dst[k] = words[k];
+    }
+    /* what the tick's indexing and divisions rely on; the rest is checked by compile_params */
+    if (p->rate_hz < 1 || p->rate_hz > 1000) {
+        return (int)(&p->rate_hz - dst);
+    }
+    if (p->controller < ECU_CTRL_MRAC || p->controller > ECU_CTRL_OPEN_LOOP) {
+        return (int)(&p->controller - dst);
+    }
+    if (p->rate_half_window < 1 || 2 * p->rate_half_window + 1 >= ECU_RATE_BUF_LEN) {
+        return (int)(&p->rate_half_window - dst);
+    }
+    return -1;
+}
+
+#ifdef ECU_WITH_NAMES
+#define ECU_STR(x) #x
+#define ECU_XSTR(x) ECU_STR(x)
+#define ECU_X_NAME(name) #name " "
+#define ECU_A_NAME(name, n) #name "[" ECU_XSTR(n) "] "
+const char ecu_param_names[] = ECU_PARAM_FIELDS(ECU_X_NAME, ECU_A_NAME);
+const char ecu_state_names[] = ECU_STATE_FIELDS(ECU_X_NAME, ECU_A_NAME);
+const char ecu_input_names[] = ECU_INPUT_FIELDS(ECU_X_NAME, ECU_A_NAME);
+const char ecu_output_names[] = ECU_OUTPUT_FIELDS(ECU_X_NAME, ECU_A_NAME);
+#endif

@@ -1,0 +1,196 @@
+/*
+ * ecu_core.h - turbojet ECU control core, C99 port of the Python firmware (ecu/firmware.py).
+ *
+ * Bit-exact with the Python tick: same Q formats (names end in _q24 = Q7.24, _q16 = Q15.16,
+ * _q28 = Q3.28), 64-bit intermediates, truncation by arithmetic shift, C division, saturating
+ * stores with the saturation events counted, and the same state layout field by field. Golden
+ * vectors written by the Python firmware (ecu/golden.py) prove it, every integer of every tick.
+ *
+ * Integration (your scheduler, your CAN driver):
+ *
+ *     static ecu_params_t params;         // or a const ecu_params_t in flash
+ *     static ecu_t ecu;                   // all state: no heap, no globals in the core
+ *
+ *     ecu_params_load(&params, words, ECU_PARAM_WORDS);   // once: calibration words (below)
+ *     ecu_init(&ecu, &params);                             // power-on: mode OFF
+ *     every period (100 Hz by default; params.rate_hz):
+ *         fill an ecu_inputs_t from the frames received since the last tick (raw integers in
+ *         the CAN contract's units; one E2E status per frame kind, see ECU_E2E_*),
+ *         const ecu_outputs_t *o = ecu_tick(&ecu, &in);
+ *         send o->duty_cpct / o->pump_enable to the pump driver and the ECU frames
+ *         (ecu_frames.h packs them from the outputs, with E2E CRC and alive counter).
+ *
+ * ecu_tick is reentrant per instance, takes constant time (no loops over data except the fixed
+ * parameter arrays), uses no floating point and no library calls. Inputs are expected in their
+ * DBC ranges (speed 0..262143 rpm, EGT 0..16383 dK, supply and current 0..65535, demand
+ * 0..65535); within them no intermediate overflows 64 bits.
+ *
+ * Parameters are the integer constants that ecu.params.compile_params computes from the
+ * engineering-unit calibration (the one place where floats become Q formats); they are loaded
+ * as ECU_PARAM_WORDS int32 words in the order of ECU_PARAM_FIELDS.
+ *
+ * Requires: two's-complement int32_t/int64_t and arithmetic right shift of negative values
+ * (gcc, clang, armcc, IAR on every 32-bit MCU; checked at compile time in ecu_core.c).
+ */
+#ifndef ECU_CORE_H
+#define ECU_CORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define ECU_N_THETA 11     /* adaptive parameters and slow integrators (ecu/state.py) */
+#define ECU_RATE_BUF_LEN 52 /* speed history ring: 0.05 s at 1000 Hz, +2 samples */
+
+/* slots of theta_q24 / theta_ext (ecu/state.py) */
+enum {
+    ECU_AP21, ECU_AP22, ECU_LAM, ECU_TH1, ECU_TH2,
+    ECU_KX1, ECU_KX2, ECU_KR, ECU_KF1, ECU_KF2, ECU_PID_I
+};
+
+/* modes (ecu/modes.py) */
+enum { ECU_OFF, ECU_ARMED, ECU_RUN, ECU_SHUTDOWN, ECU_FAULT };
+
+/* controllers (ecu/params.py) */
+enum { ECU_CTRL_MRAC, ECU_CTRL_PID, ECU_CTRL_OPEN_LOOP };
+
+/* E2E receiver status per frame kind, as the CAN layer reports what arrived since last tick */
+enum {
+    ECU_E2E_OK,            /* a fresh, valid frame: its values are used */
+    ECU_E2E_REPEATED,      /* rejected frames: the values are not used */
+    ECU_E2E_WRONGSEQUENCE,
+    ECU_E2E_WRONGCRC,
+    ECU_E2E_NONEWDATA      /* nothing arrived */
+};
+
+/*
+ * The four records, as X-macro lists (one list per record: the struct below, the Python
+ * wrapper's field names and the golden-vector layout all come from these).
+ * X(name) is one int32 field; A(name, n) an int32 array.
+ */
+
+/* ecu.params.FirmwareParams, in its order; init_theta_q24 holds the ECU_N_THETA start values */
+#define ECU_PARAM_FIELDS(X, A) \
+    X(rate_hz) X(controller) X(dt_q24) X(n_max_rpm) X(rpm_to_q24_k) X(trim_n_q24) \
+    X(trim_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) X(idm21_q24) \
+    X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) X(g_th1_q28) \
+    X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
+    X(rate_half_window) X(rate_den) X(lambda_floor_on) X(lambda_floor_q24) X(dead_zone_on) \
+    X(dead_zone_q24) X(freeze_on) X(ref_am21_q24) X(ref_am22_q24) X(ref_bm2_q24) \
+    X(refm11_q24) X(refm12_q24) X(refm21_q24) X(refm22_q24) X(refh1_q24) X(refh2_q24) \
+    X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
+    X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) X(idle_q24) X(demand_max_q24) \
+    X(limiters_on) X(egt_limit_dk) X(egt_engage_q24) X(rate_engage_q24) \
+    X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_max_dk) X(egt_max_ticks) \
+    X(accel_max_q24) X(decel_max_q24) X(rate_kp_q24) X(rate_ki_dt_q24) X(n_limit_q24) \
+    X(n_limit_kp_q24) X(n_limit_ki_dt_q24) X(overspeed_rpm) X(overspeed_ticks) \
+    X(flameout_rpm) X(flameout_ticks) X(v_min_q24) X(v_max_q24) X(v_slew_q24) \
+    X(duty_min_cpct) X(duty_max_cpct) X(supply_nominal_mv) X(pump_stall_ma) X(pump_trip_ma) \
+    X(pump_stall_ticks) X(pump_dry_base_ma) X(pump_dry_ma_per_v) X(pump_dry_min_q24) \
+    X(pump_dry_ticks) X(speed_valid_max_rpm) X(speed_step_max_rpm) X(speed_fault_ticks) \
+    X(speed_stuck_ticks) X(speed_stuck_dv_q24) X(egt_open_high_dk) X(egt_open_low_dk) \
+    X(egt_fault_ticks) X(egt_fail_demand_q24) X(obs_l1_dt_q24) X(obs_l2_dt_q24) \
+    X(demand_hold_ticks) X(demand_shutdown_ticks) X(sensor_loss_ticks) X(analog_loss_ticks) \
+    X(run_entry_rpm) X(shutdown_done_rpm)
+
+/* ecu.state.EcuState, in its order (the state digest runs over these words in this order) */
+#define ECU_STATE_FIELDS(X, A) \
+    A(theta_q24, ECU_N_THETA) A(theta_ext, ECU_N_THETA) \
+    A(n_hist_rpm, ECU_RATE_BUF_LEN) A(u_hist_q24, ECU_RATE_BUF_LEN) X(hist_idx) X(hist_fill) \
+    X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) X(xm1_q24) X(xm2_q24) \
+    X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) \
+    X(v_applied_q24) X(owner) X(v_saturated) \
+    X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
+    X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \
+    X(speed_range_cnt) X(speed_rate_cnt) X(speed_stuck_cnt) X(speed_stuck_v_q24) \
+    X(egt_open_cnt) X(egt_over_cnt) X(overspeed_cnt) X(flameout_cnt) \
+    X(pump_stall_cnt) X(pump_dry_cnt) X(speed_failed) X(speed_seen) \
+    X(mode) X(faults) X(sat_events) X(ticks)
+
+/* ecu.firmware.EcuInputs: raw integers in the CAN contract's units */
+#define ECU_INPUT_FIELDS(X, A) \
+    X(tick)          /* lockstep tick number of the sensor frame */ \
+    X(speed_rpm)     /* shaft speed, rpm */ \
+    X(egt_dk)        /* EGT, 0.1 K */ \
+    X(supply_mv)     /* pump supply voltage, mV */ \
+    X(pump_ma)       /* pump current, mA */ \
+    X(demand_cpct)   /* speed demand, 0.01 %N */ \
+    X(open_loop_mv)  /* pump voltage demand for the open-loop controller, mV */ \
+    X(arm)           /* arm request bit */ \
+    X(stop)          /* stop request bit */ \
+    X(sensor_status) /* ECU_E2E_* of the sensor frame (speed, EGT), expected every tick */ \
+    X(analog_status) /* ECU_E2E_* of the analog frame (supply, current), every 50 ms */ \
+    X(demand_status) /* ECU_E2E_* of the demand frame (demand, open loop, arm, stop) */
+
+/* ecu.firmware.EcuOutputs */
+#define ECU_OUTPUT_FIELDS(X, A) \
+    X(tick)           /* echo of the input tick */ \
+    X(duty_cpct)      /* pump PWM duty, 0.01 % (0..10000) */ \
+    X(pump_mv)        /* pump voltage aimed for, mV */ \
+    X(pump_enable)    /* pump driver enable */ \
+    X(mode)           /* ECU_OFF .. ECU_FAULT */ \
+    X(fault_word)     /* 16-bit fault word (ecu/faults.py) */ \
+    X(sat_events)     /* saturation events since power-on (saturating) */ \
+    X(ap21_q24) X(ap22_q24) X(lambda_q24) X(theta21_q24) X(theta22_q24) \
+    X(kx1_q24) X(kx2_q24) X(kr_q24) X(kf1_q24) X(kf2_q24) \
+    X(pump_health_pm) /* Lambda-hat / commissioning Lambda, 0.1 % */ \
+    X(nref_cpct)      /* reference-model speed, 0.01 %N */ \
+    X(n_cpct)         /* speed used by the control, 0.01 %N */ \
+    X(owner)          /* loop owning the pump command (0 speed, 1 EGT, 2 accel, 3 N, 4 decel) */
+
+#define ECU_X_FIELD(name) int32_t name;
+#define ECU_A_FIELD(name, n) int32_t name[n];
+#define ECU_X_COUNT(name) +1
+#define ECU_A_COUNT(name, n) +(n)
+
+typedef struct { ECU_PARAM_FIELDS(ECU_X_FIELD, ECU_A_FIELD) } ecu_params_t;
+typedef struct { ECU_STATE_FIELDS(ECU_X_FIELD, ECU_A_FIELD) } ecu_state_t;
+typedef struct { ECU_INPUT_FIELDS(ECU_X_FIELD, ECU_A_FIELD) } ecu_inputs_t;
+typedef struct { ECU_OUTPUT_FIELDS(ECU_X_FIELD, ECU_A_FIELD) } ecu_outputs_t;
+
+enum {
+    ECU_PARAM_WORDS = 0 ECU_PARAM_FIELDS(ECU_X_COUNT, ECU_A_COUNT),
+    ECU_STATE_WORDS = 0 ECU_STATE_FIELDS(ECU_X_COUNT, ECU_A_COUNT),
+    ECU_INPUT_WORDS = 0 ECU_INPUT_FIELDS(ECU_X_COUNT, ECU_A_COUNT),
+    ECU_OUTPUT_WORDS = 0 ECU_OUTPUT_FIELDS(ECU_X_COUNT, ECU_A_COUNT)
+};
+
+/* One ECU instance: parameters (not owned), state, outputs and the sticky saturation count. */
+typedef struct {
+    const ecu_params_t *p;
+    ecu_state_t s;
+    ecu_outputs_t o;
+    int64_t sat_pending; /* saturation events not yet added to s.sat_events (ARM Q flag) */
+} ecu_t;
+
+/*
+ * Fill *p from n int32 words in ECU_PARAM_FIELDS order and check what the tick relies on.
+ * Returns -1 when accepted; otherwise the index of the first offending word (or
+ * ECU_PARAM_WORDS when n is wrong), and *p must not be used.
+ */
+int ecu_params_load(ecu_params_t *p, const int32_t *words, size_t n);
+
+/* Power-on initialisation (also the only way out of a latched FAULT). */
+void ecu_init(ecu_t *e, const ecu_params_t *p);
+
+/* One control step; returns the instance's output record (valid until the next tick). */
+const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in);
+
+/* FNV-1a (32-bit) over the ECU_STATE_WORDS state words, as ecu/golden.py computes it. */
+uint32_t ecu_state_digest(const ecu_state_t *s);
+
+#ifdef ECU_WITH_NAMES
+/* Field names, space separated, of each record (host builds: the Python wrapper checks them). */
+extern const char ecu_param_names[];
+extern const char ecu_state_names[];
+extern const char ecu_input_names[];
+extern const char ecu_output_names[];
+#endif
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* ECU_CORE_H */

@@ -1,0 +1,172 @@
+/*
+ * ecu_frames.c - E2E protection and the ECU's frames (see ecu_frames.h), mirroring
+ * protocol/e2e.py, protocol/codec.py and the frame handling of ecu/node.py.
+ */
+#include "ecu_frames.h"
+
+#include "generated/turbojet.h"
+
+#define COUNTER_MODULO 15 /* alive counter 0..14 */
+#define MAX_DELTA 2       /* counter step still OK (ecu/node.py: max_delta=2) */
+
+enum { RX_SENSORS, RX_ANALOG, RX_DEMAND };
+enum { TX_ACTUATOR, TX_STATUS, TX_TELEMETRY };
+
+static const uint16_t rx_data_id[3] = {4098u, 4099u, 4097u};
+static const uint16_t tx_data_id[3] = {4100u, 4101u, 4102u};
+
+void ecu_frames_init(ecu_frames_t *f)
+{
+    int k;
+    for (k = 0; k < 3; k++) {
+        f->rx_last[k] = -1;
+        f->tx_counter[k] = 0;
+    }
+    f->telemetry_index = 0;
+}
+
+static uint8_t crc8_byte(uint8_t crc, uint8_t byte)
+{
+    unsigned r = (unsigned)crc ^ byte;
+    int bit;
+    for (bit = 0; bit < 8; bit++) {
+        r = (r & 0x80u) ? (r << 1) ^ 0x1Du : r << 1;
+    }
+    return (uint8_t)r;
+}
+
+uint8_t ecu_e2e_crc(uint16_t data_id, const uint8_t data[8])
+{
+    uint8_t crc = crc8_byte(crc8_byte(0, (uint8_t)(data_id & 0xFFu)), (uint8_t)(data_id >> 8));
+    int k;
+    for (k = 1; k < 8; k++) {
+        crc = crc8_byte(crc, data[k]);
+    }
+    return crc;
+}
+
+static int e2e_check(ecu_frames_t *f, int kind, const uint8_t data[8])
+{
+    int counter = data[1] & 0x0F;
+    int status;
+    if (ecu_e2e_crc(rx_data_id[kind], data) != data[0] || counter >= COUNTER_MODULO) {
+        return ECU_E2E_WRONGCRC;
+    }
+    if (f->rx_last[kind] < 0) {
+        status = ECU_E2E_OK;
+    } else {
+        int delta = (counter - f->rx_last[kind] + COUNTER_MODULO) % COUNTER_MODULO;
+        if (delta == 0) {
+            return ECU_E2E_REPEATED;
+        }
+        status = delta <= MAX_DELTA ? ECU_E2E_OK : ECU_E2E_WRONGSEQUENCE;
+    }
+    f->rx_last[kind] = (int8_t)counter;
+    return status;
+}
+
+int ecu_frames_receive(ecu_frames_t *f, uint32_t frame_id, const uint8_t data[8],
+                       ecu_inputs_t *in, int32_t *demand_tick)
+{
+    int status;
+    if (frame_id == ECU_FRAME_SENSORS) {
+        struct turbojet_plant_sensors_t m;
+        status = e2e_check(f, RX_SENSORS, data);
+        if (status == ECU_E2E_OK) {
+            (void)turbojet_plant_sensors_unpack(&m, data, 8u);
+            in->tick = m.sensor_tick;
+            in->speed_rpm = (int32_t)m.shaft_speed;
+            in->egt_dk = m.egt;
+        }
+    } else if (frame_id == ECU_FRAME_ANALOG) {
+        struct turbojet_plant_analog_t m;
+        status = e2e_check(f, RX_ANALOG, data);
+        if (status == ECU_E2E_OK) {
+            (void)turbojet_plant_analog_unpack(&m, data, 8u);
+            in->supply_mv = m.supply_voltage;
+            in->pump_ma = m.pump_current;
+        }
+    } else if (frame_id == ECU_FRAME_DEMAND) {
+        struct turbojet_demand_t m;
+        status = e2e_check(f, RX_DEMAND, data);
+        if (status == ECU_E2E_OK) {
+            (void)turbojet_demand_unpack(&m, data, 8u);
+            in->arm = m.arm_request;
+            in->stop = m.stop_request;
+            in->demand_cpct = m.speed_demand;
+            in->open_loop_mv = m.pump_voltage_demand;
+            *demand_tick = m.demand_tick;
+        }
+    } else {
+        status = -1;
+    }
+    return status;
+}
+
+/* raw value into [lo, hi] (the DBC range; the codec saturates, never wraps) */
+static uint32_t sat_raw(int32_t x, int32_t lo, int32_t hi)
+{
+    return (uint32_t)(x < lo ? lo : (x > hi ? hi : x));
+}
+
+/* alive counter into byte 1, CRC into byte 0 */
+static void protect(ecu_frames_t *f, int kind, uint8_t data[8])
+{
+    data[1] = (uint8_t)((data[1] & 0xF0u) | f->tx_counter[kind]);
+    f->tx_counter[kind] = (uint8_t)(f->tx_counter[kind] + 1u < COUNTER_MODULO
+                                        ? f->tx_counter[kind] + 1u : 0u);
+    data[0] = ecu_e2e_crc(tx_data_id[kind], data);
+}
+
+void ecu_frames_actuator(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8])
+{
+    struct turbojet_ecu_actuator_t m;
+    (void)turbojet_ecu_actuator_init(&m);
+    m.pump_enable = (uint8_t)sat_raw(o->pump_enable, 0, 1);
+    m.actuator_mode = (uint8_t)sat_raw(o->mode, 0, 4);
+    m.actuator_tick = (uint16_t)sat_raw(o->tick, 0, 65535);
+    m.pump_duty = (uint16_t)sat_raw(o->duty_cpct, 0, 10000);
+    m.pump_voltage_target = (uint16_t)sat_raw(o->pump_mv, 0, 30000);
+    (void)turbojet_ecu_actuator_pack(data, &m, 8u);
+    protect(f, TX_ACTUATOR, data);
+}
+
+void ecu_frames_status(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8])
+{
+    struct turbojet_ecu_status_t m;
+    (void)turbojet_ecu_status_init(&m);
+    m.ecu_mode = (uint8_t)sat_raw(o->mode, 0, 4);
+    m.fault_word = (uint16_t)sat_raw(o->fault_word, 0, 65535);
+    m.pump_health = (uint16_t)sat_raw(o->pump_health_pm, 0, 4095);
+    m.loop_owner = (uint8_t)sat_raw(o->owner, 0, 4);
+    m.reference_speed = (uint16_t)sat_raw(o->nref_cpct, 0, 15000);
+    (void)turbojet_ecu_status_pack(data, &m, 8u);
+    protect(f, TX_STATUS, data);
+}
+
+void ecu_frames_telemetry(ecu_frames_t *f, const ecu_t *e, uint8_t data[8])
+{
+    struct turbojet_ecu_telemetry_t m;
+    const ecu_outputs_t *o = &e->o;
+    (void)turbojet_ecu_telemetry_init(&m);
+    m.telemetry_index = f->telemetry_index;
+    switch (f->telemetry_index) {
+    case 0: m.est_ap21 = o->ap21_q24; break;
+    case 1: m.est_ap22 = o->ap22_q24; break;
+    case 2: m.est_lambda = o->lambda_q24; break;
+    case 3: m.est_theta21 = o->theta21_q24; break;
+    case 4: m.est_theta22 = o->theta22_q24; break;
+    case 5: m.gain_kx1 = o->kx1_q24; break;
+    case 6: m.gain_kx2 = o->kx2_q24; break;
+    case 7: m.gain_kr = o->kr_q24; break;
+    case 8: m.gain_kf1 = o->kf1_q24; break;
+    case 9: m.gain_kf2 = o->kf2_q24; break;
+    case 10: m.est_speed_dev = e->s.obs_n_q24; break;
+    case 11: m.est_speed_rate = e->s.obs_v_q24; break;
+    default: m.saturation_count = (int32_t)sat_raw(o->sat_events, 0, INT32_MAX); break;
+    }
+    (void)turbojet_ecu_telemetry_pack(data, &m, 8u);
+    protect(f, TX_TELEMETRY, data);
+    f->telemetry_index = (uint8_t)(f->telemetry_index + 1u < ECU_TELEMETRY_COUNT
+                                       ? f->telemetry_index + 1u : 0u);
+}
