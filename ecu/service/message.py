@@ -15,6 +15,7 @@ from typing import Any
 
 import msgpack
 
+from ecu.service.crc import crc16
 from ecu.service.framing import MAX_PAYLOAD
 
 VERSION = 1
@@ -30,7 +31,7 @@ class Kind(IntEnum):
 
 class Service(IntEnum):
     IDENTIFY = 0x01  # -> firmware, build, protocol, parameter-set CRC, storage, counters
-    STREAM = 0x02  # {"rate_hz": r} (0 stops) -> {"rate_hz", "fields", "units"}; samples follow
+    STREAM = 0x02  # {"rate_hz": r} (0 stops) -> {"rate_hz", "every", "fields"}; samples follow
     COUNTERS = 0x03  # -> frame and request counters, service time per tick
     PARAM_INFO = 0x10  # {"index": i} -> one parameter's name, Q format, unit, limits, value
     PARAM_READ = 0x11  # {"name": n} -> {"name", "raw", "frac_bits", "value"}
@@ -56,6 +57,14 @@ class Status(IntEnum):
     INVALID = 8  # the parameter set as a whole is refused (ecu.params.validate)
     BAD_KEY = 9
     BUSY = 10  # a flash write is in progress
+
+
+UNLOCK_SECRET = b"turbojet-sil service"
+
+
+def unlock_key(seed: int) -> int:
+    """The key that answers an unlock seed (a guard against accidental writes, not security)."""
+    return crc16(seed.to_bytes(4, "big") + UNLOCK_SECRET)
 
 
 class MessageError(ValueError):

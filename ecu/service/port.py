@@ -1,0 +1,409 @@
+"""The ECU side of the service port, serviced once per control tick within a fixed budget.
+
+:meth:`ServicePort.poll` runs before each firmware tick, as a microcontroller's main loop would
+run its UART task: it reads at most ``MAX_RX_BYTES`` without waiting, handles at most
+``MAX_REQUESTS`` requests (further decoded ones wait in a short queue, beyond which they are
+dropped and counted), records rising fault bits in the fault log, queues a live-data sample when
+the stream is due, performs at most one flash operation of a parameter save, and hands at most
+``MAX_TX_BYTES`` to the line, which takes what it can without blocking. Frames that do not fit the
+transmit buffer are dropped and counted (stream samples first: they are never queued past half
+the buffer). The time each poll takes is measured; ``worst_s`` is the longest.
+
+Writes, saves, clearing the log and arming need an unlocked session: the tool asks for a seed
+and answers with :func:`ecu.service.message.unlock_key`; the session lasts ``SESSION_S`` of ECU
+time after the last request. A stop request is always accepted and holds the stop input until an
+arm request (or a power cycle).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import random
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from ecu import modes as M
+from ecu.firmware import Ecu, EcuInputs
+from ecu.params import EcuParams
+from ecu.service import fault_log as FL
+from ecu.service import live
+from ecu.service.framing import FrameDecoder, encode_frame
+from ecu.service.message import (
+    VERSION,
+    Kind,
+    Message,
+    MessageError,
+    Service,
+    Status,
+    pack,
+    unlock_key,
+    unpack,
+)
+from ecu.service.param_table import TABLE, ParamTable, WriteRefused
+from ecu.service.storage import FlashImage, SlotWriter
+from ecu.service.transport import Transport
+
+FIRMWARE = "turbojet-ecu 0.1"
+MAX_RX_BYTES = 512  # read per tick
+MAX_REQUESTS = 4  # handled per tick
+PENDING_MAX = 16  # decoded requests waiting for a later tick
+TX_BUFFER = 4096  # bytes of frames waiting for the line
+MAX_TX_BYTES = 1024  # handed to the line per tick
+SESSION_S = 10.0
+FAULT_PAGE = 4  # fault-log entries per response
+
+
+@cache
+def build_id() -> str:
+    """The firmware build: a digest of the ECU's sources (the same sources give the same id)."""
+    digest = hashlib.sha256()
+    for path in sorted(Path(__file__).resolve().parents[1].glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+@dataclass
+class Boot:
+    """The parameter set the ECU powers up with, and where it came from."""
+
+    table: ParamTable
+    flash: FlashImage | None = None
+    state: str = "none"  # none (no flash image), loaded, defaults (no valid slot)
+    slot: int | None = None
+    sequence: int | None = None
+    problems: list[str] = field(default_factory=list)
+
+
+def boot(params: EcuParams, flash_path: Path | None) -> Boot:
+    """Load the newest valid slot of the flash image over ``params``; defaults when none is."""
+    table = ParamTable(params)
+    if flash_path is None:
+        return Boot(table)
+    flash = FlashImage(flash_path)
+    slot = flash.newest()
+    if slot is None:
+        return Boot(table, flash, "defaults")
+    problems = table.load_image(slot.payload)
+    return Boot(table, flash, "loaded", slot.index, slot.sequence, problems)
+
+
+class ServiceError(Exception):
+    def __init__(self, status: Status, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass
+class Counters:
+    rx_bytes: int = 0
+    tx_bytes: int = 0
+    requests: int = 0
+    bad_messages: int = 0  # frames whose payload is not a message
+    unexpected: int = 0  # messages that are not requests
+    queue_overflow: int = 0  # requests dropped: too many waiting
+    tx_dropped: int = 0  # frames dropped: the transmit buffer was full
+    stream_samples: int = 0
+    polls: int = 0
+    worst_s: float = 0.0
+    total_s: float = 0.0
+
+
+def _arg(body: Any, name: str, kind: type | tuple[type, ...], default: Any = None) -> Any:
+    """A request's field, checked: BAD_REQUEST naming the field when missing or mistyped."""
+    value = body.get(name, default) if isinstance(body, dict) else default
+    if isinstance(value, bool) or not isinstance(value, kind):
+        what = "number" if isinstance(kind, tuple) else kind.__name__
+        raise ServiceError(Status.BAD_REQUEST, f"field '{name}' must be a {what}")
+    return value
+
+
+class ServicePort:
+    def __init__(
+        self,
+        transport: Transport,
+        ecu: Ecu,
+        boot_state: Boot,
+        *,
+        seed: int | None = None,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        self.transport = transport
+        self.ecu = ecu
+        self.boot = boot_state
+        self.table = boot_state.table
+        self.rate_hz = ecu.p.rate_hz
+        self.decoder = FrameDecoder()
+        self.counters = Counters()
+        self.fault_log = FL.FaultLog()
+        self._clock = clock
+        self._rng = random.Random(seed)
+        self._pending: deque[bytes] = deque()
+        self._tx = bytearray()
+        self._stream_every = 0
+        self._stream_seq = 0
+        self._seed: int | None = None
+        self._session_until = -1  # poll count until which the session is unlocked
+        self._stop_held = False
+        self._writer: SlotWriter | None = None
+        self._save_request: Message | None = None
+        self._handlers: dict[int, Callable[[Any], Any]] = {
+            Service.IDENTIFY: self._identify,
+            Service.STREAM: self._stream,
+            Service.COUNTERS: self._counters,
+            Service.PARAM_INFO: self._param_info,
+            Service.PARAM_READ: self._param_read,
+            Service.PARAM_WRITE: self._param_write,
+            Service.PARAM_SAVE: self._param_save,
+            Service.FAULT_LOG_READ: self._fault_log_read,
+            Service.FAULT_LOG_CLEAR: self._fault_log_clear,
+            Service.UNLOCK_SEED: self._unlock_seed,
+            Service.UNLOCK_KEY: self._unlock_key,
+            Service.ARM: self._arm,
+            Service.STOP: self._stop,
+        }
+        snapshot = self._snapshot()
+        if boot_state.state == "defaults":
+            self.fault_log.record(0, FL.PARAMS_DEFAULTS, snapshot)
+        if boot_state.problems:
+            self.fault_log.record(0, FL.PARAMS_REJECTED, snapshot)
+
+    # -- the per-tick task -------------------------------------------------------------------
+    def poll(self, inputs: EcuInputs) -> None:
+        """Service the port once, before the firmware tick that takes ``inputs``."""
+        t0 = self._clock()
+        c = self.counters
+        data = self.transport.read(MAX_RX_BYTES)
+        if data:
+            c.rx_bytes += len(data)
+            for payload in self.decoder.feed(data):
+                if len(self._pending) < PENDING_MAX:
+                    self._pending.append(payload)
+                else:
+                    c.queue_overflow += 1
+        for _ in range(min(MAX_REQUESTS, len(self._pending))):
+            self._handle(self._pending.popleft())
+        if self._stop_held:
+            inputs.stop = 1
+            self.ecu.s.stop = 1
+        ecu = self.ecu
+        self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot())
+        if self._stream_every and c.polls % self._stream_every == 0:
+            self._send_stream()
+        if self._writer is not None and self._writer.step():
+            self._save_done()
+        if self._tx:
+            n = self.transport.write(bytes(self._tx[:MAX_TX_BYTES]))
+            del self._tx[:n]
+            c.tx_bytes += n
+        c.polls += 1
+        dt = self._clock() - t0
+        c.total_s += dt
+        if dt > c.worst_s:
+            c.worst_s = dt
+
+    def _snapshot(self) -> tuple[int, ...]:
+        o = self.ecu.out
+        s = self.ecu.s
+        return (o.mode, o.fault_word, o.n_cpct, s.egt_dk, o.pump_mv, s.supply_mv, s.pump_ma)
+
+    # -- frames out --------------------------------------------------------------------------
+    def _queue(self, msg: Message, limit: int = TX_BUFFER) -> None:
+        frame = encode_frame(pack(msg))
+        if len(self._tx) + len(frame) > limit:
+            self.counters.tx_dropped += 1
+        else:
+            self._tx += frame
+
+    def _respond(self, request: Message, status: Status, body: Any) -> None:
+        self._queue(Message(Kind.RESPONSE, request.seq, request.service, status, body))
+
+    def _send_stream(self) -> None:
+        self._stream_seq = (self._stream_seq + 1) & 0xFFFF
+        msg = Message(
+            Kind.STREAM, self._stream_seq, Service.STREAM, Status.OK, live.sample(self.ecu)
+        )
+        self._queue(msg, TX_BUFFER // 2)
+        self.counters.stream_samples += 1
+
+    # -- requests ----------------------------------------------------------------------------
+    def _handle(self, payload: bytes) -> None:
+        c = self.counters
+        try:
+            msg = unpack(payload)
+        except MessageError:
+            c.bad_messages += 1
+            return
+        if msg.kind != Kind.REQUEST:
+            c.unexpected += 1
+            return
+        c.requests += 1
+        if msg.version != VERSION:
+            why = f"protocol version {msg.version} not supported (this ECU: {VERSION})"
+            self._respond(msg, Status.BAD_VERSION, {"error": why})
+            return
+        handler = self._handlers.get(msg.service)
+        if handler is None:
+            why = f"unknown service 0x{msg.service:02X}"
+            self._respond(msg, Status.UNKNOWN_SERVICE, {"error": why})
+            return
+        if self._unlocked():
+            self._session_until = c.polls + round(SESSION_S * self.rate_hz)
+        try:
+            body = handler(msg)
+        except ServiceError as exc:
+            self._respond(msg, exc.status, {"error": str(exc)})
+            return
+        if body is not None:
+            self._respond(msg, Status.OK, body)
+
+    def _unlocked(self) -> bool:
+        return self.counters.polls < self._session_until
+
+    def _need_session(self, what: str) -> None:
+        if not self._unlocked():
+            raise ServiceError(Status.LOCKED, f"{what} needs an unlocked session (seed and key)")
+
+    def _identify(self, msg: Message) -> dict:
+        b = self.boot
+        return {
+            "firmware": FIRMWARE,
+            "build": build_id(),
+            "protocol": VERSION,
+            "param_crc": self.table.crc(),
+            "params": len(TABLE),
+            "rate_hz": self.rate_hz,
+            "storage": b.state,
+            "slot": b.slot,
+            "sequence": b.sequence,
+        }
+
+    def _counters(self, msg: Message) -> dict:
+        c = self.counters
+        s = self.decoder.stats
+        return {
+            "rx_bytes": c.rx_bytes,
+            "tx_bytes": c.tx_bytes,
+            "frames": s.frames,
+            "malformed": s.malformed,
+            "crc_errors": s.crc_errors,
+            "oversized": s.oversized,
+            "bad_messages": c.bad_messages,
+            "unexpected": c.unexpected,
+            "queue_overflow": c.queue_overflow,
+            "tx_dropped": c.tx_dropped,
+            "stream_samples": c.stream_samples,
+            "polls": c.polls,
+            "worst_us": round(c.worst_s * 1e6, 1),
+        }
+
+    def _stream(self, msg: Message) -> dict:
+        rate = _arg(msg.body, "rate_hz", (int, float))
+        if not 0 <= rate <= self.rate_hz:
+            raise ServiceError(
+                Status.OUT_OF_RANGE, f"rate_hz={rate}: must be in 0..{self.rate_hz} (0 stops)"
+            )
+        self._stream_every = max(1, round(self.rate_hz / rate)) if rate > 0 else 0
+        actual = self.rate_hz / self._stream_every if self._stream_every else 0
+        return {"rate_hz": actual, "every": self._stream_every, "fields": len(live.FIELDS)}
+
+    def _param_info(self, msg: Message) -> dict:
+        index = _arg(msg.body, "index", int)
+        if not 0 <= index < len(TABLE):
+            raise ServiceError(Status.UNKNOWN_PARAM, f"index={index}: 0..{len(TABLE) - 1}")
+        spec = TABLE[index]
+        return {
+            "index": index,
+            "name": spec.name,
+            "unit": spec.unit,
+            "frac": spec.frac_bits,
+            "lo": spec.raw_lo,
+            "hi": spec.raw_hi,
+            "run_safe": spec.run_safe,
+            "raw": self.table.raw(spec.name),
+        }
+
+    def _spec_name(self, msg: Message) -> str:
+        name = _arg(msg.body, "name", str)
+        if name not in {s.name for s in TABLE}:
+            raise ServiceError(Status.UNKNOWN_PARAM, f"unknown parameter {name!r}")
+        return name
+
+    def _param_read(self, msg: Message) -> dict:
+        name = self._spec_name(msg)
+        return {"name": name, "raw": self.table.raw(name), "frac": self.table.spec(name).frac_bits}
+
+    def _param_write(self, msg: Message) -> dict:
+        name = self._spec_name(msg)
+        raw = _arg(msg.body, "raw", int)
+        self._need_session("writing a parameter")
+        try:
+            params, firmware = self.table.check_write(name, raw, self.ecu.out.mode == M.RUN)
+        except WriteRefused as exc:
+            raise ServiceError(Status[exc.reason], str(exc)) from None
+        self.table.commit(params, firmware)
+        self.ecu.p = firmware  # applies from the next tick
+        return {**self._param_read(msg), "param_crc": self.table.crc()}
+
+    def _param_save(self, msg: Message) -> None:
+        self._need_session("saving the parameters")
+        if self.boot.flash is None:
+            raise ServiceError(Status.INVALID, "no flash image (start the ECU with --flash FILE)")
+        if self._writer is not None:
+            raise ServiceError(Status.BUSY, "a save is in progress")
+        self._writer = self.boot.flash.writer(self.table.image())
+        self._save_request = msg  # answered when the last flash operation is done
+
+    def _save_done(self) -> None:
+        assert self._writer is not None and self._save_request is not None
+        slot = self._writer.slot
+        self.boot.state, self.boot.slot, self.boot.sequence = "loaded", slot.index, slot.sequence
+        body = {"slot": slot.index, "sequence": slot.sequence, "param_crc": self.table.crc()}
+        self._respond(self._save_request, Status.OK, body)
+        self._writer = None
+        self._save_request = None
+
+    def _fault_log_read(self, msg: Message) -> dict:
+        start = _arg(msg.body, "start", int, 0)
+        entries = list(self.fault_log.entries)
+        if not 0 <= start <= len(entries):
+            raise ServiceError(Status.OUT_OF_RANGE, f"start={start}: 0..{len(entries)}")
+        return {
+            "total": self.fault_log.total,
+            "count": len(entries),
+            "rate_hz": self.rate_hz,
+            "entries": [e.wire() for e in entries[start : start + FAULT_PAGE]],
+        }
+
+    def _fault_log_clear(self, msg: Message) -> dict:
+        self._need_session("clearing the fault log")
+        return {"cleared": self.fault_log.clear()}
+
+    def _unlock_seed(self, msg: Message) -> dict:
+        self._seed = self._rng.getrandbits(32)
+        return {"seed": self._seed}
+
+    def _unlock_key(self, msg: Message) -> dict:
+        key = _arg(msg.body, "key", int)
+        seed, self._seed = self._seed, None
+        if seed is None:
+            raise ServiceError(Status.BAD_REQUEST, "ask for a seed first (UNLOCK_SEED)")
+        if key != unlock_key(seed):
+            raise ServiceError(Status.BAD_KEY, "key does not match the seed; ask for a new seed")
+        self._session_until = self.counters.polls + round(SESSION_S * self.rate_hz)
+        return {"unlocked": True, "timeout_s": SESSION_S}
+
+    def _arm(self, msg: Message) -> dict:
+        self._need_session("arming")
+        self._stop_held = False
+        self.ecu.s.arm = 1
+        self.ecu.s.stop = 0
+        return {"mode": self.ecu.out.mode}
+
+    def _stop(self, msg: Message) -> dict:
+        self._stop_held = True
+        return {"mode": self.ecu.out.mode}

@@ -1,0 +1,198 @@
+"""A service-port client: requests with sequence numbers, a timeout and retries; live samples.
+
+The client speaks the protocol of :mod:`ecu.service.message` over any
+:mod:`ecu.service.transport` (a serial device, the pty the ECU printed, a pyserial URL). Stream
+samples that arrive while it waits for a response are kept in :attr:`ServiceClient.samples`.
+``idle`` is called while waiting (by default a 1 ms sleep); an in-process test passes a function
+that runs the ECU's ticks instead.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from ecu.modes import NAMES as MODE_NAMES
+from ecu.service import fault_log, live
+from ecu.service.framing import FrameDecoder, encode_frame
+from ecu.service.message import (
+    Kind,
+    Message,
+    MessageError,
+    Service,
+    Status,
+    pack,
+    unlock_key,
+    unpack,
+)
+from ecu.service.transport import Transport
+
+
+class ServiceRequestError(RuntimeError):
+    """The ECU refused a request; ``status`` says how, the message why."""
+
+    def __init__(self, service: Service, status: int, message: str) -> None:
+        name = Status(status).name if status in Status._value2member_map_ else str(status)
+        super().__init__(f"{service.name}: {name}: {message}")
+        self.status = status
+
+
+class ServiceTimeout(TimeoutError):
+    pass
+
+
+def _sleep() -> None:
+    time.sleep(0.001)
+
+
+class ServiceClient:
+    def __init__(
+        self,
+        transport: Transport,
+        *,
+        timeout_s: float = 1.0,
+        retries: int = 2,
+        idle: Callable[[], None] = _sleep,
+    ) -> None:
+        self.transport = transport
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.idle = idle
+        self.decoder = FrameDecoder()
+        self.samples: deque[list[int]] = deque(maxlen=10_000)
+        self.stream_seq: int | None = None
+        self.stream_gaps = 0  # stream samples lost (sequence numbers skipped)
+        self._seq = 0
+        self._specs: list[dict] | None = None
+
+    # -- transport ---------------------------------------------------------------------------
+    def _write_all(self, data: bytes) -> None:
+        deadline = time.monotonic() + self.timeout_s
+        while data:
+            n = self.transport.write(data)
+            data = data[n:]
+            if data:
+                if time.monotonic() > deadline:
+                    raise ServiceTimeout(f"{self.transport.name}: the line does not take data")
+                self.idle()
+
+    def receive(self) -> list[Message]:
+        """Read what has arrived: stream samples are kept, other messages returned."""
+        messages = []
+        for payload in self.decoder.feed(self.transport.read(65536)):
+            try:
+                msg = unpack(payload)
+            except MessageError:
+                continue
+            if msg.kind == Kind.STREAM and isinstance(msg.body, list):
+                if self.stream_seq is not None:
+                    self.stream_gaps += (msg.seq - self.stream_seq - 1) % 65536
+                self.stream_seq = msg.seq
+                self.samples.append(msg.body)
+            else:
+                messages.append(msg)
+        return messages
+
+    def request(self, service: Service, body: Any = None, timeout_s: float | None = None) -> Any:
+        """Send a request and return the body of its response; raise on refusal or timeout."""
+        self._seq = (self._seq + 1) & 0xFFFF
+        seq = self._seq
+        frame = encode_frame(pack(Message(Kind.REQUEST, seq, service, Status.OK, body)))
+        wait = self.timeout_s if timeout_s is None else timeout_s
+        for _ in range(self.retries + 1):
+            self._write_all(frame)
+            deadline = time.monotonic() + wait
+            while time.monotonic() < deadline:
+                self.idle()
+                for msg in self.receive():
+                    if msg.kind == Kind.RESPONSE and msg.seq == seq and msg.service == service:
+                        if msg.status != Status.OK:
+                            error = msg.body.get("error") if isinstance(msg.body, dict) else None
+                            raise ServiceRequestError(service, msg.status, str(error))
+                        return msg.body
+        raise ServiceTimeout(
+            f"{self.transport.name}: no answer to {service.name} within {wait:g} s "
+            f"({self.retries + 1} tries)"
+        )
+
+    # -- services ----------------------------------------------------------------------------
+    def identify(self) -> dict:
+        return self.request(Service.IDENTIFY)
+
+    def counters(self) -> dict:
+        return self.request(Service.COUNTERS)
+
+    def stream(self, rate_hz: float) -> dict:
+        self.stream_seq = None
+        return self.request(Service.STREAM, {"rate_hz": rate_hz})
+
+    def latest(self) -> dict[str, float] | None:
+        """The newest live sample in engineering units."""
+        if not self.samples:
+            return None
+        return live.decode(self.samples[-1])
+
+    def unlock(self) -> None:
+        seed = self.request(Service.UNLOCK_SEED)["seed"]
+        self.request(Service.UNLOCK_KEY, {"key": unlock_key(seed)})
+
+    def params(self) -> list[dict]:
+        """Every parameter with its Q format, unit, limits, run safety and value."""
+        if self._specs is None:
+            count = self.identify()["params"]
+            self._specs = [self.request(Service.PARAM_INFO, {"index": i}) for i in range(count)]
+            for spec in self._specs:
+                scale = 1.0 / (1 << spec["frac"])
+                spec["min"], spec["max"] = spec["lo"] * scale, spec["hi"] * scale
+        out = []
+        for spec in self._specs:
+            value = self.get(spec["name"])
+            out.append({**spec, "raw": value["raw"], "value": value["value"]})
+        return out
+
+    def get(self, name: str) -> dict:
+        r = self.request(Service.PARAM_READ, {"name": name})
+        return {**r, "value": r["raw"] / (1 << r["frac"])}
+
+    def set(self, name: str, value: float) -> dict:
+        """Write a parameter in engineering units (rounded to its Q format); unlocks first."""
+        frac = self.get(name)["frac"]
+        self.unlock()
+        r = self.request(Service.PARAM_WRITE, {"name": name, "raw": round(value * (1 << frac))})
+        return {**r, "value": r["raw"] / (1 << r["frac"])}
+
+    def save(self) -> dict:
+        self.unlock()
+        return self.request(Service.PARAM_SAVE)
+
+    def faults(self) -> list[dict]:
+        """The fault log, oldest first, with names and snapshots in their units."""
+        entries: list[list] = []
+        while True:
+            page = self.request(Service.FAULT_LOG_READ, {"start": len(entries)})
+            entries += page["entries"]
+            if not page["entries"] or len(entries) >= page["count"]:
+                break
+        rate = page["rate_hz"]
+        return [
+            {
+                "time_s": tick / rate,
+                "code": code,
+                "name": fault_log.code_name(code),
+                "snapshot": dict(zip(fault_log.SNAPSHOT_FIELDS, snap, strict=True)),
+            }
+            for tick, code, snap in entries
+        ]
+
+    def clear_faults(self) -> int:
+        self.unlock()
+        return self.request(Service.FAULT_LOG_CLEAR)["cleared"]
+
+    def arm(self) -> str:
+        self.unlock()
+        return MODE_NAMES[self.request(Service.ARM)["mode"]]
+
+    def stop(self) -> str:
+        return MODE_NAMES[self.request(Service.STOP)["mode"]]

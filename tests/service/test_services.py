@@ -1,0 +1,182 @@
+"""Every service over loop:// against independent expectations; bad input is counted, never
+fatal; the port's work per tick is bounded."""
+
+import crcmod.predefined
+import msgpack
+import pytest
+from cobs import cobs
+
+from ecu import faults as F
+from ecu import modes as M
+from ecu.params import EcuParams, compile_params
+from ecu.service import fault_log, live
+from ecu.service.framing import MAX_ENCODED, encode_frame
+from ecu.service.message import Kind, Message, Service, Status, pack, unpack
+from ecu.service.param_table import TABLE
+from ecu.service.port import MAX_REQUESTS, MAX_RX_BYTES, PENDING_MAX
+from sil.console.client import ServiceRequestError
+
+CRC = crcmod.predefined.mkCrcFun("crc-ccitt-false")
+
+
+def _expected_set_crc(p: EcuParams) -> int:
+    """The stored set's CRC computed from the parameter record itself."""
+    values = {}
+    for spec in TABLE:
+        v = getattr(p, spec.field)
+        v = v if spec.element is None else v[spec.element]
+        values[spec.name] = round(float(v) * 2**spec.frac_bits)
+    return CRC(msgpack.packb(values))
+
+
+def test_identify(rig):
+    ident = rig.client.identify()
+    assert ident["firmware"].startswith("turbojet-ecu")
+    assert len(ident["build"]) == 12 and ident["protocol"] == 1
+    assert ident["param_crc"] == _expected_set_crc(EcuParams())
+    assert (ident["params"], ident["rate_hz"], ident["storage"]) == (len(TABLE), 100, "none")
+
+
+def test_read_parameters_with_q_format_units_and_limits(rig):
+    assert rig.client.get("pid_kp") == {"name": "pid_kp", "raw": 2 << 24, "frac": 24, "value": 2.0}
+    egt = rig.client.get("egt_limit_k")
+    assert (egt["raw"], egt["frac"]) == (1280 << 16, 16)
+    table = {p["name"]: p for p in rig.client.params()}
+    assert len(table) == len(TABLE)
+    assert table["gamma_x[1]"]["value"] == pytest.approx(0.1, abs=2**-24)
+    assert (table["trim_v"]["unit"], table["trim_v"]["run_safe"]) == ("V", False)
+    assert (table["trim_v"]["min"], table["trim_v"]["max"]) == (1.0, 25.0)
+    with pytest.raises(ServiceRequestError, match="UNKNOWN_PARAM: unknown parameter 'nope'"):
+        rig.client.get("nope")
+
+
+def test_write_needs_the_unlock_and_is_range_checked(rig):
+    c = rig.client
+    with pytest.raises(ServiceRequestError, match="LOCKED"):
+        c.request(Service.PARAM_WRITE, {"name": "pid_kp", "raw": 3 << 24})
+    seed = c.request(Service.UNLOCK_SEED)["seed"]
+    with pytest.raises(ServiceRequestError, match="BAD_KEY"):
+        c.request(Service.UNLOCK_KEY, {"key": (CRC(seed.to_bytes(4, "big")) + 1) & 0xFFFF})
+    with pytest.raises(ServiceRequestError, match="BAD_REQUEST: ask for a seed first"):
+        c.request(Service.UNLOCK_KEY, {"key": 0})
+    with pytest.raises(
+        ServiceRequestError, match=r"OUT_OF_RANGE: pid_kp=25 V/%N: outside .*\[0, 20\]"
+    ):
+        c.set("pid_kp", 25.0)
+    with pytest.raises(ServiceRequestError, match="INVALID: v_max: .*trim_v"):
+        c.set("v_max", 10.0)  # below the trim voltage 11.56 V: the set's own check names it
+    with pytest.raises(ServiceRequestError, match="BAD_REQUEST: field 'raw' must be a int"):
+        c.request(Service.PARAM_WRITE, {"name": "pid_kp", "raw": 1.5})
+    r = c.set("pid_kp", 3.25)
+    assert r["raw"] == round(3.25 * 2**24) and r["param_crc"] == c.identify()["param_crc"]
+    expected = compile_params(EcuParams(pid_kp=3.25))
+    assert rig.ecu.p.pid_kp_q24 == expected.pid_kp_q24  # the firmware runs with it
+    assert c.identify()["param_crc"] == _expected_set_crc(EcuParams(pid_kp=3.25))
+
+
+def test_unsafe_parameters_are_refused_in_run(rig):
+    rig.engine_running()
+    rig.ticks(3)
+    assert rig.ecu.out.mode == M.RUN
+    with pytest.raises(ServiceRequestError, match="REFUSED_IN_RUN: trim_v: unsafe"):
+        rig.client.set("trim_v", 12.0)
+    assert rig.client.set("egt_limit_k", 1250.0)["value"] == 1250.0  # run-safe
+    assert rig.ecu.p.egt_limit_dk == 12500
+
+
+def test_stream_at_50_hz_decodes_to_the_ecu_outputs(rig):
+    rig.engine_running()
+    answer = rig.client.stream(50)
+    assert answer == {"rate_hz": 50.0, "every": 2, "fields": len(live.FIELDS)}
+    rig.client.samples.clear()
+    for _ in range(100):
+        rig.tick()
+        rig.client.receive()
+    assert len(rig.client.samples) == 50 and rig.client.stream_gaps == 0
+    last = rig.client.latest()
+    o = rig.ecu.out
+    # the sample of a poll describes the tick before it
+    assert last["mode"] == M.RUN and last["speed_rpm"] == 100_890
+    assert last["lambda"] == pytest.approx(o.lambda_q24 / 2**24, abs=1e-5)
+    assert last["egt"] == pytest.approx(1048.0)
+    rig.client.stream(0)
+    rig.client.samples.clear()
+    rig.ticks(10)
+    rig.client.receive()
+    assert not rig.client.samples
+    with pytest.raises(ServiceRequestError, match="OUT_OF_RANGE: rate_hz=500"):
+        rig.client.stream(500)
+
+
+def test_fault_log_read_and_clear(rig):
+    rig.ticks(2)  # no sensor frames: SENSOR_FRAME_LOST rises
+    rig.engine_running()
+    rig.i.speed_rpm = 200_000  # out of range, persistent: SPEED_RANGE
+    rig.ticks(10)
+    entries = rig.client.faults()
+    names = [e["name"] for e in entries]
+    assert names[0] == "SENSOR_FRAME_LOST" and "SPEED_RANGE" in names
+    hit = entries[names.index("SPEED_RANGE")]
+    assert hit["snapshot"]["fault_word"] & F.SPEED_RANGE
+    assert hit["time_s"] > 0 and set(hit["snapshot"]) == set(fault_log.SNAPSHOT_FIELDS)
+    with pytest.raises(ServiceRequestError, match="LOCKED"):
+        rig.client.request(Service.FAULT_LOG_CLEAR)
+    assert rig.client.clear_faults() == len(entries)
+    assert rig.client.faults() == []
+
+
+def test_stop_holds_until_arm(rig):
+    rig.engine_running()
+    rig.ticks(2)
+    assert rig.ecu.out.mode == M.RUN
+    rig.client.stop()
+    rig.ticks(300)  # the demand frames keep asking for arm and no stop
+    assert rig.ecu.out.mode == M.SHUTDOWN
+    rig.i.speed_rpm = 5_000  # spooled down
+    rig.i.arm = 0  # the arm switch released: SHUTDOWN -> OFF
+    rig.ticks(5)
+    rig.i.arm = 1  # armed again by the demand frames: the held stop keeps the ECU in OFF
+    rig.ticks(50)
+    assert rig.ecu.out.mode == M.OFF
+    with pytest.raises(ServiceRequestError, match="LOCKED: arming"):
+        rig.client.request(Service.ARM)
+    rig.client.arm()
+    rig.i.stop = 0  # the next demand frame's own stop bit (the held stop had set the input)
+    rig.ticks(2)
+    assert rig.ecu.out.mode == M.ARMED  # armed, waiting for the starter
+
+
+def test_bad_frames_are_counted_and_the_port_keeps_answering(rig):
+    t = rig.transport
+    payload = pack(Message(Kind.REQUEST, 9, Service.IDENTIFY))
+    bad_crc = b"\x00" + cobs.encode(payload + ((CRC(payload) ^ 1).to_bytes(2, "big"))) + b"\x00"
+    t.write(bad_crc + b"\x00\x05\x00" + b"\x11" * (MAX_ENCODED + 5) + b"\x00")
+    t.write(encode_frame(b"\x01\x01"))  # shorter than a header
+    t.write(encode_frame(pack(Message(Kind.RESPONSE, 1, Service.IDENTIFY))))  # not a request
+    t.write(encode_frame(pack(Message(Kind.REQUEST, 3, Service.IDENTIFY, version=9))))
+    t.write(encode_frame(pack(Message(Kind.REQUEST, 4, 0x7F))))
+    replies = []
+    for _ in range(4):
+        rig.tick()
+        replies += [unpack(p) for p in rig.client.decoder.feed(t.read(4096))]
+    assert [(m.seq, m.status) for m in replies] == [
+        (3, Status.BAD_VERSION),
+        (4, Status.UNKNOWN_SERVICE),
+    ]
+    counters = rig.client.counters()
+    assert (counters["crc_errors"], counters["malformed"], counters["oversized"]) == (1, 1, 1)
+    assert (counters["bad_messages"], counters["unexpected"]) == (1, 1)
+
+
+def test_work_per_tick_is_bounded(rig):
+    frame = encode_frame(pack(Message(Kind.REQUEST, 1, Service.IDENTIFY)))
+    burst = frame * 60
+    rig.transport.write(burst)
+    rig.port.poll(rig.i)
+    c = rig.port.counters
+    assert c.rx_bytes == MAX_RX_BYTES
+    assert c.requests == MAX_REQUESTS
+    decoded = MAX_RX_BYTES // len(frame)
+    assert len(rig.port._pending) == min(PENDING_MAX, decoded) - MAX_REQUESTS
+    assert c.queue_overflow == max(0, decoded - PENDING_MAX)
+    assert rig.port.counters.worst_s < 0.05
