@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass, field, fields
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -151,6 +152,7 @@ class Scenario:
         return int(round(self.duration_s * self.ecu_rate_hz))
 
 
+@lru_cache(maxsize=1)
 def fault_targets() -> tuple[str, ...]:
     """Fault names, from the FaultTarget value table of the DBC."""
     message = load_database().get_message_by_name("FaultInject")
@@ -283,19 +285,24 @@ def _integer(r: _Reader, key: str, default: int, lo: int, hi: int) -> int:
     return value
 
 
+@lru_cache(maxsize=1)
+def _message_ids() -> dict[str, int]:
+    return {m.name: m.frame_id for m in load_database().messages}
+
+
 def _frame_ids(r: _Reader, key: str) -> tuple[int, ...]:
-    db = load_database()
+    by_name = _message_ids()
     value = r.get(key, [])
     if not isinstance(value, list):
         raise r.fail(key, "a list of message names or frame IDs", value)
     ids = []
     for item in value:
-        if isinstance(item, str) and item in {m.name for m in db.messages}:
-            ids.append(db.get_message_by_name(item).frame_id)
+        if isinstance(item, str) and item in by_name:
+            ids.append(by_name[item])
         elif isinstance(item, int) and not isinstance(item, bool) and 0 <= item <= 0x7FF:
             ids.append(item)
         else:
-            names = ", ".join(m.name for m in db.messages)
+            names = ", ".join(by_name)
             raise r.fail(key, f"message names ({names}) or 11-bit frame IDs", item)
     return tuple(ids)
 

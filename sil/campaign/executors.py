@@ -1,0 +1,193 @@
+"""Run a campaign's cases on a local process pool or a Dask cluster; results stream into one
+CSV table (``results.csv``) as runs finish, so an interrupted campaign resumes where it stopped.
+
+A case that raises is recorded as failed with its error and the campaign goes on. A case counts
+as done when the table has a row with its run ID and content digest (a changed campaign file
+reruns the cases it changed).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import sys
+import time
+import traceback
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from sil.campaign.spec import Campaign, Case, Invariants
+
+FIGURES = (
+    "ticks", "wall_s", "tracking_rms_pct", "max_n_pct", "max_egt_K", "egt_limit_time_s",
+    "pump_v_min", "pump_v_max", "final_mode", "fault_bits", "stalls",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Task:
+    run_id: str
+    scenario_toml: str
+    base_dir: str
+    invariants: Invariants
+
+
+def run_task(task: Task) -> dict:
+    """One case in a worker: its row of the table (never raises)."""
+    from sil import scenario as scenarios
+    from sil.campaign.case import run_case
+    from sil.campaign.invariants import check
+
+    row: dict = {"run_id": task.run_id}
+    try:
+        s = scenarios.parse(task.scenario_toml, task.run_id, Path(task.base_dir))
+        fig, detections, violations = check(run_case(s), task.invariants)
+        row.update(fig, status="completed", error="", detections=json.dumps(detections))
+        row.update(violations="; ".join(violations), n_violations=len(violations))
+    except Exception as exc:  # a crashing run is recorded, the campaign goes on
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        row.update(status="failed", error=f"{type(exc).__name__}: {exc} ({where.filename}:"
+                   f"{where.lineno})")  # fmt: skip
+    return row
+
+
+def columns(campaign: Campaign) -> list[str]:
+    return [
+        "run_id", "digest", "sample", *campaign.axes, "status", "error", *FIGURES,
+        "n_violations", "violations", "detections",
+    ]  # fmt: skip
+
+
+class Table:
+    """results.csv: read what is done, append rows as they come (flushed each time)."""
+
+    def __init__(self, path: Path, campaign: Campaign) -> None:
+        self.path = path
+        self.fields = columns(campaign)
+        self.done: set[tuple[str, str]] = set()
+        if path.exists() and path.stat().st_size:
+            with path.open(newline="") as f:
+                reader = csv.DictReader(f)
+                if reader.fieldnames != self.fields:
+                    raise ValueError(
+                        f"{path}: written by another campaign layout (columns differ); "
+                        "use another --out or remove it"
+                    )
+                self.done = {(r["run_id"], r["digest"]) for r in reader}
+            self._file = path.open("a", newline="")
+            self._writer = csv.DictWriter(self._file, self.fields)
+        else:
+            self._file = path.open("w", newline="")
+            self._writer = csv.DictWriter(self._file, self.fields)
+            self._writer.writeheader()
+
+    def add(self, case: Case, row: dict) -> None:
+        out = {"digest": case.digest, "sample": case.sample, **case.values, **row}
+        self._writer.writerow({k: _cell(out.get(k, "")) for k in self.fields})
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _cell(v: object) -> object:
+    if isinstance(v, float) and math.isnan(v):
+        return ""
+    return v
+
+
+def _local(tasks: list[Task], workers: int) -> Iterator[dict]:
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(run_task, t) for t in tasks]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        except BaseException:
+            for future in futures:
+                future.cancel()
+            raise
+
+
+def _dask(tasks: list[Task], workers: int, scheduler: str | None) -> Iterator[dict]:
+    from dask.distributed import Client, LocalCluster
+    from dask.distributed import as_completed as dask_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        futures = client.map(run_task, tasks, pure=False)
+        for _, row in dask_completed(futures, with_results=True):
+            yield row
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+@dataclass
+class Outcome:
+    total: int
+    skipped: int
+    completed: int
+    failed: int
+    violations: int
+    wall_s: float
+
+    @property
+    def runs_per_min(self) -> float:
+        ran = self.completed + self.failed
+        return 60.0 * ran / self.wall_s if self.wall_s > 0 and ran else math.nan
+
+
+def execute(
+    campaign: Campaign,
+    out: Path,
+    *,
+    executor: str = "local",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+) -> Outcome:
+    """Run the cases not yet in ``out/results.csv``; write each case's scenario file."""
+    from tqdm import tqdm
+
+    scen_dir = out / "scenarios"
+    scen_dir.mkdir(parents=True, exist_ok=True)
+    for case in campaign.cases:
+        (scen_dir / f"{case.run_id}.toml").write_text(case.scenario_toml)
+    table = Table(out / "results.csv", campaign)
+    todo = [c for c in campaign.cases if (c.run_id, c.digest) not in table.done]
+    by_id = {c.run_id: c for c in todo}
+    base_dir = str(campaign.path.parent.resolve())
+    tasks = [Task(c.run_id, c.scenario_toml, base_dir, campaign.invariants) for c in todo]
+    workers = workers or os.cpu_count() or 1
+    outcome = Outcome(len(campaign.cases), len(campaign.cases) - len(todo), 0, 0, 0, 0.0)
+    bar = tqdm(total=len(todo), desc=campaign.name, unit="run", disable=not progress,
+               file=sys.stderr, smoothing=0.05)  # fmt: skip
+    t0 = time.perf_counter()
+    try:
+        rows = _dask(tasks, workers, scheduler) if executor == "dask" else _local(tasks, workers)
+        for row in rows:
+            table.add(by_id[row["run_id"]], row)
+            if row["status"] == "failed":
+                outcome.failed += 1
+            else:
+                outcome.completed += 1
+                outcome.violations += row["n_violations"] > 0
+            bar.set_postfix(failed=outcome.failed, violating=outcome.violations, refresh=False)
+            bar.update()
+    finally:
+        outcome.wall_s = time.perf_counter() - t0
+        bar.close()
+        table.close()
+    return outcome

@@ -1,0 +1,126 @@
+"""Figures and invariants of one case, from its probe and the injector's log.
+
+Invariants (thresholds in the campaign's ``[invariants]``):
+- ``overspeed``: the true speed never above ``max_speed_pct``;
+- ``egt``: the true EGT never above the ECU's EGT limit plus ``egt_margin_K``;
+- ``pump_command``: the pump voltage the ECU commands within [0, v_max], and within
+  [v_min, v_max] while it runs;
+- per ``[[bus_fault]]`` with expectations: ``detect`` (every corrupted frame rejected by its
+  receiver for "E2E", else the fault bit seen in EcuStatus within ``within_ticks`` of the
+  window's start), ``fallback`` (the ECU mode reached from the window's start on) and
+  ``recover`` (the detected bit clear again within ``recover_within_ticks`` of the window's end).
+A fault that a corrupted frame slips through is counted as missed, never waved through.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ecu import faults as ecu_faults
+from ecu import modes as ecu_modes
+from sil.busfault.spec import E2E_KINDS
+from sil.campaign.case import CaseRun
+from sil.campaign.spec import Invariants
+
+BIT = {name: bit for bit, name in ecu_faults.NAMES.items()}
+OWNER_EGT = 1
+
+
+def _rms(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
+
+
+def figures(r: CaseRun) -> dict:
+    p = r.probe
+    n, egt, mode = r.column("n_pct"), r.column("egt_k"), r.column("mode")
+    v, words = r.column("pump_v"), r.column("fault_word")
+    seen = int(np.bitwise_or.reduce(words)) if words.size else 0
+    return {
+        "ticks": p.tick,
+        "wall_s": r.wall_s,
+        "tracking_rms_pct": _rms(r.column("speed_pct") - r.column("ref_pct")),
+        "max_n_pct": float(n.max()) if n.size else math.nan,
+        "max_egt_K": float(egt.max()) if egt.size else math.nan,
+        "egt_limit_time_s": float(np.sum(r.column("owner") == OWNER_EGT)) / r.scenario.ecu_rate_hz,
+        "pump_v_min": float(v.min()) if v.size else math.nan,
+        "pump_v_max": float(v.max()) if v.size else math.nan,
+        "final_mode": ecu_modes.NAMES[int(mode[-1])] if mode.size else "",
+        "fault_bits": " ".join(
+            ecu_faults.names(seen & ~(ecu_faults.LIMITER_ACTIVE | ecu_faults.PUMP_SATURATED))
+        ),
+        "stalls": sum(r.stalls.values()),
+    }
+
+
+def _detections(r: CaseRun) -> list[dict]:
+    """Per bus fault: what was injected and what the ECU made of it."""
+    rate = r.scenario.ecu_rate_hz
+    words, mode = r.column("fault_word"), r.column("mode")
+    out = []
+    for index, f in enumerate(r.scenario.bus_faults):
+        start, end = f.window(rate)
+        events = [e for e in r.bus_events if e["fault"] == index]
+        e = f.expect
+        d: dict = {"fault": index, "kind": f.kind, "start_s": start / rate, "frames": len(events)}
+        if e.detect == "E2E":
+            corrupted = [ev for ev in events if ev["kind"] in E2E_KINDS and "e2e" in ev]
+            missed = sum(ev["e2e"] == "OK" for ev in corrupted)
+            d.update(expected="E2E", caught=len(corrupted) - missed, missed=missed)
+            d["detected"] = (missed == 0) if corrupted else None  # None: nothing corrupted
+            d["detect_ticks"] = 0 if d["detected"] else None
+        elif e.detect is not None:
+            hits = np.flatnonzero(words[start:] & BIT[e.detect])
+            d.update(expected=e.detect)
+            d["detect_ticks"] = int(hits[0]) if hits.size else None
+            d["detected"] = hits.size > 0 and hits[0] <= (e.within_ticks or 0)
+            if e.recover_within_ticks is not None:
+                clear = np.flatnonzero((words[end:] & BIT[e.detect]) == 0)
+                d["recover_ticks"] = int(clear[0]) if clear.size else None
+                d["recovered"] = clear.size > 0 and clear[0] <= e.recover_within_ticks
+        if e.fallback_mode is not None:
+            want = ecu_modes.NAMES.index(e.fallback_mode)
+            hits = np.flatnonzero(mode[start:] == want)
+            d["fallback_ticks"] = int(hits[0]) if hits.size else None
+            d["fallback"] = hits.size > 0
+        out.append(d)
+    return out
+
+
+def check(r: CaseRun, inv: Invariants) -> tuple[dict, list[dict], list[str]]:
+    """(figures, bus fault detections, violations) of a case."""
+    fig = figures(r)
+    params = r.params
+    violations = []
+    if fig["ticks"] < r.ticks:
+        violations.append(f"run ended early: {fig['ticks']} of {r.ticks} ticks")
+    if fig["max_n_pct"] > inv.max_speed_pct:
+        violations.append(f"overspeed: {fig['max_n_pct']:.2f} %N > {inv.max_speed_pct:g} %N")
+    egt_cap = params.egt_limit_k + inv.egt_margin_K
+    if fig["max_egt_K"] > egt_cap:
+        violations.append(f"egt: {fig['max_egt_K']:.1f} K > {egt_cap:g} K")
+    v, mode = r.column("pump_v"), r.column("mode")
+    running = mode == ecu_modes.RUN
+    tol = 0.0015  # the frame's 1 mV resolution and rounding
+    if (
+        (v < -tol).any()
+        or (v > params.v_max + tol).any()
+        or (running.any() and (v[running] < params.v_min - tol).any())
+    ):
+        violations.append(
+            f"pump_command: {fig['pump_v_min']:.3f}..{fig['pump_v_max']:.3f} V outside "
+            f"[{params.v_min:g}, {params.v_max:g}] V"
+        )
+    detections = _detections(r)
+    if inv.check_faults:
+        for d in detections:
+            name = f"bus_fault[{d['fault']}] {d['kind']}"
+            if d.get("detected") is False:
+                violations.append(f"{name}: not detected ({d['expected']}) in time")
+            if d.get("fallback") is False:
+                violations.append(f"{name}: fallback mode not reached")
+            if d.get("recovered") is False:
+                violations.append(f"{name}: did not recover in time")
+    return fig, detections, violations

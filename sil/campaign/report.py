@@ -1,0 +1,221 @@
+"""The campaign report: ``report.md`` with PNG plots, from ``results.csv``.
+
+- tracking RMS per controller across the engine variation (percentiles, the nominal engine's,
+  and the targets: MRAC 95th percentile within 2x its nominal, MRAC median below the PID's);
+- per bus fault class: detection rate, time to detect, fallback and recovery;
+- invariant violations and failures, each with the ``sil run`` line that reproduces the run.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shlex
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+CONTROLLER = "controller.kind"
+
+
+def load(path: Path) -> list[dict]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _float(v: str) -> float:
+    try:
+        return float(v)
+    except ValueError:
+        return math.nan
+
+
+def repro(out: Path, run_id: str) -> str:
+    """The command line that reruns a case with full recording (can.log, trace, plots)."""
+    scenario = out / "scenarios" / f"{run_id}.toml"
+    return shlex.join(
+        ["sil", "run", str(scenario), "--mode", "inproc", "--out", str(out / "repro" / run_id)]
+    )
+
+
+def _pct(x: np.ndarray, q: float) -> float:
+    return float(np.percentile(x, q)) if x.size else math.nan
+
+
+def tracking(rows: list[dict]) -> dict[str, dict]:
+    """Per controller: tracking RMS percentiles over the varied engines, and the nominal's."""
+    out: dict[str, dict] = {}
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        if r["status"] == "completed":
+            groups[r.get(CONTROLLER) or "base"].append(r)
+    for name, rs in sorted(groups.items()):
+        varied = np.array([_float(r["tracking_rms_pct"]) for r in rs if r["sample"] != "-1"])
+        varied = varied[np.isfinite(varied)]
+        nominal = [_float(r["tracking_rms_pct"]) for r in rs if r["sample"] == "-1"]
+        out[name] = {
+            "runs": int(varied.size),
+            "nominal": nominal[0] if nominal else math.nan,
+            **{f"p{q}": _pct(varied, q) for q in (5, 50, 95)},
+            "max": float(varied.max()) if varied.size else math.nan,
+            "values": varied,
+        }
+    return out
+
+
+def detection(rows: list[dict]) -> dict[str, dict]:
+    """Per bus fault class (kind and expectation): runs, detection, fallback, recovery."""
+    classes: dict[str, dict] = {}
+    for r in rows:
+        if r["status"] != "completed" or not r["detections"]:
+            continue
+        for d in json.loads(r["detections"]):
+            key = f"{r.get('variant') or d['kind']} ({d['kind']}"
+            key += f", {d['expected']})" if "expected" in d else ")"
+            c = classes.setdefault(
+                key, {"runs": 0, "detected": 0, "judged": 0, "ticks": [], "fallback": [],
+                      "recovered": [], "caught": 0, "missed": 0}
+            )  # fmt: skip
+            c["runs"] += 1
+            if d.get("detected") is not None:
+                c["judged"] += 1
+                c["detected"] += bool(d["detected"])
+            if d.get("detect_ticks") is not None:
+                c["ticks"].append(d["detect_ticks"])
+            c["caught"] += d.get("caught", 0)
+            c["missed"] += d.get("missed", 0)
+            if "fallback" in d:
+                c["fallback"].append(bool(d["fallback"]))
+            if "recovered" in d:
+                c["recovered"].append(bool(d["recovered"]))
+    return classes
+
+
+def _plots(rows: list[dict], track: dict, classes: dict, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = []
+    if any(t["runs"] for t in track.values()):
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        hi = max(float(t["values"].max()) for t in track.values() if t["runs"])
+        bins = np.linspace(0.0, hi * 1.02, 50)
+        for name, t in track.items():
+            if t["runs"]:
+                ax.hist(t["values"], bins=bins, alpha=0.55, label=f"{name} ({t['runs']} engines)")
+                if math.isfinite(t["nominal"]):
+                    ax.axvline(t["nominal"], ls="--", lw=1, color=ax.patches[-1].get_facecolor())
+        ax.set_xlabel("tracking RMS against the reference model [%N]")
+        ax.set_ylabel("runs")
+        ax.set_title("Tracking error across engine variation (dashed: nominal engine)")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(out / "tracking_rms.png", dpi=110)
+        plt.close(fig)
+        names.append("tracking_rms.png")
+    ticks = {k: c["ticks"] for k, c in classes.items() if c["ticks"]}
+    if ticks:
+        fig, ax = plt.subplots(figsize=(8, 0.6 + 0.5 * len(ticks)))
+        ax.boxplot(list(ticks.values()), vert=False, labels=list(ticks))
+        ax.set_xlabel("time to detect [ECU periods from the fault's start]")
+        ax.set_title("Time to detect per bus fault class")
+        fig.tight_layout()
+        fig.savefig(out / "time_to_detect.png", dpi=110)
+        plt.close(fig)
+        names.append("time_to_detect.png")
+    return names
+
+
+def _fmt(x: float, spec: str = ".3f") -> str:
+    return format(x, spec) if math.isfinite(x) else "-"
+
+
+def write(out: Path, title: str, speed: dict | None = None) -> Path:
+    """report.md (and plots) in ``out`` from ``out/results.csv``; ``speed``: runs/min etc."""
+    rows = load(out / "results.csv")
+    track, classes = tracking(rows), detection(rows)
+    plots = _plots(rows, track, classes, out)
+    done = [r for r in rows if r["status"] == "completed"]
+    failed = [r for r in rows if r["status"] == "failed"]
+    violating = [r for r in done if r["n_violations"] not in ("", "0")]
+    walls = np.array([_float(r["wall_s"]) for r in done])
+    lines = [f"# Campaign {title}", ""]
+    lines.append(f"- runs: {len(rows)} ({len(done)} completed, {len(failed)} failed), "
+                 f"{len(violating)} with invariant violations")  # fmt: skip
+    if walls.size:
+        lines.append(
+            f"- wall time per run: median {np.median(walls):.2f} s, max {walls.max():.2f} s"
+        )
+    for key, value in (speed or {}).items():
+        lines.append(f"- {key}: {value}")
+    lines.append("")
+    if any(t["runs"] for t in track.values()):
+        lines += ["## Tracking RMS across engine variation [%N]", "",
+                  "| controller | engines | nominal | p5 | median | p95 | max | p95 / nominal |",
+                  "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for name, t in track.items():
+            ratio = t["p95"] / t["nominal"] if t["nominal"] else math.nan
+            lines.append(
+                f"| {name} | {t['runs']} | {_fmt(t['nominal'])} | {_fmt(t['p5'])} | "
+                f"{_fmt(t['p50'])} | {_fmt(t['p95'])} | {_fmt(t['max'])} | {_fmt(ratio, '.2f')} |"
+            )
+        lines.append("")
+        lines += _targets(track)
+        lines += ["", "![tracking](tracking_rms.png)", ""]
+    if classes:
+        lines += [
+            "## Bus faults",
+            "",
+            "| class | runs | detected | E2E caught / missed | time to detect [ticks] "
+            "median / max | fallback reached | recovered |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for key, c in classes.items():
+            rate = (
+                f"{c['detected']}/{c['judged']} ({100 * c['detected'] / c['judged']:.0f} %)"
+                if c["judged"]
+                else "-"
+            )
+            t = np.array(c["ticks"])
+            tt = f"{np.median(t):g} / {t.max():g}" if t.size else "-"
+            fb = f"{sum(c['fallback'])}/{len(c['fallback'])}" if c["fallback"] else "-"
+            rc = f"{sum(c['recovered'])}/{len(c['recovered'])}" if c["recovered"] else "-"
+            e2e = f"{c['caught']} / {c['missed']}" if c["caught"] or c["missed"] else "-"
+            lines.append(f"| {key} | {c['runs']} | {rate} | {e2e} | {tt} | {fb} | {rc} |")
+        lines.append("")
+        if "time_to_detect.png" in plots:
+            lines += ["![time to detect](time_to_detect.png)", ""]
+    lines += ["## Invariant violations", ""]
+    if not violating:
+        lines += ["None.", ""]
+    for r in violating:
+        lines += [f"- run {r['run_id']}: {r['violations']}", f"  `{repro(out, r['run_id'])}`"]
+    if failed:
+        lines += ["", "## Failed runs", ""]
+        for r in failed:
+            lines += [f"- run {r['run_id']}: {r['error']}", f"  `{repro(out, r['run_id'])}`"]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _targets(track: dict) -> list[str]:
+    """The issue's two targets, said plainly whichever way they come out."""
+    mrac, pid = track.get("mrac"), track.get("pid")
+    if mrac is None or not mrac["runs"]:
+        return []
+    out = []
+    ratio = mrac["p95"] / mrac["nominal"] if mrac["nominal"] else math.nan
+    ok = ratio <= 2.0
+    out.append(f"- MRAC 95th percentile {_fmt(mrac['p95'])} %N is {_fmt(ratio, '.2f')}x the "
+               f"nominal engine's {_fmt(mrac['nominal'])} %N: target (within 2x) "
+               f"{'met' if ok else 'NOT met'}.")  # fmt: skip
+    if pid is not None and pid["runs"]:
+        better = mrac["p50"] < pid["p50"]
+        out.append(f"- MRAC median {_fmt(mrac['p50'])} %N against PID median {_fmt(pid['p50'])} "
+                   f"%N: target (MRAC better) {'met' if better else 'NOT met'}.")  # fmt: skip
+    return out

@@ -1,0 +1,84 @@
+"""`sil campaign FILE`: many in-process runs across engine variation, controllers, bus faults and
+seeds, on a local process pool or a Dask cluster; a results table and a report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+NAME = "campaign"
+HELP = "run a campaign (engine variation, bus faults, seeds) on a local pool or Dask"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", type=Path, help="campaign file (TOML, see sil/campaigns/)")
+    parser.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local (default): a process pool on this machine; dask: a Dask cluster",
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="Dask scheduler address (default: a LocalCluster on this machine)",
+    )
+    parser.add_argument(
+        "--workers", type=int, metavar="N", help="worker processes (default: all cores)"
+    )
+    parser.add_argument("--out", type=Path, help="output folder (default: out/campaign-NAME)")
+    parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--json", action="store_true", help="print the outcome as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from sil.campaign import report
+    from sil.campaign.executors import execute
+    from sil.campaign.spec import CampaignError, load
+
+    if args.scheduler and args.executor != "dask":
+        print("sil campaign: --scheduler needs --executor dask", file=sys.stderr)
+        return 2
+    if args.workers is not None and args.workers < 1:
+        print(f"sil campaign: --workers: expected a positive number, got {args.workers}",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    try:
+        campaign = load(args.file)
+    except CampaignError as exc:
+        print(f"sil campaign: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or Path("out") / f"campaign-{campaign.name}"
+    out.mkdir(parents=True, exist_ok=True)
+    if args.file.resolve() != (out / "campaign.toml").resolve():
+        shutil.copyfile(args.file, out / "campaign.toml")
+    try:
+        outcome = execute(
+            campaign,
+            out,
+            executor=args.executor,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=not args.no_progress,
+        )
+    except ValueError as exc:
+        print(f"sil campaign: {exc}", file=sys.stderr)
+        return 2
+    speed = {
+        "executor": args.executor,
+        "this invocation": f"{outcome.completed + outcome.failed} runs in {outcome.wall_s:.1f} s "
+        f"({outcome.runs_per_min:.1f} runs/min), {outcome.skipped} done before",
+    }
+    summary = {**outcome.__dict__, "runs_per_min": outcome.runs_per_min, "out": str(out)}
+    if not args.no_report:
+        summary["report"] = str(report.write(out, campaign.name, speed))
+    if args.json:
+        print(json.dumps(summary, indent=2, default=float))
+    else:
+        for key, value in summary.items():
+            print(f"{key:<12} {value:.4g}" if isinstance(value, float) else f"{key:<12} {value}")
+    return 1 if outcome.failed or outcome.violations else 0
