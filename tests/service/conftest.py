@@ -46,3 +46,8 @@ class LoopRig:
 @pytest.fixture
 def rig() -> LoopRig:
     return LoopRig(EcuParams())
+
+
+@pytest.fixture
+def rig_factory():
+    return LoopRig
