@@ -29,6 +29,7 @@ from ecu import commissioning
 from ecu import faults as ecu_faults
 from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params, preset
+from ecu.port.core import make_ecu
 from plant.aerothermal import AeroThermalPlant
 from plant.fast_plant import FastPlant
 from plant.faults import Fault, FaultKind
@@ -39,7 +40,7 @@ from protocol.bus import BusSpec, default_spec, open_bus, parse_spec
 from protocol.busload import bus_load_pct
 from protocol.codec import Codec
 from protocol.node import InProcessBus
-from sil import metrics, plots, profiles
+from sil import metrics, profiles
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
@@ -68,6 +69,7 @@ class RunOptions:
     plots: bool = True
     progress: bool = True
     commission: Path | None = None  # `sil identify --export` file for the ECU
+    ecu_impl: str = "python"  # ECU tick: the Python firmware or its C port ("c", ecu/port)
 
 
 @dataclass
@@ -219,7 +221,8 @@ def run(opts: RunOptions) -> dict:
     try:
         if opts.mode == "inproc":
             # started in this order, as on a bus: demands first, the plant's tick 0 last
-            nodes = [command, EcuNode(compile_params(params)), PlantNode(plant)]
+            ecu = make_ecu(opts.ecu_impl, compile_params(params))
+            nodes = [command, EcuNode(ecu=ecu), PlantNode(plant)]
             if s.bus_faults:
                 injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, codec)
                 FaultyInProcessBus(*nodes, injector).run(done=lambda: command.finished)
@@ -271,6 +274,8 @@ def _run_on_bus(
         "--guard",
         str(NODE_GUARD_S),
         "--json",
+        "--impl",
+        opts.ecu_impl,
     ]
     if opts.commission is not None:
         ecu_args += ["--commission", str(opts.commission)]
@@ -416,6 +421,8 @@ def _finish(
     for fmt in opts.log_formats:
         convert(opts.out_dir / "can.log", fmt)
     if opts.plots:
+        from sil import plots  # matplotlib: only when plotting (campaign runs do not)
+
         title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
         summary["plots"] = [
             p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind)

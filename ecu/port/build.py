@@ -77,8 +77,9 @@ def host_replayer(cc: str | None = None) -> Path:
     return _compile(cc, flags, (*CORE_SOURCES, "replay.c"), "replay")
 
 
-def arm_replayer() -> Path:
-    """The replayer for a Cortex-M4 (mps2-an386 under QEMU), reading vectors by semihosting."""
+def arm_replayer(systick: bool = False) -> Path:
+    """The replayer for a Cortex-M4 (mps2-an386 under QEMU), reading vectors by semihosting;
+    ``systick``: the variant that counts SysTick around each tick (see replay.c)."""
     if not shutil.which(ARM_CC):
         raise PortBuildError(
             f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
@@ -86,12 +87,15 @@ def arm_replayer() -> Path:
     flags = (
         *WARNINGS,
         *ARM_FLAGS,
+        *(("-DREPLAY_SYSTICK",) if systick else ()),
         "--specs=rdimon.specs",
         "-Wl,--gc-sections",
         f"-T{PORT_DIR / 'mps2_an386.ld'}",
     )
     sources = (*CORE_SOURCES, "replay.c", "startup_cm4.s")
-    return _compile(ARM_CC, flags, sources, "replay-cm4.elf")
+    return _compile(
+        ARM_CC, flags, sources, "replay-cm4-systick.elf" if systick else "replay-cm4.elf"
+    )
 
 
 def arm_objects() -> dict[str, Path]:

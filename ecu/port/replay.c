@@ -7,6 +7,11 @@
  * output words and of ticks, the parameter words, and per tick the input words, the output words
  * and the FNV-1a digest of the state after the tick. Built for the host and, with newlib's
  * semihosting (rdimon), for the Cortex-M4 under QEMU: stdio here is only the test harness.
+ *
+ * With REPLAY_SYSTICK (Cortex-M4 under `qemu -icount shift=0`, where the virtual clock counts
+ * instructions) the SysTick timer is read around every ecu_tick and around a calibration loop of
+ * a known instruction count; the replayer prints "SYSTICK <tick counts> <calibration counts>
+ * <calibration instructions>" (see ecu/port/bench.py).
  */
 #include <stdio.h>
 
@@ -14,6 +19,26 @@
 
 static ecu_params_t params;
 static ecu_t ecu;
+
+#ifdef REPLAY_SYSTICK
+#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
+#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
+#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
+#define CALIBRATION_LOOPS 100000u /* two instructions each: subs, bne */
+
+static uint32_t systick_since(uint32_t start) /* counts since `start` (24-bit down counter) */
+{
+    return (start - SYST_CVR) & 0xFFFFFFu;
+}
+
+static uint32_t calibrate(void)
+{
+    uint32_t n = CALIBRATION_LOOPS;
+    uint32_t t0 = SYST_CVR;
+    __asm__ volatile("1: subs %0, %0, #1\n bne 1b" : "+r"(n) : : "cc");
+    return systick_since(t0);
+}
+#endif
 
 static int read_words(FILE *f, int32_t *w, size_t n)
 {
@@ -39,6 +64,9 @@ static int replay(FILE *f, const char *path)
     ecu_inputs_t in;
     int32_t t, n_ticks;
     int k, bad;
+#ifdef REPLAY_SYSTICK
+    uint32_t counts = 0;
+#endif
     if (read_words(f, head, 5) != 0 || head[0] != 0x31564745) { /* "EGV1" */
         printf("%s: not a golden-vector file (no EGV1 header)\n", path);
         return 2;
@@ -61,6 +89,11 @@ static int replay(FILE *f, const char *path)
         return 2;
     }
     ecu_init(&ecu, &params);
+#ifdef REPLAY_SYSTICK
+    SYST_RVR = 0xFFFFFFu;
+    SYST_CVR = 0u;
+    SYST_CSR = 5u; /* enabled, processor clock, no interrupt */
+#endif
     for (t = 0; t < n_ticks; t++) {
         const int32_t *o;
         if (read_words(f, in_w, ECU_INPUT_WORDS) != 0 ||
@@ -71,7 +104,15 @@ static int replay(FILE *f, const char *path)
         for (k = 0; k < ECU_INPUT_WORDS; k++) {
             ((int32_t *)(void *)&in)[k] = in_w[k];
         }
+#ifdef REPLAY_SYSTICK
+        {
+            uint32_t t0 = SYST_CVR;
+            o = (const int32_t *)(const void *)ecu_tick(&ecu, &in);
+            counts += systick_since(t0);
+        }
+#else
         o = (const int32_t *)(const void *)ecu_tick(&ecu, &in);
+#endif
         for (k = 0; k < ECU_OUTPUT_WORDS; k++) {
             if (o[k] != out_w[k]) {
                 printf("MISMATCH tick %ld output word %d: python %ld, c %ld\n", (long)t, k,
@@ -86,6 +127,10 @@ static int replay(FILE *f, const char *path)
             return 1;
         }
     }
+#ifdef REPLAY_SYSTICK
+    printf("SYSTICK %lu %lu %lu\n", (unsigned long)counts, (unsigned long)calibrate(),
+           (unsigned long)(2u * CALIBRATION_LOOPS));
+#endif
     printf("OK %ld ticks\n", (long)n_ticks);
     return 0;
 }

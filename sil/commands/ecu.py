@@ -61,6 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PATH",
         help="create this file once the node listens on the bus (for launchers)",
     )
+    parser.add_argument(
+        "--impl",
+        choices=("python", "c"),
+        default="python",
+        help="tick implementation: Python firmware or its C port (ecu/port, built at first use)",
+    )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
 
 
@@ -101,7 +107,15 @@ def run(args: argparse.Namespace) -> int:
     if args.ticks is not None and args.ticks < 1:
         print("sil ecu: --ticks must be at least 1", file=sys.stderr)
         return 2
-    node = EcuNode(params, lockstep=args.mode == "lockstep", max_ticks=args.ticks)
+    from ecu.port.build import PortBuildError
+    from ecu.port.core import PortError, make_ecu
+
+    try:
+        ecu = make_ecu(args.impl, params)
+    except (PortBuildError, PortError) as exc:
+        print(f"sil ecu: --impl {args.impl}: {exc}", file=sys.stderr)
+        return 2
+    node = EcuNode(ecu=ecu, lockstep=args.mode == "lockstep", max_ticks=args.ticks)
     try:
         bus = open_bus(args.bus)
     except BusSpecError as exc:

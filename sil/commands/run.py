@@ -50,6 +50,12 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="ECU trim point and initial estimates (sil identify --export)",
     )
+    parser.add_argument(
+        "--ecu-impl",
+        choices=("python", "c"),
+        default="python",
+        help="ECU tick implementation: the Python firmware or its C port (ecu/port)",
+    )
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
@@ -120,6 +126,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         log_formats=tuple(args.log_format),
         commission=args.commission,
         plots=not args.no_plots,
+        ecu_impl=getattr(args, "ecu_impl", "python"),
     )
     _interrupt_on_signals()
     try:

@@ -1,0 +1,197 @@
+"""`sil bench port`: figures of the C port.
+
+- flash and RAM on a Cortex-M4 (``arm-none-eabi-size`` of the core built with -Os; RAM is the
+  instance and the parameters as the replayer holds them, plus the stack bound from
+  ``-fstack-usage``), against the targets of 16 KiB and 2 KiB;
+- instructions per tick: callgrind on the host build (``--toggle-collect=ecu_tick``) and QEMU on
+  the Cortex-M4 build (``-icount shift=0``: SysTick counts the virtual clock, calibrated in the
+  same run by a loop of known length), both replaying the MRAC golden vector;
+- the SIL in process with the C ECU and with the Python one on the aero-thermal MRAC scenario
+  (real-time factors), and where the C run's time goes (cProfile, by package).
+"""
+
+from __future__ import annotations
+
+import cProfile
+import dataclasses
+import pstats
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from ecu import golden
+from ecu.port import build, qemu
+
+SCENARIO = "thesis-5.3-mrac-aero"
+VECTOR = "mrac-aero"
+FLASH_TARGET = 16 * 1024
+RAM_TARGET = 2 * 1024
+INSTRUCTIONS_TARGET = 5000
+
+
+def _size(obj: Path) -> tuple[int, int, int]:
+    """text, data, bss of an object file."""
+    out = subprocess.run(
+        ["arm-none-eabi-size", str(obj)], capture_output=True, text=True, check=True
+    ).stdout
+    text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
+    return text, data, bss
+
+
+def _symbol_sizes(elf: Path, names: tuple[str, ...]) -> dict[str, int]:
+    out = subprocess.run(
+        ["arm-none-eabi-nm", "-S", str(elf)], capture_output=True, text=True, check=True
+    ).stdout
+    sizes: dict[str, int] = {}
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) == 4 and parts[3] in names:
+            sizes[parts[3]] = sizes.get(parts[3], 0) + int(parts[1], 16)
+    return sizes
+
+
+def _stack_bound() -> int:
+    """Sum of the stack frames of every function in ecu_core.c at -Os (a bound on the tick's
+    stack, whatever the call chain)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        obj = Path(tmp) / "ecu_core.o"
+        subprocess.run(
+            [
+                build.ARM_CC,
+                *build.WARNINGS,
+                *build.ARM_FLAGS,
+                "-fstack-usage",
+                "-c",
+                str(build.PORT_DIR / "ecu_core.c"),
+                "-o",
+                str(obj),
+            ],  # fmt: skip
+            check=True,
+            capture_output=True,
+        )
+        lines = obj.with_suffix(".su").read_text().splitlines()
+    return sum(int(line.split("\t")[1]) for line in lines)
+
+
+def arm_figures(elf: Path) -> dict:
+    objects = build.arm_objects()
+    core_text, core_data, core_bss = _size(objects["ecu_core.c"])
+    libgcc = _symbol_sizes(elf, ("__aeabi_ldivmod", "__udivmoddi4", "__aeabi_uldivmod"))
+    frames = sum(sum(_size(objects[s])[:2]) for s in ("ecu_frames.c", "generated/turbojet.c"))
+    ram = _symbol_sizes(elf, ("ecu", "params"))
+    stack = _stack_bound()
+    flash = core_text + core_data + sum(libgcc.values())
+    ram_total = sum(ram.values()) + core_data + core_bss + stack
+    return {
+        "cm4_core_flash_bytes": flash,
+        "cm4_core_flash_detail": f"ecu_core.o {core_text + core_data} + libgcc 64-bit "
+        f"division {sum(libgcc.values())}",
+        "cm4_frames_flash_bytes": frames,
+        "cm4_ram_bytes": ram_total,
+        "cm4_ram_detail": f"ecu_t {ram.get('ecu', 0)} + params {ram.get('params', 0)} "
+        f"+ stack bound {stack}",
+        "flash_target_met": flash + frames <= FLASH_TARGET,
+        "ram_target_met": ram_total <= RAM_TARGET,
+    }
+
+
+def callgrind_instructions(replayer: Path, vectors: Path, ticks: int) -> float | str:
+    if not shutil.which("valgrind"):
+        return "valgrind not found (apt-get install valgrind)"
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        subprocess.run(
+            [
+                "valgrind",
+                "--tool=callgrind",
+                "--toggle-collect=ecu_tick",
+                f"--callgrind-out-file={out}",
+                str(replayer),
+                str(vectors),
+            ],  # fmt: skip
+            check=True,
+            capture_output=True,
+        )
+        total = re.search(r"^(?:summary|totals): (\d+)", out.read_text(), re.M)
+    return round(int(total.group(1)) / ticks, 1) if total else "no totals in callgrind output"
+
+
+def qemu_instructions(vectors: Path, ticks: int) -> float | str:
+    try:
+        elf = build.arm_replayer(systick=True)
+        done = qemu.run(elf, vectors, icount=True)
+    except (build.PortBuildError, FileNotFoundError) as exc:
+        return str(exc)
+    found = re.search(r"SYSTICK (\d+) (\d+) (\d+)", done.stdout)
+    if done.returncode != 0 or not found:
+        return f"QEMU replay failed: {done.stdout.strip()} {done.stderr.strip()}"
+    counts, cal_counts, cal_instructions = (int(x) for x in found.groups())
+    return round(counts * cal_instructions / cal_counts / ticks, 1)
+
+
+def _package(filename: str) -> str:
+    for name in ("plant", "protocol", "sil", "ecu", "numpy", "can", "numba"):
+        if f"/{name}/" in filename:
+            return name
+    return "other"
+
+
+def sil_figures(quick: bool) -> dict:
+    from sil import scenario
+    from sil.runner import RunOptions
+    from sil.runner import run as run_scenario
+
+    s = scenario.load(SCENARIO)
+    if quick:
+        s = dataclasses.replace(s, duration_s=30.0)
+    figures: dict = {"sil_scenario": s.name, "sil_sim_time_s": s.duration_s}
+    with tempfile.TemporaryDirectory() as tmp:
+        warm_up = dataclasses.replace(s, duration_s=1.0)  # plant JIT, imports, the C build
+        run_scenario(RunOptions(warm_up, Path(tmp) / "warm", mode="inproc", plots=False,
+                                progress=False, ecu_impl="c"))  # fmt: skip
+        for impl in ("c", "python"):
+            opts = RunOptions(
+                s, Path(tmp) / impl, mode="inproc", plots=False, progress=False, ecu_impl=impl
+            )
+            summary = run_scenario(opts)
+            figures[f"sil_inproc_realtime_factor_{impl}_ecu"] = round(summary["realtime_factor"], 1)
+        short = dataclasses.replace(s, duration_s=min(s.duration_s, 30.0))
+        profile = cProfile.Profile()
+        opts = RunOptions(
+            short, Path(tmp) / "profile", mode="inproc", plots=False, progress=False, ecu_impl="c"
+        )
+        profile.runcall(run_scenario, opts)
+    stats = pstats.Stats(profile).stats  # type: ignore[attr-defined]
+    by_package: dict[str, float] = {}
+    for (filename, _, _), (_, _, tottime, _, _) in stats.items():
+        key = _package(filename)
+        by_package[key] = by_package.get(key, 0.0) + tottime
+    total = sum(by_package.values()) or 1.0
+    figures["sil_c_ecu_time_share_pct"] = {
+        k: round(100.0 * v / total, 1) for k, v in sorted(by_package.items(), key=lambda kv: -kv[1])
+    }
+    return figures
+
+
+def run(quick: bool = False) -> dict:
+    figures: dict = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        g = golden.SOURCES[VECTOR]()
+        vectors = Path(tmp) / f"{VECTOR}.gv"
+        golden.write(g, vectors)
+        figures["vector"] = f"{VECTOR} ({g.ticks} ticks)"
+        try:
+            figures.update(arm_figures(build.arm_replayer()))
+        except (build.PortBuildError, FileNotFoundError, subprocess.CalledProcessError) as exc:
+            figures["cm4"] = f"not measured: {exc}"
+        replayer = build.host_replayer()
+        figures["host_instructions_per_tick"] = callgrind_instructions(replayer, vectors, g.ticks)
+        figures["cm4_qemu_instructions_per_tick"] = qemu_instructions(vectors, g.ticks)
+    figures["instructions_target_met"] = all(
+        isinstance(v, float) and v < INSTRUCTIONS_TARGET
+        for v in (figures["host_instructions_per_tick"], figures["cm4_qemu_instructions_per_tick"])
+    )
+    figures.update(sil_figures(quick))
+    return figures

@@ -1,0 +1,33 @@
+"""Run the Cortex-M4 replayer under QEMU (mps2-an386, semihosting for the file and the output)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+QEMU = "qemu-system-arm"
+MACHINE = "mps2-an386"
+
+
+def run(elf: Path, vectors: Path, *, icount: bool = False, timeout: float = 300.0):  # noqa: ANN201
+    """``replay VECTORS`` on the emulated board; returns the CompletedProcess (text output)."""
+    if not shutil.which(QEMU):
+        raise FileNotFoundError(f"{QEMU} not found (apt-get install qemu-system-arm)")
+    cmd = [
+        QEMU,
+        "-M",
+        MACHINE,
+        "-nographic",
+        "-monitor",
+        "none",
+        "-serial",
+        "none",
+        "-semihosting-config",
+        f"enable=on,target=native,arg=replay,arg={vectors.resolve()}",
+        "-kernel",
+        str(elf),
+    ]
+    if icount:
+        cmd[1:1] = ["-icount", "shift=0"]  # virtual clock: one ns per instruction
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
