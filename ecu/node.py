@@ -17,11 +17,16 @@ The node reuses its buffers: nothing it keeps grows per frame or per tick.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ecu.firmware import E2E_NONEWDATA, E2E_OK, Ecu, EcuInputs
 from ecu.params import EcuParams, FirmwareParams
 from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, every_ticks
 from protocol.node import SendFn
+
+if TYPE_CHECKING:
+    from ecu.service.port import ServicePort
 
 _TELEMETRY_FIELDS = (
     "ap21_q24", "ap22_q24", "lambda_q24", "theta21_q24", "theta22_q24",
@@ -87,6 +92,8 @@ class EcuNode:
         self.sensor_seen = False  # a sensor frame has come (the plant is, or was, alive)
         self.timeout_s: float | None = None  # set while the plant is silent (see on_timeout)
         self.finished = False
+        # the service port (ecu.service.port.ServicePort), polled before each tick, or None
+        self.service: ServicePort | None = None
 
     # -- frames in ---------------------------------------------------------------------------
     def start(self, send: SendFn) -> None:
@@ -178,6 +185,8 @@ class EcuNode:
         i = self.i
         self._apply_demand()
         i.tick = self.tick
+        if self.service is not None:
+            self.service.poll(i)
         o = self.ecu.tick(i)
         i.sensor_status = i.analog_status = i.demand_status = E2E_NONEWDATA
         k = self.ticks

@@ -133,8 +133,7 @@ class ParamTable:
     """The live parameter set of one ECU (engineering record and compiled constants)."""
 
     def __init__(self, params: EcuParams) -> None:
-        self.params = params
-        self.firmware = compile_params(params)
+        self.commit(params, compile_params(params))
 
     def raw(self, name: str) -> int:
         spec = self.spec(name)
@@ -169,13 +168,15 @@ class ParamTable:
     def commit(self, params: EcuParams, firmware: FirmwareParams) -> None:
         self.params = params
         self.firmware = firmware
+        self._image = msgpack.packb({spec.name: self.raw(spec.name) for spec in TABLE})
+        self._crc = crc16(self._image)
 
     def image(self) -> bytes:
         """The set as stored in flash: msgpack of {name: raw} in table order."""
-        return msgpack.packb({spec.name: self.raw(spec.name) for spec in TABLE})
+        return self._image
 
     def crc(self) -> int:
-        return crc16(self.image())
+        return self._crc
 
     def load_image(self, image: bytes) -> list[str]:
         """Apply a stored set (entry by entry, limits checked, the whole set validated at the

@@ -141,6 +141,7 @@ class ServicePort:
         self.counters = Counters()
         self.fault_log = FL.FaultLog()
         self._clock = clock
+        self._build = build_id()  # at power-up, not inside a tick
         self._rng = random.Random(seed)
         self._pending: deque[bytes] = deque()
         self._tx = bytearray()
@@ -186,7 +187,8 @@ class ServicePort:
                 else:
                     c.queue_overflow += 1
         for _ in range(min(MAX_REQUESTS, len(self._pending))):
-            self._handle(self._pending.popleft())
+            if self._handle(self._pending.popleft()) == Service.PARAM_WRITE:
+                break  # a write recompiles the parameters: the only one this tick
         if self._stop_held:
             inputs.stop = 1
             self.ecu.s.stop = 1
@@ -231,35 +233,36 @@ class ServicePort:
         self.counters.stream_samples += 1
 
     # -- requests ----------------------------------------------------------------------------
-    def _handle(self, payload: bytes) -> None:
+    def _handle(self, payload: bytes) -> int | None:
+        """Answer one request; returns its service (None for what is not a request)."""
         c = self.counters
         try:
             msg = unpack(payload)
         except MessageError:
             c.bad_messages += 1
-            return
+            return None
         if msg.kind != Kind.REQUEST:
             c.unexpected += 1
-            return
+            return None
         c.requests += 1
+        handler = self._handlers.get(msg.service)
         if msg.version != VERSION:
             why = f"protocol version {msg.version} not supported (this ECU: {VERSION})"
             self._respond(msg, Status.BAD_VERSION, {"error": why})
-            return
-        handler = self._handlers.get(msg.service)
-        if handler is None:
+        elif handler is None:
             why = f"unknown service 0x{msg.service:02X}"
             self._respond(msg, Status.UNKNOWN_SERVICE, {"error": why})
-            return
-        if self._unlocked():
-            self._session_until = c.polls + round(SESSION_S * self.rate_hz)
-        try:
-            body = handler(msg)
-        except ServiceError as exc:
-            self._respond(msg, exc.status, {"error": str(exc)})
-            return
-        if body is not None:
-            self._respond(msg, Status.OK, body)
+        else:
+            if self._unlocked():
+                self._session_until = c.polls + round(SESSION_S * self.rate_hz)
+            try:
+                body = handler(msg)
+            except ServiceError as exc:
+                self._respond(msg, exc.status, {"error": str(exc)})
+            else:
+                if body is not None:
+                    self._respond(msg, Status.OK, body)
+        return msg.service
 
     def _unlocked(self) -> bool:
         return self.counters.polls < self._session_until
@@ -272,7 +275,7 @@ class ServicePort:
         b = self.boot
         return {
             "firmware": FIRMWARE,
-            "build": build_id(),
+            "build": self._build,
             "protocol": VERSION,
             "param_crc": self.table.crc(),
             "params": len(TABLE),
@@ -282,7 +285,8 @@ class ServicePort:
             "sequence": b.sequence,
         }
 
-    def _counters(self, msg: Message) -> dict:
+    def summary(self) -> dict:
+        """Frame and request counters, and the time the port took per tick (worst and mean)."""
         c = self.counters
         s = self.decoder.stats
         return {
@@ -294,12 +298,17 @@ class ServicePort:
             "oversized": s.oversized,
             "bad_messages": c.bad_messages,
             "unexpected": c.unexpected,
+            "requests": c.requests,
             "queue_overflow": c.queue_overflow,
             "tx_dropped": c.tx_dropped,
             "stream_samples": c.stream_samples,
             "polls": c.polls,
             "worst_us": round(c.worst_s * 1e6, 1),
+            "mean_us": round(c.total_s / c.polls * 1e6, 1) if c.polls else 0.0,
         }
+
+    def _counters(self, msg: Message) -> dict:
+        return self.summary()
 
     def _stream(self, msg: Message) -> dict:
         rate = _arg(msg.body, "rate_hz", (int, float))
@@ -341,6 +350,10 @@ class ServicePort:
         name = self._spec_name(msg)
         raw = _arg(msg.body, "raw", int)
         self._need_session("writing a parameter")
+        if not isinstance(self.ecu, Ecu):
+            raise ServiceError(
+                Status.INVALID, "this tick implementation takes parameters at power-up only"
+            )
         try:
             params, firmware = self.table.check_write(name, raw, self.ecu.out.mode == M.RUN)
         except WriteRefused as exc:

@@ -118,5 +118,5 @@ def open_transport(spec: str) -> Transport:
             return SerialTransport(port, spec)
         port = serial.Serial(spec, baudrate=115200, timeout=0, write_timeout=0)
     except (serial.SerialException, ValueError) as exc:
-        raise TransportError(f"--serial {spec}: cannot open the port: {exc}") from None
+        raise TransportError(f"port {spec!r}: cannot open it: {exc}") from None
     return FdTransport(port.fd, spec, keep=port)

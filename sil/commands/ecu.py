@@ -67,6 +67,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="python",
         help="tick implementation: Python firmware or its C port (ecu/port, built at first use)",
     )
+    parser.add_argument(
+        "--serial",
+        metavar="PORT",
+        help="serve the service port on PORT: a device, 'pty' (a new pseudo-terminal, whose path "
+        "is printed) or a pyserial URL (socket://HOST:PORT, rfc2217://...)",
+    )
+    parser.add_argument(
+        "--flash",
+        type=Path,
+        metavar="FILE",
+        help="emulated flash image holding the stored parameter set (created when missing)",
+    )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
 
 
@@ -100,8 +112,14 @@ def run(args: argparse.Namespace) -> int:
         params = preset(args.preset, **overrides)
         if args.commission:
             params = commissioning.apply(params, commissioning.load(args.commission))
+        booted = None
+        if args.serial or args.flash:  # the stored set, if any, over the preset and overrides
+            from ecu.service.port import boot
+
+            booted = boot(params, args.flash)
+            params = booted.table.params
         params = compile_params(params)
-    except (ParamError, ValueError, TypeError) as exc:
+    except (ParamError, ValueError, TypeError, OSError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
     if args.ticks is not None and args.ticks < 1:
@@ -116,6 +134,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil ecu: --impl {args.impl}: {exc}", file=sys.stderr)
         return 2
     node = EcuNode(ecu=ecu, lockstep=args.mode == "lockstep", max_ticks=args.ticks)
+    if args.serial and booted is not None:
+        from ecu.service.port import ServicePort
+        from ecu.service.transport import TransportError, open_transport
+
+        try:
+            node.service = ServicePort(open_transport(args.serial), node.ecu, booted)
+        except TransportError as exc:
+            print(f"sil ecu: {exc}", file=sys.stderr)
+            return 2
+        print(f"service port: {node.service.transport.name}", file=sys.stderr, flush=True)
     try:
         bus = open_bus(args.bus)
     except BusSpecError as exc:
@@ -133,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
             stats = run_realtime(node, bus, 1.0 / params.rate_hz, should_stop=stop.is_set)
     finally:
         bus.shutdown()
+        if node.service is not None:
+            node.service.transport.close()
     o = node.ecu.out
     summary = {
         "ticks": node.ticks,
@@ -145,6 +175,8 @@ def run(args: argparse.Namespace) -> int:
         "ticks_without_due_demand": node.demand_waits,
         "overruns": stats.overruns,
     }
+    if node.service is not None:
+        summary["service"] = node.service.summary()
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

@@ -1,0 +1,98 @@
+"""Two processes over a pseudo-terminal: `sil ecu --serial pty` and clients in other processes
+(this test and `sil console`); parameters saved to flash survive a SIGKILL of the ECU."""
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+
+from ecu.service.transport import open_transport
+from sil.console.client import ServiceClient
+
+
+def _start_ecu(flash, tag: str) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "ecu", "--bus", f"virtual:svc-{os.getpid()}-{tag}"]
+        + ["--mode", "realtime", "--serial", "pty", "--flash", str(flash), "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([proc.stderr], [], [], 1.0)
+        if ready:
+            line = proc.stderr.readline()
+            assert line, f"sil ecu exited with {proc.poll()} before serving the port"
+            if line.startswith("service port: "):
+                return proc, line.split(": ", 1)[1].strip()
+    proc.kill()
+    raise AssertionError("sil ecu did not print its service port")
+
+
+def _console(port: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sil.cli", "console", port, *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_service_over_a_pty_between_processes_and_a_power_cut(tmp_path):
+    flash = tmp_path / "flash.bin"
+    ecu, port = _start_ecu(flash, "a")
+    try:
+        assert port.startswith("/dev/pts/")
+        client = ServiceClient(open_transport(port), timeout_s=2.0)
+        ident = client.identify()
+        assert (ident["storage"], ident["rate_hz"]) == ("defaults", 100)
+        assert client.faults()[0]["name"] == "PARAMS_DEFAULTS"
+
+        done = _console(port, "set", "pid_kp=2.75", "trim_v=12", "--save", "--json")
+        assert done.returncode == 0, done.stderr
+        result = json.loads(done.stdout)
+        assert [w["value"] for w in result["written"]] == [2.75, 12.0]
+        assert (result["saved"]["slot"], result["saved"]["sequence"]) == (0, 1)
+        refused = _console(port, "set", "pid_kp=99")
+        assert refused.returncode == 1
+        assert "OUT_OF_RANGE: pid_kp=99 V/%N: outside its limits [0, 20]" in refused.stderr
+        bad = _console(port, "set", "pid_kp")
+        assert bad.returncode == 2 and "'pid_kp': expected NAME=NUMBER" in bad.stderr
+
+        client.stream(50)
+        client.samples.clear()
+        end = time.monotonic() + 0.6
+        while time.monotonic() < end:
+            client.receive()
+            time.sleep(0.01)
+        assert len(client.samples) >= 20 and client.stream_gaps == 0
+        client.stream(0)
+        crc = client.identify()["param_crc"]
+        assert crc == result["saved"]["param_crc"]
+        client.transport.close()
+    finally:
+        ecu.send_signal(signal.SIGKILL)  # power cut
+        ecu.wait()
+
+    ecu, port = _start_ecu(flash, "b")
+    try:
+        live = _console(port, "live", "--samples", "3", "--json")
+        assert live.returncode == 0, live.stderr
+        assert len(json.loads(live.stdout)) == 3
+        shown = _console(port, "get", "pid_kp", "trim_v", "--json")
+        assert [r["value"] for r in json.loads(shown.stdout)] == [2.75, 12.0]
+        ident = json.loads(_console(port, "identify", "--json").stdout)
+        assert (ident["storage"], ident["slot"], ident["sequence"]) == ("loaded", 0, 1)
+        assert ident["param_crc"] == crc
+    finally:
+        ecu.send_signal(signal.SIGTERM)
+        out, _ = ecu.communicate(timeout=30)
+    summary = json.loads(out)
+    service = summary["service"]
+    assert service["requests"] >= 4 and service["frames"] == service["requests"]
+    assert service["crc_errors"] == service["malformed"] == 0
+    assert 0 < service["worst_us"] < 1e6 / 100  # always within one 10 ms tick here
