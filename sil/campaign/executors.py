@@ -2,8 +2,9 @@
 CSV table (``results.csv``) as runs finish, so an interrupted campaign resumes where it stopped.
 
 A case that raises is recorded as failed with its error and the campaign goes on. A case counts
-as done when the table has a row with its run ID and content digest (a changed campaign file
-reruns the cases it changed).
+as done when the table has a completed row with its run ID and content digest: a resumed
+campaign reruns failed cases and the cases a changed campaign file changed (the report reads
+the last row of each run).
 """
 
 from __future__ import annotations
@@ -77,7 +78,9 @@ class Table:
                         f"{path}: written by another campaign layout (columns differ); "
                         "use another --out or remove it"
                     )
-                self.done = {(r["run_id"], r["digest"]) for r in reader}
+                self.done = {
+                    (r["run_id"], r["digest"]) for r in reader if r["status"] == "completed"
+                }
             self._file = path.open("a", newline="")
             self._writer = csv.DictWriter(self._file, self.fields)
         else:

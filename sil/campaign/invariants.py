@@ -75,16 +75,16 @@ def _detections(r: CaseRun) -> list[dict]:
             hits = np.flatnonzero(words[start:] & BIT[e.detect])
             d.update(expected=e.detect)
             d["detect_ticks"] = int(hits[0]) if hits.size else None
-            d["detected"] = hits.size > 0 and hits[0] <= (e.within_ticks or 0)
+            d["detected"] = bool(hits.size) and bool(hits[0] <= (e.within_ticks or 0))
             if e.recover_within_ticks is not None:
                 clear = np.flatnonzero((words[end:] & BIT[e.detect]) == 0)
                 d["recover_ticks"] = int(clear[0]) if clear.size else None
-                d["recovered"] = clear.size > 0 and clear[0] <= e.recover_within_ticks
+                d["recovered"] = bool(clear.size) and bool(clear[0] <= e.recover_within_ticks)
         if e.fallback_mode is not None:
             want = ecu_modes.NAMES.index(e.fallback_mode)
             hits = np.flatnonzero(mode[start:] == want)
             d["fallback_ticks"] = int(hits[0]) if hits.size else None
-            d["fallback"] = hits.size > 0
+            d["fallback"] = bool(hits.size)
         out.append(d)
     return out
 

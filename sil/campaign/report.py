@@ -21,8 +21,9 @@ CONTROLLER = "controller.kind"
 
 
 def load(path: Path) -> list[dict]:
+    """The table's rows, the last one of each run (a resumed campaign appends reruns)."""
     with path.open(newline="") as f:
-        return list(csv.DictReader(f))
+        return list({r["run_id"]: r for r in csv.DictReader(f)}.values())
 
 
 def _float(v: str) -> float:
@@ -120,7 +121,7 @@ def _plots(rows: list[dict], track: dict, classes: dict, out: Path) -> list[str]
     ticks = {k: c["ticks"] for k, c in classes.items() if c["ticks"]}
     if ticks:
         fig, ax = plt.subplots(figsize=(8, 0.6 + 0.5 * len(ticks)))
-        ax.boxplot(list(ticks.values()), vert=False, labels=list(ticks))
+        ax.boxplot(list(ticks.values()), orientation="horizontal", tick_labels=list(ticks))
         ax.set_xlabel("time to detect [ECU periods from the fault's start]")
         ax.set_title("Time to detect per bus fault class")
         fig.tight_layout()
