@@ -1,0 +1,95 @@
+"""Campaigns end to end: local pool and Dask agree run for run, resume, failures, invariants,
+bus fault detection, and the printed `sil run` line reproduces a run."""
+
+import csv
+import json
+import shlex
+from pathlib import Path
+
+import pytest
+
+from sil.campaign.executors import Task, columns, execute, run_task
+from sil.campaign.report import load as load_rows
+from sil.campaign.spec import Invariants, load
+from sil.cli import main
+from tests.campaign.conftest import BUS, NOMINAL, SMALL
+
+
+def rows(out: Path) -> dict[str, dict]:
+    with (out / "results.csv").open(newline="") as f:
+        return {r["run_id"]: r for r in csv.DictReader(f)}
+
+
+def without_wall(r: dict) -> dict:
+    return {k: v for k, v in r.items() if k != "wall_s"}
+
+
+@pytest.mark.slow
+def test_local_and_dask_give_identical_runs_and_a_resumed_campaign_skips_them(write, tmp_path):
+    path = write(SMALL)
+    local, dask = tmp_path / "local", tmp_path / "dask"
+    assert (
+        main(["campaign", str(path), "--out", str(local), "--workers", "2", "--no-progress"]) == 0
+    )
+    argv = ["campaign", str(path), "--out", str(dask), "--executor", "dask", "--workers", "2"]
+    assert main([*argv, "--no-progress"]) == 0
+    a, b = rows(local), rows(dask)
+    assert len(a) == 6 and all(r["status"] == "completed" for r in a.values())
+    assert {k: without_wall(r) for k, r in a.items()} == {k: without_wall(r) for k, r in b.items()}
+    # resumed: nothing runs again, nothing is appended
+    outcome = execute(load(path), local, workers=2, progress=False)
+    assert (outcome.skipped, outcome.completed) == (6, 0)
+    assert len((local / "results.csv").read_text().splitlines()) == 7
+    report = (local / "report.md").read_text()
+    assert "| mrac | 2 |" in report and "| pid | 2 |" in report
+    assert (local / "tracking_rms.png").stat().st_size > 0
+
+
+def test_a_crashing_run_is_recorded_failed_and_rerun_on_resume(write, tmp_path):
+    row = run_task(Task("00000", "duration_s = -1\n[command]\n", ".", Invariants()))
+    assert row["status"] == "failed" and "duration_s" in row["error"]
+    campaign = load(write(NOMINAL))
+    out = tmp_path / "out"
+    out.mkdir()
+    # a table where the first case failed: a resumed campaign runs it again
+    with (out / "results.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, columns(campaign))
+        w.writeheader()
+        case = campaign.cases[0]
+        w.writerow({"run_id": case.run_id, "digest": case.digest, "status": "failed"})
+    outcome = execute(campaign, out, workers=1, progress=False)
+    assert (outcome.skipped, outcome.completed) == (0, 2)
+    assert [r["status"] for r in load_rows(out / "results.csv")] == ["completed", "completed"]
+
+
+@pytest.mark.slow
+def test_violations_are_reported_with_a_sil_run_line_that_reproduces_the_run(write, tmp_path):
+    text = NOMINAL + "\n[invariants]\nmax_speed_pct = 89.0\n"
+    out = tmp_path / "out"
+    assert main(["campaign", str(write(text)), "--out", str(out), "--no-progress"]) == 1
+    report = (out / "report.md").read_text()
+    lines = [ln.strip().strip("`") for ln in report.splitlines() if "sil run " in ln]
+    assert len(lines) == 2 and "overspeed" in report
+    r = rows(out)["00000"]
+    assert r["n_violations"] == "1" and r["violations"].startswith("overspeed: ")
+    argv = shlex.split(lines[0])[1:]
+    assert argv[:2] == ["run", str(out / "scenarios" / "00000.toml")]
+    assert main([*argv, "--no-plots"]) == 0
+    summary = json.loads((out / "repro" / "00000" / "summary.json").read_text())
+    assert summary["tracking_rms_pct"] == pytest.approx(float(r["tracking_rms_pct"]), rel=1e-6)
+
+
+@pytest.mark.slow
+def test_bus_fault_campaign_detects_what_it_must(write, tmp_path):
+    out = tmp_path / "out"
+    assert main(["campaign", str(write(BUS)), "--out", str(out), "--no-progress"]) == 0
+    by_variant = {r["variant"]: r for r in rows(out).values()}
+    flips = json.loads(by_variant["flips"]["detections"])[0]
+    assert flips["detected"] and flips["missed"] == 0 and flips["caught"] > 10
+    loss = json.loads(by_variant["loss"]["detections"])[0]
+    assert loss["detected"] and loss["fallback"] and loss["detect_ticks"] <= 5
+    assert by_variant["loss"]["final_mode"] == "FAULT"
+    short = json.loads(by_variant["short-loss"]["detections"])[0]
+    assert short["detected"] and short["recovered"]
+    assert by_variant["short-loss"]["final_mode"] == "RUN"
+    assert "| flips (bitflip, E2E) | 1 | 1/1 (100 %) |" in (out / "report.md").read_text()
