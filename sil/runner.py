@@ -70,6 +70,7 @@ class RunOptions:
     progress: bool = True
     commission: Path | None = None  # `sil identify --export` file for the ECU
     ecu_impl: str = "python"  # ECU tick: the Python firmware or its C port ("c", ecu/port)
+    ecu_extra_args: tuple[str, ...] = ()  # appended to `sil ecu` (e.g. --serial pty)
 
 
 @dataclass
@@ -286,6 +287,7 @@ def _run_on_bus(
             ecu_args += ["--rate", str(value)]
         else:
             ecu_args += ["--param", f"{name}={value!r}"]
+    ecu_args += opts.ecu_extra_args
     p = s.plant
     plant_args = [
         "plant",

@@ -32,7 +32,7 @@ class Kind(IntEnum):
 class Service(IntEnum):
     IDENTIFY = 0x01  # -> firmware, build, protocol, parameter-set CRC, storage, counters
     STREAM = 0x02  # {"rate_hz": r} (0 stops) -> {"rate_hz", "every", "fields"}; samples follow
-    COUNTERS = 0x03  # -> frame and request counters, service time per tick
+    COUNTERS = 0x03  # -> [frame and request counters, service time per tick] (port.COUNTER_NAMES)
     PARAM_INFO = 0x10  # {"index": i} -> one parameter's name, Q format, unit, limits, value
     PARAM_READ = 0x11  # {"name": n} -> {"name", "raw", "frac_bits", "value"}
     PARAM_WRITE = 0x12  # {"name": n, "raw": q} -> same as read (needs the unlock)

@@ -7,7 +7,8 @@ dropped and counted), records rising fault bits in the fault log, queues a live-
 the stream is due, performs at most one flash operation of a parameter save, and hands at most
 ``MAX_TX_BYTES`` to the line, which takes what it can without blocking. Frames that do not fit the
 transmit buffer are dropped and counted (stream samples first: they are never queued past half
-the buffer). The time each poll takes is measured; ``worst_s`` is the longest.
+the buffer). The time each poll takes is measured: ``worst_s`` is the longest in wall time (it
+includes any preemption by the operating system), ``worst_cpu_s`` the most CPU time.
 
 Writes, saves, clearing the log and arming need an unlocked session: the tool asks for a seed
 and answers with :func:`ecu.service.message.unlock_key`; the session lasts ``SESSION_S`` of ECU
@@ -56,6 +57,12 @@ TX_BUFFER = 4096  # bytes of frames waiting for the line
 MAX_TX_BYTES = 1024  # handed to the line per tick
 SESSION_S = 10.0
 FAULT_PAGE = 4  # fault-log entries per response
+# the COUNTERS response: its values in this order
+COUNTER_NAMES = (
+    "rx_bytes", "tx_bytes", "frames", "malformed", "crc_errors", "oversized", "bad_messages",
+    "unexpected", "requests", "queue_overflow", "tx_dropped", "stream_samples", "polls",
+    "worst_us", "worst_cpu_us", "mean_us",
+)  # fmt: skip
 
 
 @cache
@@ -109,7 +116,8 @@ class Counters:
     tx_dropped: int = 0  # frames dropped: the transmit buffer was full
     stream_samples: int = 0
     polls: int = 0
-    worst_s: float = 0.0
+    worst_s: float = 0.0  # wall time of the longest poll (includes preemption by the OS)
+    worst_cpu_s: float = 0.0  # this thread's CPU time in the longest-computing poll
     total_s: float = 0.0
 
 
@@ -131,6 +139,7 @@ class ServicePort:
         *,
         seed: int | None = None,
         clock: Callable[[], float] = time.perf_counter,
+        cpu_clock: Callable[[], float] = time.thread_time,
     ) -> None:
         self.transport = transport
         self.ecu = ecu
@@ -141,6 +150,7 @@ class ServicePort:
         self.counters = Counters()
         self.fault_log = FL.FaultLog()
         self._clock = clock
+        self._cpu_clock = cpu_clock
         self._build = build_id()  # at power-up, not inside a tick
         self._rng = random.Random(seed)
         self._pending: deque[bytes] = deque()
@@ -177,6 +187,7 @@ class ServicePort:
     def poll(self, inputs: EcuInputs) -> None:
         """Service the port once, before the firmware tick that takes ``inputs``."""
         t0 = self._clock()
+        cpu0 = self._cpu_clock()
         c = self.counters
         data = self.transport.read(MAX_RX_BYTES)
         if data:
@@ -204,9 +215,12 @@ class ServicePort:
             c.tx_bytes += n
         c.polls += 1
         dt = self._clock() - t0
+        cpu = self._cpu_clock() - cpu0
         c.total_s += dt
         if dt > c.worst_s:
             c.worst_s = dt
+        if cpu > c.worst_cpu_s:
+            c.worst_cpu_s = cpu
 
     def _snapshot(self) -> tuple[int, ...]:
         o = self.ecu.out
@@ -285,30 +299,23 @@ class ServicePort:
             "sequence": b.sequence,
         }
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, int | float]:
         """Frame and request counters, and the time the port took per tick (worst and mean)."""
+        return dict(zip(COUNTER_NAMES, self._counter_values(), strict=True))
+
+    def _counter_values(self) -> list[int | float]:
         c = self.counters
         s = self.decoder.stats
-        return {
-            "rx_bytes": c.rx_bytes,
-            "tx_bytes": c.tx_bytes,
-            "frames": s.frames,
-            "malformed": s.malformed,
-            "crc_errors": s.crc_errors,
-            "oversized": s.oversized,
-            "bad_messages": c.bad_messages,
-            "unexpected": c.unexpected,
-            "requests": c.requests,
-            "queue_overflow": c.queue_overflow,
-            "tx_dropped": c.tx_dropped,
-            "stream_samples": c.stream_samples,
-            "polls": c.polls,
-            "worst_us": round(c.worst_s * 1e6, 1),
-            "mean_us": round(c.total_s / c.polls * 1e6, 1) if c.polls else 0.0,
-        }
+        mean_us = round(c.total_s / c.polls * 1e6, 1) if c.polls else 0.0
+        return [
+            c.rx_bytes, c.tx_bytes, s.frames, s.malformed, s.crc_errors, s.oversized,
+            c.bad_messages, c.unexpected, c.requests, c.queue_overflow, c.tx_dropped,
+            c.stream_samples, c.polls, round(c.worst_s * 1e6, 1), round(c.worst_cpu_s * 1e6, 1),
+            mean_us,
+        ]  # fmt: skip
 
-    def _counters(self, msg: Message) -> dict:
-        return self.summary()
+    def _counters(self, msg: Message) -> list[int | float]:
+        return self._counter_values()  # values only, in COUNTER_NAMES order: names would not fit
 
     def _stream(self, msg: Message) -> dict:
         rate = _arg(msg.body, "rate_hz", (int, float))

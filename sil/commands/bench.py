@@ -16,6 +16,7 @@ TARGETS = {
     "ecu": "ecu.bench",
     "replay": "tools.replay_bench",
     "sil": "sil.bench",
+    "service": "sil.console.bench",
     "port": "ecu.port.bench",
 }
 

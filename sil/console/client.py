@@ -27,6 +27,7 @@ from ecu.service.message import (
     unlock_key,
     unpack,
 )
+from ecu.service.port import COUNTER_NAMES
 from ecu.service.transport import Transport
 
 
@@ -122,7 +123,7 @@ class ServiceClient:
         return self.request(Service.IDENTIFY)
 
     def counters(self) -> dict:
-        return self.request(Service.COUNTERS)
+        return dict(zip(COUNTER_NAMES, self.request(Service.COUNTERS), strict=True))
 
     def stream(self, rate_hz: float) -> dict:
         self.stream_seq = None

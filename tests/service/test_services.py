@@ -13,7 +13,7 @@ from ecu.service import fault_log, live
 from ecu.service.framing import MAX_ENCODED, encode_frame
 from ecu.service.message import Kind, Message, Service, Status, pack, unpack
 from ecu.service.param_table import TABLE
-from ecu.service.port import MAX_REQUESTS, MAX_RX_BYTES, PENDING_MAX
+from ecu.service.port import COUNTER_NAMES, MAX_REQUESTS, MAX_RX_BYTES, PENDING_MAX
 from sil.console.client import ServiceRequestError
 
 CRC = crcmod.predefined.mkCrcFun("crc-ccitt-false")
@@ -180,3 +180,12 @@ def test_work_per_tick_is_bounded(rig):
     assert len(rig.port._pending) == min(PENDING_MAX, decoded) - MAX_REQUESTS
     assert c.queue_overflow == max(0, decoded - PENDING_MAX)
     assert rig.port.counters.worst_s < 0.05
+
+
+def test_counters_fit_a_frame_at_any_count(rig):
+    c = rig.port.counters
+    c.rx_bytes = c.tx_bytes = c.requests = c.polls = c.stream_samples = 2**40
+    c.worst_s = c.worst_cpu_s = 1.234567
+    got = rig.client.counters()
+    assert got["rx_bytes"] >= 2**40 and got["worst_cpu_us"] == 1234567.0
+    assert list(got) == list(COUNTER_NAMES)

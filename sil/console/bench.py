@@ -1,0 +1,128 @@
+"""`sil bench service`: frame throughput of the service port on a pseudo-terminal and the time
+the port takes inside one ECU tick.
+
+The ECU side runs here (the Python firmware with a running engine's inputs, its service port on a
+new pty); a client runs in another process, as `sil console` would:
+
+- stream: the port polled free-running (no tick period) and streaming a live sample every tick;
+  the client decodes what arrives: frames and bytes per second, samples lost;
+- requests: the same loop answering back-to-back parameter reads: round trips per second;
+- budget: ticks at 100 Hz in real time, streaming at 50 Hz while the client reads and writes
+  parameters and the fault log without pause: worst, 99th-percentile and mean time of the port's
+  poll in one tick.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+from ecu.firmware import E2E_OK, Ecu, EcuInputs
+from ecu.params import EcuParams
+from ecu.service.port import ServicePort, boot
+from ecu.service.transport import open_pty
+
+CLIENT = """
+import json, sys, time
+from ecu.service.transport import open_transport
+from sil.console.client import ServiceClient
+
+mode, seconds = sys.argv[2], float(sys.argv[3])
+c = ServiceClient(open_transport(sys.argv[1]), timeout_s=5.0, retries=0)
+c.identify()
+out = {}
+if mode == "stream":
+    c.stream(100)
+    frames0, t0 = c.decoder.stats.frames, time.perf_counter()
+    read = 0
+    while time.perf_counter() - t0 < seconds:
+        data = c.transport.read(65536)
+        read += len(data)
+        c.decoder.feed(data)
+        time.sleep(0.0005)
+    dt = time.perf_counter() - t0
+    out = {"frames_s": (c.decoder.stats.frames - frames0) / dt, "bytes_s": read / dt}
+    c.stream(0)
+elif mode == "requests":
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        c.get("pid_kp")
+        n += 1
+    out = {"round_trips_s": n / (time.perf_counter() - t0)}
+else:
+    c.stream(50)
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        c.set("pid_kp", 2.0 + (n % 8) / 8)
+        c.get("egt_limit_k")
+        c.faults()
+        c.receive()
+        n += 1
+    out = {"cycles": n, "gaps": c.stream_gaps}
+c.stream(0)
+print(json.dumps(out), flush=True)
+"""
+
+
+def _running_inputs() -> EcuInputs:
+    i = EcuInputs()
+    i.sensor_status = i.analog_status = i.demand_status = E2E_OK
+    i.speed_rpm, i.egt_dk, i.supply_mv, i.pump_ma = 100_890, 10_480, 22_200, 1_500
+    i.demand_cpct, i.arm = 8_968, 1
+    return i
+
+
+def _session(mode: str, seconds: float, period_s: float | None) -> tuple[dict, list[float], dict]:
+    """Serve one client process; returns its figures, each poll's duration and the port's
+    counters."""
+    params = EcuParams()
+    booted = boot(params, None)
+    ecu = Ecu(booted.table.firmware)
+    transport = open_pty()
+    port = ServicePort(transport, ecu, booted, seed=1)
+    i = _running_inputs()
+    client = subprocess.Popen(
+        [sys.executable, "-c", CLIENT, transport.name, mode, str(seconds)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    polls: list[float] = []
+    clock = time.perf_counter
+    next_tick = clock()
+    while client.poll() is None:
+        if period_s is not None:
+            next_tick += period_s
+            time.sleep(max(0.0, next_tick - clock()))
+        t0 = clock()
+        port.poll(i)
+        polls.append(clock() - t0)
+        i.sensor_status = i.analog_status = i.demand_status = E2E_OK
+        ecu.tick(i)
+    out = client.stdout.read()
+    transport.close()
+    if client.returncode != 0:
+        raise RuntimeError(f"bench client ({mode}) exited with {client.returncode}")
+    return json.loads(out), polls, port.summary()
+
+
+def run(quick: bool = False) -> dict:
+    seconds = 1.0 if quick else 3.0
+    stream, _, streamed = _session("stream", seconds, None)
+    requests, _, _ = _session("requests", seconds, None)
+    budget, polls, port = _session("budget", seconds, 0.01)
+    polls.sort()
+    return {
+        "pty_stream_frames_per_s": round(stream["frames_s"]),
+        "pty_stream_bytes_per_s": round(stream["bytes_s"]),
+        "pty_stream_frames_dropped_by_ecu": streamed["tx_dropped"],
+        "pty_request_round_trips_per_s": round(requests["round_trips_s"]),
+        "budget_ticks": len(polls),
+        "budget_client_cycles": budget["cycles"],
+        "budget_stream_samples_lost": budget["gaps"],
+        "service_worst_us_per_tick": round(polls[-1] * 1e6, 1),
+        "service_worst_cpu_us_per_tick": port["worst_cpu_us"],
+        "service_p99_us_per_tick": round(polls[int(0.99 * (len(polls) - 1))] * 1e6, 1),
+        "service_mean_us_per_tick": round(sum(polls) / len(polls) * 1e6, 1),
+    }
