@@ -128,9 +128,10 @@ def record_modes(ticks: int = 2400) -> Golden:
     """Scripted inputs through every mode, with lost and corrupt frames and a pump fault.
 
     One phase per 100 ticks: OFF; arm, the starter spools up (ARMED), RUN; demand frames lost
-    (hold, idle) and corrupt sensor frames; analog frames lost; stop (SHUTDOWN), spool down,
-    disarm (OFF); arm again, supply sag; demand lost past the shutdown time; disarm, re-arm;
-    a stalled pump (FAULT, latched). Speed follows the eq. 3.24 fast model while the ECU runs.
+    (hold, idle), corrupt and missing sensor frames; analog frames lost; stop (SHUTDOWN), spool
+    down, disarm (OFF); arm again, supply sag, EGT thermocouple open; demand lost past the
+    shutdown time; disarm, re-arm; a stalled pump (FAULT, latched). Speed follows the eq. 3.24
+    fast model while the ECU runs.
     """
     from plant.fast_model import FastEngine
 
@@ -156,6 +157,8 @@ def record_modes(ticks: int = 2400) -> Golden:
         i.tick = k % 65536
         i.speed_rpm = max(0, round(n_pct * 1125.0) + (k * 7919) % 41 - 20)  # with noise
         i.egt_dk = 10480 + round(200 * (n_pct - 89.68))
+        if phase == 11 and j >= 50:
+            i.egt_dk = 0  # thermocouple open, reading low: EGT_OPEN, demand limited
         i.supply_mv = 22200 - (3000 if phase == 11 else 0)
         i.pump_ma = (1050 + 60 * ecu.out.pump_mv // 1000) if ecu.out.pump_enable else 0
         if phase >= 19:
@@ -170,6 +173,8 @@ def record_modes(ticks: int = 2400) -> Golden:
             i.demand_status = E2E_NONEWDATA
             if j % 7 == 3:
                 i.sensor_status = E2E_WRONGCRC
+            elif j % 11 == 5:
+                i.sensor_status = E2E_NONEWDATA
         if phase == 4 and j < 60:
             i.analog_status = E2E_NONEWDATA  # analog lost: nominal supply assumed
         if phase in (12, 13, 14):
@@ -196,7 +201,7 @@ step_s = 5
 """
 
 _FAULTS = """
-description = "MRAC with plant and sensor faults: pump halves, speed noise, stuck, EGT open"
+description = "MRAC with plant and sensor faults: pump halves, speed noise, speed stuck"
 duration_s = 40
 [plant]
 model = "aero"
@@ -220,8 +225,19 @@ value = 800
 time_s = 12
 target = "SPEED_STUCK"
 value = 1
+"""
+
+_EGT_OPEN = """
+description = "PID, the EGT thermocouple opens (reads its upscale burnout value) at 3 s"
+duration_s = 20
+[plant]
+model = "aero"
+[controller]
+kind = "pid"
+[command]
+base = "trim"
 [[fault]]
-time_s = 20
+time_s = 3
 target = "EGT_OPEN_CIRCUIT"
 value = 1
 """
@@ -236,6 +252,7 @@ SOURCES: dict[str, Callable[[], Golden]] = {
     ),
     "limiters-hot": lambda: record_scenario("limiters-hot", _HOT_LIMITS, 2500),
     "faults": lambda: record_scenario("faults", _FAULTS, 2500),
+    "egt-open": lambda: record_scenario("egt-open", _EGT_OPEN, 1000),
     "modes": record_modes,
 }
 

@@ -1,0 +1,41 @@
+"""The Cortex-M4 build (arm-none-eabi-gcc -mcpu=cortex-m4 -mthumb -Os) replays the golden
+vectors under qemu-system-arm (mps2-an386, semihosting), and its figures meet the targets."""
+
+import pytest
+
+from ecu import golden
+from ecu.port import bench, build, qemu
+
+
+@pytest.fixture(scope="module")
+def elf(toolchains):
+    return build.arm_replayer()
+
+
+@pytest.mark.parametrize("name", list(golden.SOURCES))
+def test_cortex_m4_matches_every_tick(elf, vectors, name):
+    path, g = vectors[name]
+    done = qemu.run(elf, path, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.strip() == f"OK {g.ticks} ticks"
+
+
+def test_cortex_m4_reports_a_difference(elf, vectors, tmp_path):
+    path, _ = vectors["mrac-aero"]
+    data = bytearray(path.read_bytes())
+    data[-4] ^= 0x10  # the last tick's state digest
+    bad = tmp_path / "bad.gv"
+    bad.write_bytes(bytes(data))
+    done = qemu.run(elf, bad, timeout=120)
+    assert done.returncode != 0 and "state digest" in done.stdout
+
+
+def test_flash_ram_and_instructions_per_tick_meet_the_targets(elf, vectors):
+    figures = bench.arm_figures(elf)
+    assert figures["cm4_core_flash_bytes"] + figures["cm4_frames_flash_bytes"] <= 16 * 1024
+    assert 0 < figures["cm4_ram_bytes"] <= 2 * 1024
+    path, g = vectors["mrac-aero"]
+    host = bench.callgrind_instructions(build.host_replayer(), path, g.ticks)
+    arm = bench.qemu_instructions(path, g.ticks)
+    assert isinstance(host, float) and isinstance(arm, float), (host, arm)
+    assert 200 < host < 5000 and 200 < arm < 5000
