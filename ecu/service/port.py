@@ -57,6 +57,7 @@ TX_BUFFER = 4096  # bytes of frames waiting for the line
 MAX_TX_BYTES = 1024  # handed to the line per tick
 SESSION_S = 10.0
 FAULT_PAGE = 4  # fault-log entries per response
+MIN_STREAM_HZ = 0.1
 # the COUNTERS response: its values in this order
 COUNTER_NAMES = (
     "rx_bytes", "tx_bytes", "frames", "malformed", "crc_errors", "oversized", "bad_messages",
@@ -319,9 +320,10 @@ class ServicePort:
 
     def _stream(self, msg: Message) -> dict:
         rate = _arg(msg.body, "rate_hz", (int, float))
-        if not 0 <= rate <= self.rate_hz:
+        if rate != 0 and not MIN_STREAM_HZ <= rate <= self.rate_hz:
             raise ServiceError(
-                Status.OUT_OF_RANGE, f"rate_hz={rate}: must be in 0..{self.rate_hz} (0 stops)"
+                Status.OUT_OF_RANGE,
+                f"rate_hz={rate}: must be 0 (stop) or in {MIN_STREAM_HZ}..{self.rate_hz}",
             )
         self._stream_every = max(1, round(self.rate_hz / rate)) if rate > 0 else 0
         actual = self.rate_hz / self._stream_every if self._stream_every else 0

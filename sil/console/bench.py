@@ -9,12 +9,16 @@ new pty); a client runs in another process, as `sil console` would:
 - requests: the same loop answering back-to-back parameter reads: round trips per second;
 - budget: ticks at 100 Hz in real time, streaming at 50 Hz while the client reads and writes
   parameters and the fault log without pause: worst, 99th-percentile and mean time of the port's
-  poll in one tick.
+  poll in one tick, in wall time (on a busy machine its tail is the operating system preempting
+  the process) and the most CPU time one poll took; and how many polls gave up the CPU in the
+  kernel (voluntary context switches: the descriptors are non-blocking, so these are waits on the
+  pty's own locks while the client reads it at the same moment, or on page faults).
 """
 
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -89,22 +93,25 @@ def _session(mode: str, seconds: float, period_s: float | None) -> tuple[dict, l
         text=True,
     )
     polls: list[float] = []
+    blocked = 0  # polls during which this thread waited in the kernel
     clock = time.perf_counter
     next_tick = clock()
     while client.poll() is None:
         if period_s is not None:
             next_tick += period_s
             time.sleep(max(0.0, next_tick - clock()))
+        waits = resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw
         t0 = clock()
         port.poll(i)
         polls.append(clock() - t0)
+        blocked += resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw != waits
         i.sensor_status = i.analog_status = i.demand_status = E2E_OK
         ecu.tick(i)
     out = client.stdout.read()
     transport.close()
     if client.returncode != 0:
         raise RuntimeError(f"bench client ({mode}) exited with {client.returncode}")
-    return json.loads(out), polls, port.summary()
+    return json.loads(out), polls, {**port.summary(), "blocked": blocked}
 
 
 def run(quick: bool = False) -> dict:
@@ -125,4 +132,5 @@ def run(quick: bool = False) -> dict:
         "service_worst_cpu_us_per_tick": port["worst_cpu_us"],
         "service_p99_us_per_tick": round(polls[int(0.99 * (len(polls) - 1))] * 1e6, 1),
         "service_mean_us_per_tick": round(sum(polls) / len(polls) * 1e6, 1),
+        "service_polls_that_blocked": port["blocked"] + streamed["blocked"],
     }

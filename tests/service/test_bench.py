@@ -19,3 +19,4 @@ def test_bench_service_quick():
     assert figures["budget_stream_samples_lost"] == 0 and figures["budget_client_cycles"] > 0
     assert 0 < figures["service_mean_us_per_tick"] <= figures["service_worst_us_per_tick"]
     assert 0 < figures["service_worst_cpu_us_per_tick"] < 10_000  # CPU inside a 10 ms tick
+    assert figures["service_polls_that_blocked"] < figures["budget_ticks"]

@@ -1,12 +1,15 @@
 """Two processes over a pseudo-terminal: `sil ecu --serial pty` and clients in other processes
 (this test and `sil console`); parameters saved to flash survive a SIGKILL of the ECU."""
 
+import fcntl
 import json
 import os
 import select
 import signal
+import struct
 import subprocess
 import sys
+import termios
 import time
 
 from ecu.service.transport import open_transport
@@ -96,3 +99,39 @@ def test_service_over_a_pty_between_processes_and_a_power_cut(tmp_path):
     assert service["requests"] >= 4 and service["frames"] == service["requests"]
     assert service["crc_errors"] == service["malformed"] == 0
     assert 0 < service["worst_us"] < 1e6 / 100  # always within one 10 ms tick here
+
+
+def _read_until(fd: int, text: bytes, seconds: float) -> bytes:
+    seen = b""
+    deadline = time.monotonic() + seconds
+    while text not in seen and time.monotonic() < deadline:
+        ready, _, _ = select.select([fd], [], [], 0.1)
+        if ready:
+            seen += os.read(fd, 65536)
+    return seen
+
+
+def test_interactive_console_on_a_terminal(tmp_path):
+    ecu, port = _start_ecu(tmp_path / "flash.bin", "tty")
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
+    console = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "console", port],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        env={**os.environ, "TERM": "xterm"},
+    )
+    os.close(slave)
+    try:
+        assert b"speed " in _read_until(master, b"speed ", 30)  # live values on screen
+        os.write(master, b"get pid_kp\r")
+        assert b"pid_kp = 2 (raw 33554432" in _read_until(master, b"pid_kp = 2 (raw", 10)
+        os.write(master, b"quit\r")
+        assert console.wait(10) == 0
+    finally:
+        if console.poll() is None:
+            console.kill()
+        os.close(master)
+        ecu.send_signal(signal.SIGTERM)
+        ecu.communicate(timeout=30)

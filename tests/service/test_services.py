@@ -5,6 +5,8 @@ import crcmod.predefined
 import msgpack
 import pytest
 from cobs import cobs
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ecu import faults as F
 from ecu import modes as M
@@ -15,6 +17,7 @@ from ecu.service.message import Kind, Message, Service, Status, pack, unpack
 from ecu.service.param_table import TABLE
 from ecu.service.port import COUNTER_NAMES, MAX_REQUESTS, MAX_RX_BYTES, PENDING_MAX
 from sil.console.client import ServiceRequestError
+from tests.service.conftest import LoopRig
 
 CRC = crcmod.predefined.mkCrcFun("crc-ccitt-false")
 
@@ -189,3 +192,43 @@ def test_counters_fit_a_frame_at_any_count(rig):
     got = rig.client.counters()
     assert got["rx_bytes"] >= 2**40 and got["worst_cpu_us"] == 1234567.0
     assert list(got) == list(COUNTER_NAMES)
+
+
+bodies = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**64 - 1)
+    | st.floats()
+    | st.text(max_size=8),
+    lambda inner: (
+        st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3)
+    ),
+    max_leaves=6,
+)
+field_names = st.sampled_from(["name", "raw", "index", "rate_hz", "start", "key", "x"])
+
+
+@settings(max_examples=400, deadline=None, derandomize=True)
+@given(
+    st.sampled_from([*Service, 0x00, 0x7F, 0xFF]),
+    st.one_of(bodies, st.dictionaries(field_names, bodies, max_size=3)),
+    st.integers(0, 255),
+)
+def test_any_request_body_gets_an_answer_and_never_raises(service, body, version):
+    rig = LoopRig(EcuParams())
+    rig.client.unlock()
+    try:
+        payload = pack(Message(Kind.REQUEST, 77, service, Status.OK, body, version=version))
+    except ValueError:
+        return  # larger than a frame: the sender cannot even build it
+    rig.transport.write(encode_frame(payload))
+    answers = []
+    for _ in range(8):  # a save takes a few ticks
+        rig.tick()
+        answers += [unpack(p) for p in rig.client.decoder.feed(rig.transport.read(4096))]
+    replies = [m for m in answers if m.kind == Kind.RESPONSE and m.seq == 77]
+    assert len(replies) == 1
+    reply = replies[0]
+    assert reply.status in Status._value2member_map_
+    if reply.status != Status.OK:
+        assert isinstance(reply.body["error"], str) and reply.body["error"]
