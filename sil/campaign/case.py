@@ -13,6 +13,7 @@ import numpy as np
 
 from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params
+from ecu.port.core import make_ecu
 from plant.node import PlantNode
 from protocol.codec import Codec
 from protocol.node import InProcessBus
@@ -41,7 +42,8 @@ class CaseRun:
         return np.asarray(getattr(self.probe, name))
 
 
-def run_case(s: Scenario, seed: int | None = None) -> CaseRun:
+def run_case(s: Scenario, seed: int | None = None, ecu_impl: str = "python") -> CaseRun:
+    """Run a case; ``ecu_impl``: the firmware's Python original or its C port (ecu.port)."""
     seed = s.seed if seed is None else seed
     t0 = time.perf_counter()
     plant = build_plant(s, seed)
@@ -55,7 +57,9 @@ def run_case(s: Scenario, seed: int | None = None) -> CaseRun:
     command = CommandNode(
         codec, probe, commands, ecu_rate_hz=s.ecu_rate_hz, open_loop=open_loop, faults=s.faults
     )
-    ecu, plant_node = EcuNode(compile_params(params)), PlantNode(plant)
+    # one codec for all three (18 ms each to build): each node packs only its own messages
+    ecu = EcuNode(ecu=make_ecu(ecu_impl, compile_params(params)), codec=codec)
+    plant_node = PlantNode(plant, codec=codec)
     events: list[dict] = []
     stalls: dict[str, int] = {}
     if s.bus_faults:

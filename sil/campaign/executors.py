@@ -2,7 +2,8 @@
 CSV table (``results.csv``) as runs finish, so an interrupted campaign resumes where it stopped.
 
 A case that raises is recorded as failed with its error and the campaign goes on. A case counts
-as done when the table has a completed row with its run ID and content digest: a resumed
+as done when the table has a completed row with its run ID, content digest and ECU
+implementation: a resumed
 campaign reruns failed cases and the cases a changed campaign file changed (the report reads
 the last row of each run).
 """
@@ -35,6 +36,7 @@ class Task:
     scenario_toml: str
     base_dir: str
     invariants: Invariants
+    ecu_impl: str = "python"
 
 
 def run_task(task: Task) -> dict:
@@ -43,10 +45,10 @@ def run_task(task: Task) -> dict:
     from sil.campaign.case import run_case
     from sil.campaign.invariants import check
 
-    row: dict = {"run_id": task.run_id}
+    row: dict = {"run_id": task.run_id, "ecu_impl": task.ecu_impl}
     try:
         s = scenarios.parse(task.scenario_toml, task.run_id, Path(task.base_dir))
-        fig, detections, violations = check(run_case(s), task.invariants)
+        fig, detections, violations = check(run_case(s, ecu_impl=task.ecu_impl), task.invariants)
         row.update(fig, status="completed", error="", detections=json.dumps(detections))
         row.update(violations="; ".join(violations), n_violations=len(violations))
     except Exception as exc:  # a crashing run is recorded, the campaign goes on
@@ -58,7 +60,7 @@ def run_task(task: Task) -> dict:
 
 def columns(campaign: Campaign) -> list[str]:
     return [
-        "run_id", "digest", "sample", *campaign.axes, "status", "error", *FIGURES,
+        "run_id", "digest", "ecu_impl", "sample", *campaign.axes, "status", "error", *FIGURES,
         "n_violations", "violations", "detections",
     ]  # fmt: skip
 
@@ -69,7 +71,7 @@ class Table:
     def __init__(self, path: Path, campaign: Campaign) -> None:
         self.path = path
         self.fields = columns(campaign)
-        self.done: set[tuple[str, str]] = set()
+        self.done: set[tuple[str, str, str]] = set()
         if path.exists() and path.stat().st_size:
             with path.open(newline="") as f:
                 reader = csv.DictReader(f)
@@ -79,7 +81,9 @@ class Table:
                         "use another --out or remove it"
                     )
                 self.done = {
-                    (r["run_id"], r["digest"]) for r in reader if r["status"] == "completed"
+                    (r["run_id"], r["digest"], r["ecu_impl"])
+                    for r in reader
+                    if r["status"] == "completed"
                 }
             self._file = path.open("a", newline="")
             self._writer = csv.DictWriter(self._file, self.fields)
@@ -157,6 +161,7 @@ def execute(
     out: Path,
     *,
     executor: str = "local",
+    ecu_impl: str = "python",
     workers: int | None = None,
     scheduler: str | None = None,
     progress: bool = True,
@@ -169,10 +174,10 @@ def execute(
     for case in campaign.cases:
         (scen_dir / f"{case.run_id}.toml").write_text(case.scenario_toml)
     table = Table(out / "results.csv", campaign)
-    todo = [c for c in campaign.cases if (c.run_id, c.digest) not in table.done]
+    todo = [c for c in campaign.cases if (c.run_id, c.digest, ecu_impl) not in table.done]
     by_id = {c.run_id: c for c in todo}
     base_dir = str(campaign.path.parent.resolve())
-    tasks = [Task(c.run_id, c.scenario_toml, base_dir, campaign.invariants) for c in todo]
+    tasks = [Task(c.run_id, c.scenario_toml, base_dir, campaign.invariants, ecu_impl) for c in todo]
     workers = workers or os.cpu_count() or 1
     outcome = Outcome(len(campaign.cases), len(campaign.cases) - len(todo), 0, 0, 0, 0.0)
     bar = tqdm(total=len(todo), desc=campaign.name, unit="run", disable=not progress,

@@ -21,9 +21,10 @@ CONTROLLER = "controller.kind"
 
 
 def load(path: Path) -> list[dict]:
-    """The table's rows, the last one of each run (a resumed campaign appends reruns)."""
+    """The table's rows in run order, the last one of each run (a resumed campaign appends)."""
     with path.open(newline="") as f:
-        return list({r["run_id"]: r for r in csv.DictReader(f)}.values())
+        last = {r["run_id"]: r for r in csv.DictReader(f)}
+    return [last[k] for k in sorted(last)]
 
 
 def _float(v: str) -> float:
@@ -33,12 +34,14 @@ def _float(v: str) -> float:
         return math.nan
 
 
-def repro(out: Path, run_id: str) -> str:
+def repro(out: Path, row: dict) -> str:
     """The command line that reruns a case with full recording (can.log, trace, plots)."""
+    run_id = row["run_id"]
     scenario = out / "scenarios" / f"{run_id}.toml"
-    return shlex.join(
-        ["sil", "run", str(scenario), "--mode", "inproc", "--out", str(out / "repro" / run_id)]
-    )
+    argv = ["sil", "run", str(scenario), "--mode", "inproc", "--out", str(out / "repro" / run_id)]
+    if row.get("ecu_impl", "python") != "python":
+        argv += ["--ecu-impl", row["ecu_impl"]]
+    return shlex.join(argv)
 
 
 def _pct(x: np.ndarray, q: float) -> float:
@@ -194,11 +197,11 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
     if not violating:
         lines += ["None.", ""]
     for r in violating:
-        lines += [f"- run {r['run_id']}: {r['violations']}", f"  `{repro(out, r['run_id'])}`"]
+        lines += [f"- run {r['run_id']}: {r['violations']}", f"  `{repro(out, r)}`"]
     if failed:
         lines += ["", "## Failed runs", ""]
         for r in failed:
-            lines += [f"- run {r['run_id']}: {r['error']}", f"  `{repro(out, r['run_id'])}`"]
+            lines += [f"- run {r['run_id']}: {r['error']}", f"  `{repro(out, r)}`"]
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n")
     return path

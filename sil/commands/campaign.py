@@ -9,6 +9,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from ecu.port.core import IMPLEMENTATIONS
+
 NAME = "campaign"
 HELP = "run a campaign (engine variation, bus faults, seeds) on a local pool or Dask"
 
@@ -25,6 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--scheduler",
         metavar="ADDRESS",
         help="Dask scheduler address (default: a LocalCluster on this machine)",
+    )
+    parser.add_argument(
+        "--ecu-impl",
+        choices=IMPLEMENTATIONS,
+        default="python",
+        help="ECU tick: the Python firmware (default) or its C port (ecu/port)",
     )
     parser.add_argument(
         "--workers", type=int, metavar="N", help="worker processes (default: all cores)"
@@ -61,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
             campaign,
             out,
             executor=args.executor,
+            ecu_impl=args.ecu_impl,
             workers=args.workers,
             scheduler=args.scheduler,
             progress=not args.no_progress,
@@ -69,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil campaign: {exc}", file=sys.stderr)
         return 2
     speed = {
-        "executor": args.executor,
+        "executor": f"{args.executor}, {args.ecu_impl} ECU",
         "this invocation": f"{outcome.completed + outcome.failed} runs in {outcome.wall_s:.1f} s "
         f"({outcome.runs_per_min:.1f} runs/min), {outcome.skipped} done before",
     }
