@@ -6,6 +6,7 @@
 - instructions per tick: callgrind on the host build (``--toggle-collect=ecu_tick``) and QEMU on
   the Cortex-M4 build (``-icount shift=0``: SysTick counts the virtual clock, calibrated in the
   same run by a loop of known length), both replaying the MRAC golden vector;
+- microseconds per tick called from Python (the C core through ctypes, the Python firmware);
 - the SIL in process with the C ECU and with the Python one on the aero-thermal MRAC scenario
   (real-time factors), and where the C run's time goes (cProfile, by package).
 """
@@ -19,10 +20,12 @@ import re
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 from ecu import golden
 from ecu.port import build, qemu
+from ecu.port.core import CEcu
 
 SCENARIO = "thesis-5.3-mrac-aero"
 VECTOR = "mrac-aero"
@@ -131,6 +134,28 @@ def qemu_instructions(vectors: Path, ticks: int) -> float | str:
     return round(counts * cal_instructions / cal_counts / ticks, 1)
 
 
+def tick_us(g: golden.Golden) -> dict:
+    """Microseconds per tick called from Python: the C core through ctypes and the Python
+    firmware, on the vector's inputs."""
+    from ecu.firmware import Ecu, EcuInputs
+
+    n_in = len(golden.INPUT_FIELDS)
+    inputs = []
+    for t in range(g.ticks):
+        i = EcuInputs()
+        row = g.rows[t * golden.ROW_WORDS : t * golden.ROW_WORDS + n_in]
+        for name, value in zip(golden.INPUT_FIELDS, row, strict=True):
+            setattr(i, name, value)
+        inputs.append(i)
+    figures = {}
+    for key, ecu in (("ctypes_c_tick_us", CEcu(g.params)), ("python_tick_us", Ecu(g.params))):
+        t0 = time.perf_counter()
+        for i in inputs:
+            ecu.tick(i)
+        figures[key] = round((time.perf_counter() - t0) / g.ticks * 1e6, 2)
+    return figures
+
+
 def _package(filename: str) -> str:
     for name in ("plant", "protocol", "sil", "ecu", "numpy", "can", "numba"):
         if f"/{name}/" in filename:
@@ -189,6 +214,7 @@ def run(quick: bool = False) -> dict:
         replayer = build.host_replayer()
         figures["host_instructions_per_tick"] = callgrind_instructions(replayer, vectors, g.ticks)
         figures["cm4_qemu_instructions_per_tick"] = qemu_instructions(vectors, g.ticks)
+        figures.update(tick_us(g))
     figures["instructions_target_met"] = all(
         isinstance(v, float) and v < INSTRUCTIONS_TARGET
         for v in (figures["host_instructions_per_tick"], figures["cm4_qemu_instructions_per_tick"])

@@ -20,8 +20,8 @@
  *         send o->duty_cpct / o->pump_enable to the pump driver and the ECU frames
  *         (ecu_frames.h packs them from the outputs, with E2E CRC and alive counter).
  *
- * ecu_tick is reentrant per instance, takes constant time (no loops over data except the fixed
- * parameter arrays), uses no floating point and no library calls. Inputs are expected in their
+ * ecu_tick is reentrant per instance, has no loops, uses no floating point and calls nothing but
+ * the compiler's 64-bit division helper (__aeabi_ldivmod on Arm). Inputs are expected in their
  * DBC ranges (speed 0..262143 rpm, EGT 0..16383 dK, supply and current 0..65535, demand
  * 0..65535); within them no intermediate overflows 64 bits.
  *
