@@ -93,3 +93,15 @@ def test_bus_fault_campaign_detects_what_it_must(write, tmp_path):
     assert short["detected"] and short["recovered"]
     assert by_variant["short-loss"]["final_mode"] == "RUN"
     assert "| flips (bitflip, E2E) | 1 | 1/1 (100 %) |" in (out / "report.md").read_text()
+
+
+def test_the_c_ecu_gives_the_same_runs_as_the_python_one(write, tmp_path):
+    campaign = load(write(NOMINAL))
+    python = execute(campaign, tmp_path / "py", workers=2, progress=False)
+    c = execute(campaign, tmp_path / "c", ecu_impl="c", workers=2, progress=False)
+    assert python.completed == c.completed == 2
+    a, b = rows(tmp_path / "py"), rows(tmp_path / "c")
+    drop = ("wall_s", "ecu_impl")
+    assert {i: {k: v for k, v in r.items() if k not in drop} for i, r in a.items()} == {
+        i: {k: v for k, v in r.items() if k not in drop} for i, r in b.items()
+    }
