@@ -18,7 +18,6 @@ PARAMS_DEFAULTS = 64  # no valid parameter slot in flash at start: defaults in u
 PARAMS_REJECTED = 65  # a stored set (or some of its entries) was refused at start
 LOGGED_BITS = 0xFFFF & ~(F.LIMITER_ACTIVE | F.PUMP_SATURATED)
 SNAPSHOT_FIELDS = ("mode", "fault_word", "speed_cpct", "egt_dk", "pump_mv", "supply_mv", "pump_ma")
-SNAPSHOT_UNITS = ("", "", "0.01 %N", "0.1 K", "mV", "mV", "mA")
 
 
 def code_name(code: int) -> str:

@@ -40,10 +40,6 @@ class FrameStats:
     crc_errors: int = 0
     oversized: int = 0  # longer than MAX_ENCODED before their delimiter
 
-    @property
-    def dropped(self) -> int:
-        return self.malformed + self.crc_errors + self.oversized
-
 
 class FrameDecoder:
     """Incremental frame decoder with bounded memory (see the module docstring)."""

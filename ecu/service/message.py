@@ -20,7 +20,6 @@ from ecu.service.framing import MAX_PAYLOAD
 
 VERSION = 1
 HEADER = struct.Struct(">BBHBB")
-SEQ_MODULO = 1 << 16
 
 
 class Kind(IntEnum):

@@ -39,10 +39,6 @@ class ParamSpec:
         return int(rest.rstrip("]")) if bracket else None
 
     @property
-    def q_format(self) -> str:
-        return f"Q{31 - self.frac_bits}.{self.frac_bits}" if self.frac_bits else "int32"
-
-    @property
     def raw_lo(self) -> int:
         return math.ceil(self.lo * (1 << self.frac_bits))
 

@@ -78,7 +78,8 @@ def _command(client: ServiceClient, cmd: str, args: list[str]) -> list[str]:
         ]
     if cmd == "params" and not args:
         return [
-            f"{p['name']:<20} {p['value']:>12g} {p['unit']:<9} [{p['min']:g}, {p['max']:g}]"
+            f"{p['name']:<20} {p['value']:>12g} {p['unit']:<9} Q{31 - p['frac']}.{p['frac']:<3}"
+            f"[{p['min']:g}, {p['max']:g}]"
             f"{'' if p['run_safe'] else '  (not in RUN)'}"
             for p in client.params()
         ]

@@ -98,7 +98,8 @@ def test_service_over_a_pty_between_processes_and_a_power_cut(tmp_path):
     service = summary["service"]
     assert service["requests"] >= 4 and service["frames"] == service["requests"]
     assert service["crc_errors"] == service["malformed"] == 0
-    assert 0 < service["worst_us"] < 1e6 / 100  # always within one 10 ms tick here
+    # CPU time: the wall time also counts preemption by other processes on a busy machine
+    assert 0 < service["worst_cpu_us"] < 1e6 / 100  # within one 10 ms tick
 
 
 def _read_until(fd: int, text: bytes, seconds: float) -> bytes:
