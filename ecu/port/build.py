@@ -3,6 +3,8 @@ Cortex-M4 replay firmware (for QEMU). Outputs go to a build directory keyed by a
 sources and flags, so an edited source is rebuilt on the next use and never reused stale.
 
 The warning flags are the issue's: ``-std=c99 -Wall -Wextra -Wconversion -pedantic -Werror``.
+
+    python -m ecu.port.build       build everything this host can and print the paths
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -106,3 +109,22 @@ def arm_objects() -> dict[str, Path]:
         )
     flags = (*WARNINGS, *ARM_FLAGS, "-c")
     return {s: _compile(ARM_CC, flags, (s,), Path(s).stem + ".o") for s in CORE_SOURCES}
+
+
+def main() -> int:
+    print(f"host library: {host_library()}")
+    print(f"host replayer: {host_replayer()}")
+    try:
+        print(f"Cortex-M4 replayer: {arm_replayer()}")
+    except PortBuildError as exc:
+        print(f"Cortex-M4 replayer: not built: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except PortBuildError as exc:
+        print(f"ecu.port.build: {exc}", file=sys.stderr)
+        sys.exit(2)
