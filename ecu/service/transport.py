@@ -80,18 +80,21 @@ class SerialTransport:
         self.name = name
 
     def read(self, max_bytes: int) -> bytes:
-        n = min(self.port.in_waiting, max_bytes)
-        return self.port.read(n) if n else b""
+        try:
+            n = min(self.port.in_waiting, max_bytes)
+            return self.port.read(n) if n else b""
+        except (serial.SerialException, OSError):  # a lost connection reads as silence
+            return b""
 
     def write(self, data: bytes) -> int:
-        capacity = getattr(self.port, "buffer_size", None)  # loop://: a bounded in-process queue
-        if capacity is not None:
-            data = data[: max(0, capacity - self.port.out_waiting)]
-            if not data:
-                return 0
         try:
+            capacity = getattr(self.port, "buffer_size", None)  # loop://: a bounded queue
+            if capacity is not None:
+                data = data[: max(0, capacity - self.port.out_waiting)]
+                if not data:
+                    return 0
             return self.port.write(data) or 0
-        except serial.SerialTimeoutException:
+        except (serial.SerialException, OSError):  # timed out or disconnected: not taken
             return 0
 
     def close(self) -> None:

@@ -1,6 +1,9 @@
 """Every service over loop:// against independent expectations; bad input is counted, never
 fatal; the port's work per tick is bounded."""
 
+import socket
+import time
+
 import crcmod.predefined
 import msgpack
 import pytest
@@ -10,13 +13,22 @@ from hypothesis import strategies as st
 
 from ecu import faults as F
 from ecu import modes as M
+from ecu.firmware import Ecu, EcuInputs
 from ecu.params import EcuParams, compile_params
 from ecu.service import fault_log, live
 from ecu.service.framing import MAX_ENCODED, encode_frame
 from ecu.service.message import Kind, Message, Service, Status, pack, unpack
 from ecu.service.param_table import TABLE
-from ecu.service.port import COUNTER_NAMES, MAX_REQUESTS, MAX_RX_BYTES, PENDING_MAX
-from sil.console.client import ServiceRequestError
+from ecu.service.port import (
+    COUNTER_NAMES,
+    MAX_REQUESTS,
+    MAX_RX_BYTES,
+    PENDING_MAX,
+    ServicePort,
+    boot,
+)
+from ecu.service.transport import open_transport
+from sil.console.client import ServiceClient, ServiceRequestError
 from tests.service.conftest import LoopRig
 
 CRC = crcmod.predefined.mkCrcFun("crc-ccitt-false")
@@ -232,3 +244,53 @@ def test_any_request_body_gets_an_answer_and_never_raises(service, body, version
     assert reply.status in Status._value2member_map_
     if reply.status != Status.OK:
         assert isinstance(reply.body["error"], str) and reply.body["error"]
+
+
+class _SocketEnd:
+    """The host's end of a TCP connection as a transport (non-blocking)."""
+
+    name = "tcp"
+
+    def __init__(self, sock: socket.socket) -> None:
+        sock.setblocking(False)
+        self.sock = sock
+
+    def read(self, max_bytes: int) -> bytes:
+        try:
+            return self.sock.recv(max_bytes)
+        except BlockingIOError:
+            return b""
+
+    def write(self, data: bytes) -> int:
+        try:
+            return self.sock.send(data)
+        except BlockingIOError:
+            return 0
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def test_round_trip_over_a_socket_url():
+    """The ECU on pyserial's socket:// handler, the host on the accepted connection."""
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        host, port = server.getsockname()
+        ecu_side = open_transport(f"socket://{host}:{port}")
+        conn, _ = server.accept()
+    booted = boot(EcuParams(), None)
+    ecu = Ecu(booted.table.firmware)
+    service = ServicePort(ecu_side, ecu, booted, seed=3)
+    inputs = EcuInputs()
+
+    def tick() -> None:
+        service.poll(inputs)
+        ecu.tick(inputs)
+        time.sleep(0.001)
+
+    client = ServiceClient(_SocketEnd(conn), timeout_s=5.0, retries=0, idle=tick)
+    assert client.identify()["param_crc"] == _expected_set_crc(EcuParams())
+    assert client.set("egt_kp", 0.02)["value"] == pytest.approx(0.02, abs=2**-24)
+    conn.close()
+    for _ in range(3):
+        tick()  # the host is gone: the ECU side keeps polling without raising
+    ecu_side.close()
