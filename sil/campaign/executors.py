@@ -14,6 +14,7 @@ import csv
 import json
 import math
 import os
+import signal
 import sys
 import time
 import traceback
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sil.campaign.spec import Campaign, Case, Invariants
+from sil.runner import _die_with_parent
 
 FIGURES = (
     "ticks", "wall_s", "tracking_rms_pct", "max_n_pct", "max_egt_K", "egt_limit_time_s",
@@ -107,16 +109,24 @@ def _cell(v: object) -> object:
     return v
 
 
+def _worker_init() -> None:
+    """Workers die with the campaign (Linux), and leave Ctrl-C to it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform == "linux":
+        _die_with_parent()
+
+
 def _local(tasks: list[Task], workers: int) -> Iterator[dict]:
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    try:
         futures = [pool.submit(run_task, t) for t in tasks]
-        try:
-            for future in as_completed(futures):
-                yield future.result()
-        except BaseException:
-            for future in futures:
-                future.cancel()
-            raise
+        for future in as_completed(futures):
+            yield future.result()
+    finally:  # interrupted: drop what has not started, stop the workers now
+        running = list((pool._processes or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in running:
+            proc.terminate()
 
 
 def _dask(tasks: list[Task], workers: int, scheduler: str | None) -> Iterator[dict]:

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from ecu.port.core import IMPLEMENTATIONS
+from sil.commands.run import _interrupt_on_signals
 
 NAME = "campaign"
 HELP = "run a campaign (engine variation, bus faults, seeds) on a local pool or Dask"
@@ -64,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.file.resolve() != (out / "campaign.toml").resolve():
         shutil.copyfile(args.file, out / "campaign.toml")
+    _interrupt_on_signals()
     try:
         outcome = execute(
             campaign,
@@ -77,6 +79,10 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"sil campaign: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"sil campaign: interrupted; run it again to resume ({out / 'results.csv'})",
+              file=sys.stderr)  # fmt: skip
+        return 130
     speed = {
         "executor": f"{args.executor}, {args.ecu_impl} ECU",
         "this invocation": f"{outcome.completed + outcome.failed} runs in {outcome.wall_s:.1f} s "

@@ -105,3 +105,33 @@ def test_the_c_ecu_gives_the_same_runs_as_the_python_one(write, tmp_path):
     assert {i: {k: v for k, v in r.items() if k not in drop} for i, r in a.items()} == {
         i: {k: v for k, v in r.items() if k not in drop} for i, r in b.items()
     }
+
+
+@pytest.mark.slow
+def test_an_interrupted_campaign_stops_its_workers_and_resumes(write, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = write(SMALL.replace("samples = 2", "samples = 5"))  # 12 runs
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "sil.cli", "campaign", str(path), "--out", str(out)]
+    proc = subprocess.Popen([*argv, "--workers", "2", "--no-progress", "--no-report"])
+    table = out / "results.csv"
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (
+        not table.exists() or len(table.read_text().splitlines()) < 3
+    ):
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(30) == 130
+    done = len(rows(out))
+    assert 2 <= done < 12
+    time.sleep(0.5)
+    workers = subprocess.run(["pgrep", "-f", str(out)], capture_output=True, text=True).stdout
+    assert workers.split() == [] or workers.split() == [str(os.getpid())]
+    outcome = execute(load(path), out, workers=2, progress=False)
+    assert outcome.skipped == done and outcome.completed == 12 - done
+    assert len(rows(out)) == 12
