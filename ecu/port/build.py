@@ -73,11 +73,14 @@ def host_library(cc: str | None = None) -> Path:
     return _compile(cc, flags, CORE_SOURCES, "libecu_port.so")
 
 
-def host_replayer(cc: str | None = None) -> Path:
-    """The golden-vector replayer for the host: ``replay FILE`` (exit 0 when every tick matches)."""
+def host_replayer(cc: str | None = None, *, sanitize: bool = False) -> Path:
+    """The golden-vector replayer for the host: ``replay FILE`` (exit 0 when every tick matches);
+    ``sanitize``: built with UBSan and ASan, stopping at the first undefined behaviour."""
     cc = cc or host_compiler()
     flags = (*WARNINGS, "-O2", "-DECU_WITH_NAMES")
-    return _compile(cc, flags, (*CORE_SOURCES, "replay.c"), "replay")
+    if sanitize:
+        flags += ("-g", "-fsanitize=undefined,address", "-fno-sanitize-recover=all")
+    return _compile(cc, flags, (*CORE_SOURCES, "replay.c"), "replay-san" if sanitize else "replay")
 
 
 def arm_replayer(systick: bool = False) -> Path:

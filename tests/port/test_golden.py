@@ -35,6 +35,15 @@ def test_host_build_matches_every_tick(vectors, name):
     assert g.ticks >= 1000
 
 
+def test_no_undefined_behaviour_on_any_vector(vectors):
+    """UBSan (signed overflow, shifts, ...) and ASan stop the replay at the first finding."""
+    replayer = build.host_replayer(sanitize=True)
+    for name, (path, g) in vectors.items():
+        done = subprocess.run([str(replayer), str(path)], capture_output=True, text=True)
+        assert done.returncode == 0 and done.stderr == "", f"{name}: {done.stdout}{done.stderr}"
+        assert done.stdout.strip() == f"OK {g.ticks} ticks"
+
+
 def test_vectors_cover_controllers_modes_limiters_and_faults(vectors):
     gs = [g for _, g in vectors.values()]
     assert {g.params.controller for g in gs} == {CTRL_MRAC, CTRL_PID, CTRL_OPEN_LOOP}
