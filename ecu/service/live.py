@@ -52,5 +52,9 @@ def sample(ecu) -> list[int]:
     ]  # fmt: skip
 
 
-def decode(raw: list[int]) -> dict[str, float]:
-    return {name: r * scale for (name, _, scale), r in zip(FIELDS, raw, strict=True)}
+def decode(raw: list[int]) -> dict[str, int | float]:
+    """A sample in its units (counts and codes stay integers)."""
+    return {
+        name: r if scale == 1.0 else r * scale
+        for (name, _, scale), r in zip(FIELDS, raw, strict=True)
+    }

@@ -13,7 +13,8 @@ includes any preemption by the operating system), ``worst_cpu_s`` the most CPU t
 Writes, saves, clearing the log and arming need an unlocked session: the tool asks for a seed
 and answers with :func:`ecu.service.message.unlock_key`; the session lasts ``SESSION_S`` of ECU
 time after the last request. A stop request is always accepted and holds the stop input until an
-arm request (or a power cycle).
+arm request (or a power cycle). A request repeated with the same sequence number and service
+(the client's retry after a lost answer) is answered again without being run twice.
 """
 
 from __future__ import annotations
@@ -58,10 +59,11 @@ MAX_TX_BYTES = 1024  # handed to the line per tick
 SESSION_S = 10.0
 FAULT_PAGE = 4  # fault-log entries per response
 MIN_STREAM_HZ = 0.1
+REPEAT_S = 2.0  # a request repeated (same sequence and service) within this is not run again
 # the COUNTERS response: its values in this order
 COUNTER_NAMES = (
     "rx_bytes", "tx_bytes", "frames", "malformed", "crc_errors", "oversized", "bad_messages",
-    "unexpected", "requests", "queue_overflow", "tx_dropped", "stream_samples", "polls",
+    "unexpected", "requests", "repeats", "queue_overflow", "tx_dropped", "stream_samples", "polls",
     "worst_us", "worst_cpu_us", "mean_us",
 )  # fmt: skip
 
@@ -114,6 +116,7 @@ class Counters:
     bad_messages: int = 0  # frames whose payload is not a message
     unexpected: int = 0  # messages that are not requests
     queue_overflow: int = 0  # requests dropped: too many waiting
+    repeats: int = 0  # requests repeated by the client: answered again, not run again
     tx_dropped: int = 0  # frames dropped: the transmit buffer was full
     stream_samples: int = 0
     polls: int = 0
@@ -163,6 +166,9 @@ class ServicePort:
         self._stop_held = False
         self._writer: SlotWriter | None = None
         self._save_request: Message | None = None
+        self._last_request: tuple[int, int] | None = None  # (sequence, service) last handled
+        self._last_answer: bytes | None = None  # its response frame (None while pending)
+        self._last_until = 0  # poll count until which a repeat of it gets that answer again
         self._handlers: dict[int, Callable[[Any], Any]] = {
             Service.IDENTIFY: self._identify,
             Service.STREAM: self._stream,
@@ -229,22 +235,26 @@ class ServicePort:
         return (o.mode, o.fault_word, o.n_cpct, s.egt_dk, o.pump_mv, s.supply_mv, s.pump_ma)
 
     # -- frames out --------------------------------------------------------------------------
-    def _queue(self, msg: Message, limit: int = TX_BUFFER) -> None:
-        frame = encode_frame(pack(msg))
+    def _queue(self, frame: bytes, limit: int = TX_BUFFER) -> None:
         if len(self._tx) + len(frame) > limit:
             self.counters.tx_dropped += 1
         else:
             self._tx += frame
 
     def _respond(self, request: Message, status: Status, body: Any) -> None:
-        self._queue(Message(Kind.RESPONSE, request.seq, request.service, status, body))
+        frame = encode_frame(
+            pack(Message(Kind.RESPONSE, request.seq, request.service, status, body))
+        )
+        if (request.seq, request.service) == self._last_request:
+            self._last_answer = frame  # kept for a repeat of the request
+        self._queue(frame)
 
     def _send_stream(self) -> None:
         self._stream_seq = (self._stream_seq + 1) & 0xFFFF
         msg = Message(
             Kind.STREAM, self._stream_seq, Service.STREAM, Status.OK, live.sample(self.ecu)
         )
-        self._queue(msg, TX_BUFFER // 2)
+        self._queue(encode_frame(pack(msg)), TX_BUFFER // 2)
         self.counters.stream_samples += 1
 
     # -- requests ----------------------------------------------------------------------------
@@ -260,6 +270,14 @@ class ServicePort:
             c.unexpected += 1
             return None
         c.requests += 1
+        key = (msg.seq, msg.service)
+        if key == self._last_request and c.polls < self._last_until:
+            c.repeats += 1  # the client did not hear the answer and asked again: answer again
+            if self._last_answer is not None:
+                self._queue(self._last_answer)
+            return msg.service
+        self._last_request, self._last_answer = key, None
+        self._last_until = c.polls + round(REPEAT_S * self.rate_hz)
         handler = self._handlers.get(msg.service)
         if msg.version != VERSION:
             why = f"protocol version {msg.version} not supported (this ECU: {VERSION})"
@@ -310,7 +328,7 @@ class ServicePort:
         mean_us = round(c.total_s / c.polls * 1e6, 1) if c.polls else 0.0
         return [
             c.rx_bytes, c.tx_bytes, s.frames, s.malformed, s.crc_errors, s.oversized,
-            c.bad_messages, c.unexpected, c.requests, c.queue_overflow, c.tx_dropped,
+            c.bad_messages, c.unexpected, c.requests, c.repeats, c.queue_overflow, c.tx_dropped,
             c.stream_samples, c.polls, round(c.worst_s * 1e6, 1), round(c.worst_cpu_s * 1e6, 1),
             mean_us,
         ]  # fmt: skip

@@ -9,6 +9,7 @@ that runs the ECU's ticks instead.
 
 from __future__ import annotations
 
+import random
 import time
 from collections import deque
 from collections.abc import Callable
@@ -56,6 +57,7 @@ class ServiceClient:
         timeout_s: float = 1.0,
         retries: int = 2,
         idle: Callable[[], None] = _sleep,
+        first_seq: int | None = None,
     ) -> None:
         self.transport = transport
         self.timeout_s = timeout_s
@@ -65,7 +67,8 @@ class ServiceClient:
         self.samples: deque[list[int]] = deque(maxlen=10_000)
         self.stream_seq: int | None = None
         self.stream_gaps = 0  # stream samples lost (sequence numbers skipped)
-        self._seq = 0
+        # a new client starts where its predecessor's numbers are unlikely to be (see REPEAT_S)
+        self._seq = random.getrandbits(16) if first_seq is None else first_seq
         self._specs: list[dict] | None = None
 
     # -- transport ---------------------------------------------------------------------------
@@ -129,7 +132,7 @@ class ServiceClient:
         self.stream_seq = None
         return self.request(Service.STREAM, {"rate_hz": rate_hz})
 
-    def latest(self) -> dict[str, float] | None:
+    def latest(self) -> dict[str, int | float] | None:
         """The newest live sample in engineering units."""
         if not self.samples:
             return None

@@ -20,7 +20,7 @@ HELP = (
 )
 
 
-def render(ident: dict, sample: dict[str, float] | None, stream_gaps: int) -> list[str]:
+def render(ident: dict, sample: dict[str, int | float] | None, stream_gaps: int) -> list[str]:
     head = (
         f"{ident['firmware']}  build {ident['build']}  protocol {ident['protocol']}  "
         f"param CRC 0x{ident['param_crc']:04X}  storage {ident['storage']}"

@@ -23,7 +23,9 @@ class LoopRig:
         self.ecu = Ecu(self.boot.table.firmware)
         self.transport = open_transport("loop://")
         self.port = ServicePort(self.transport, self.ecu, self.boot, seed=7)
-        self.client = ServiceClient(self.transport, timeout_s=5.0, retries=0, idle=self.tick)
+        self.client = ServiceClient(
+            self.transport, timeout_s=5.0, retries=0, idle=self.tick, first_seq=0
+        )
         self.i = EcuInputs()
         self.i.sensor_status = self.i.analog_status = self.i.demand_status = E2E_NONEWDATA
 

@@ -294,3 +294,16 @@ def test_round_trip_over_a_socket_url():
     for _ in range(3):
         tick()  # the host is gone: the ECU side keeps polling without raising
     ecu_side.close()
+
+
+def test_a_repeated_request_is_answered_again_not_run_again(rig):
+    seed_request = encode_frame(pack(Message(Kind.REQUEST, 500, Service.UNLOCK_SEED)))
+    answers = []
+    for _ in range(2):  # the client's retry: the same sequence number and service
+        rig.transport.write(seed_request)
+        rig.tick()
+        answers += [unpack(p) for p in rig.client.decoder.feed(rig.transport.read(4096))]
+    assert [m.seq for m in answers] == [500, 500]
+    assert answers[0].body == answers[1].body  # the same seed: the request ran once
+    assert rig.client.counters()["repeats"] == 1
+    assert rig.client.request(Service.UNLOCK_SEED) != answers[0].body  # a new request runs
