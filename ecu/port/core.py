@@ -100,19 +100,19 @@ def _param_name(index: int) -> str:
 
 
 class CEcu:
-    """The C firmware behind the Python firmware's interface (see the module docstring)."""
+    """The C firmware behind the Python firmware's interface (see the module docstring).
+
+    Assigning ``p`` (a new FirmwareParams) loads it into the C parameter record the instance
+    runs on, from the next tick, as assigning ``Ecu.p`` does (the service port's parameter
+    writes); a refused set leaves the running one untouched.
+    """
 
     def __init__(self, params: EcuParams | FirmwareParams | None = None) -> None:
         if params is None:
             params = EcuParams()
-        self.p = params if isinstance(params, FirmwareParams) else compile_params(params)
         lib = library()
-        words = param_words(self.p)
-        self._words = (ctypes.c_int32 * len(words))(*words)
         self._params = lib.params_t()
-        bad = lib.lib.ecu_params_load(ctypes.byref(self._params), self._words, len(words))
-        if bad >= 0:
-            raise PortError(f"ecu_params_load refused FirmwareParams.{_param_name(bad)}")
+        self.p = params if isinstance(params, FirmwareParams) else compile_params(params)
         self._ecu = lib.ecu_t()
         self._in = lib.inputs_t()
         self._tick = lib.lib.ecu_tick
@@ -120,6 +120,22 @@ class CEcu:
         self.s = self._ecu.s
         self.out = self._ecu.o
         self.reset()
+
+    @property
+    def p(self) -> FirmwareParams:
+        return self._p
+
+    @p.setter
+    def p(self, params: FirmwareParams) -> None:
+        lib = library()
+        words = param_words(params)
+        loaded = lib.params_t()
+        c_words = (ctypes.c_int32 * len(words))(*words)
+        bad = lib.lib.ecu_params_load(ctypes.byref(loaded), c_words, len(words))
+        if bad >= 0:
+            raise PortError(f"ecu_params_load refused FirmwareParams.{_param_name(bad)}")
+        ctypes.pointer(self._params)[0] = loaded  # in place: ecu_t points at this record
+        self._p = params
 
     def reset(self) -> None:
         """Power-on initialisation (``ecu_init``)."""

@@ -200,3 +200,28 @@ def test_one_tick_from_extreme_states_is_equal(controller):
         for name in a.__slots__:
             assert getattr(a, name) == getattr(b, name), f"trial {trial}: output {name}"
         assert (diff := _state_difference(py.s, c.s)) is None, f"trial {trial}: state {diff}"
+
+
+def test_assigning_parameters_applies_them_from_the_next_tick():
+    """As the service port does on a parameter write: ``ecu.p = new`` on both firmwares."""
+    py, c, unchanged = Ecu(), core.CEcu(), Ecu()
+    i = EcuInputs()
+    i.speed_rpm, i.egt_dk, i.supply_mv, i.pump_ma, i.arm = 100900, 10480, 22200, 1700, 1
+    faster = compile_params(EcuParams(ref_wn=8.0, gamma_lambda=3.0, v_slew_v_s=50.0))
+    differs = 0
+    for k in range(600):
+        if k == 300:
+            py.p = c.p = faster
+        i.demand_cpct = 9300 if (k // 100) % 2 else 8700
+        i.speed_rpm += (py.out.pump_mv - 11560) // 40
+        a, b = py.tick(i), c.tick(i)
+        for name in a.__slots__:
+            assert getattr(a, name) == getattr(b, name), f"tick {k}: output {name}"
+        differs += unchanged.tick(i).nref_cpct != a.nref_cpct
+    assert differs > 100  # the new set did change the control
+    assert c.p is faster
+    refused = compile_params(EcuParams())
+    refused.rate_half_window = 0
+    with pytest.raises(core.PortError, match="rate_half_window"):
+        c.p = refused
+    assert c.p is faster and c._params.rate_half_window == faster.rate_half_window
