@@ -32,6 +32,7 @@ VECTOR = "mrac-aero"
 FLASH_TARGET = 16 * 1024
 RAM_TARGET = 2 * 1024
 INSTRUCTIONS_TARGET = 5000
+REPEATS = 3  # SIL runs per ECU implementation
 
 
 def _size(obj: Path) -> tuple[int, int, int]:
@@ -176,12 +177,15 @@ def sil_figures(quick: bool) -> dict:
         warm_up = dataclasses.replace(s, duration_s=1.0)  # plant JIT, imports, the C build
         run_scenario(RunOptions(warm_up, Path(tmp) / "warm", mode="inproc", plots=False,
                                 progress=False, ecu_impl="c"))  # fmt: skip
-        for impl in ("c", "python"):
-            opts = RunOptions(
-                s, Path(tmp) / impl, mode="inproc", plots=False, progress=False, ecu_impl=impl
-            )
-            summary = run_scenario(opts)
-            figures[f"sil_inproc_realtime_factor_{impl}_ecu"] = round(summary["realtime_factor"], 1)
+        best = {"c": 0.0, "python": 0.0}
+        for _ in range(REPEATS):  # alternated, best of each: the machine is shared
+            for impl in best:
+                opts = RunOptions(
+                    s, Path(tmp) / impl, mode="inproc", plots=False, progress=False, ecu_impl=impl
+                )
+                best[impl] = max(best[impl], run_scenario(opts)["realtime_factor"])
+        for impl, factor in best.items():
+            figures[f"sil_inproc_realtime_factor_{impl}_ecu"] = round(factor, 1)
         short = dataclasses.replace(s, duration_s=min(s.duration_s, 30.0))
         profile = cProfile.Profile()
         opts = RunOptions(
@@ -197,6 +201,18 @@ def sil_figures(quick: bool) -> dict:
     figures["sil_c_ecu_time_share_pct"] = {
         k: round(100.0 * v / total, 1) for k, v in sorted(by_package.items(), key=lambda kv: -kv[1])
     }
+    # cumulative share of the per-tick entry points (nested calls counted in their caller)
+    entries = {
+        "recorder": ("sil/recorder.py", "record"),
+        "plant_step": ("plant/node.py", "on_frame"),
+        "ecu_node": ("ecu/node.py", "_run_tick"),
+        "c_tick_via_ctypes": ("ecu/port/core.py", "tick"),
+    }
+    for key, (path, function) in entries.items():
+        cumulative = sum(
+            v[3] for (f, _, name), v in stats.items() if f.endswith(path) and name == function
+        )
+        figures[f"sil_c_ecu_cumulative_pct_{key}"] = round(100.0 * cumulative / total, 1)
     return figures
 
 
