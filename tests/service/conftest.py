@@ -6,6 +6,11 @@ responses go through pyserial's loop:// handler in a fixed order and every test 
 
 from __future__ import annotations
 
+import os
+import select
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -43,6 +48,28 @@ class LoopRig:
         i.sensor_status = i.analog_status = i.demand_status = E2E_OK
         i.speed_rpm, i.egt_dk, i.supply_mv, i.pump_ma = 100_890, 10_480, 22_200, 1_500
         i.demand_cpct, i.arm, i.stop = 8_968, 1, 0
+
+
+def start_ecu(flash: Path, tag: str) -> tuple[subprocess.Popen, str]:
+    """`sil ecu --serial pty --flash FLASH` in real time on a virtual bus of its own; returns the
+    process and the pty path it printed."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "ecu", "--bus", f"virtual:svc-{os.getpid()}-{tag}"]
+        + ["--mode", "realtime", "--serial", "pty", "--flash", str(flash), "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([proc.stderr], [], [], 1.0)
+        if ready:
+            line = proc.stderr.readline()
+            assert line, f"sil ecu exited with {proc.poll()} before serving the port"
+            if line.startswith("service port: "):
+                return proc, line.split(": ", 1)[1].strip()
+    proc.kill()
+    raise AssertionError("sil ecu did not print its service port")
 
 
 @pytest.fixture

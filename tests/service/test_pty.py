@@ -14,26 +14,7 @@ import time
 
 from ecu.service.transport import open_transport
 from sil.console.client import ServiceClient
-
-
-def _start_ecu(flash, tag: str) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", "ecu", "--bus", f"virtual:svc-{os.getpid()}-{tag}"]
-        + ["--mode", "realtime", "--serial", "pty", "--flash", str(flash), "--json"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([proc.stderr], [], [], 1.0)
-        if ready:
-            line = proc.stderr.readline()
-            assert line, f"sil ecu exited with {proc.poll()} before serving the port"
-            if line.startswith("service port: "):
-                return proc, line.split(": ", 1)[1].strip()
-    proc.kill()
-    raise AssertionError("sil ecu did not print its service port")
+from tests.service.conftest import start_ecu
 
 
 def _console(port: str, *args: str) -> subprocess.CompletedProcess:
@@ -47,7 +28,7 @@ def _console(port: str, *args: str) -> subprocess.CompletedProcess:
 
 def test_service_over_a_pty_between_processes_and_a_power_cut(tmp_path):
     flash = tmp_path / "flash.bin"
-    ecu, port = _start_ecu(flash, "a")
+    ecu, port = start_ecu(flash, "a")
     try:
         assert port.startswith("/dev/pts/")
         client = ServiceClient(open_transport(port), timeout_s=2.0)
@@ -83,7 +64,7 @@ def test_service_over_a_pty_between_processes_and_a_power_cut(tmp_path):
         ecu.send_signal(signal.SIGKILL)  # power cut
         ecu.wait()
 
-    ecu, port = _start_ecu(flash, "b")
+    ecu, port = start_ecu(flash, "b")
     try:
         live = _console(port, "live", "--samples", "3", "--json")
         assert live.returncode == 0, live.stderr
@@ -115,7 +96,7 @@ def _read_until(fd: int, text: bytes, seconds: float) -> bytes:
 
 
 def test_interactive_console_on_a_terminal(tmp_path):
-    ecu, port = _start_ecu(tmp_path / "flash.bin", "tty")
+    ecu, port = start_ecu(tmp_path / "flash.bin", "tty")
     master, slave = os.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
     console = subprocess.Popen(

@@ -25,6 +25,9 @@ from ecu.service.storage import (
     load,
     read_slots,
 )
+from ecu.service.transport import open_transport
+from sil.console.client import ServiceClient
+from tests.service.conftest import start_ecu
 
 
 def test_fresh_image_is_erased_and_saves_alternate(tmp_path):
@@ -191,3 +194,62 @@ def test_stored_entries_out_of_limits_are_skipped_and_named(tmp_path):
         "'bogus': not a parameter of this firmware, skipped",
     ]
     assert (b.table.raw("pid_kp"), b.table.raw("pid_ki")) == (2 << 24, 3 << 24)
+
+
+class PowerCut(Exception):
+    pass
+
+
+ECU_CUTS = 6
+
+
+def test_power_cut_of_the_ecu_process_during_saves_over_the_port(tmp_path):
+    """`sil ecu --serial pty --flash` is SIGKILLed at a seeded random moment while a client writes
+    and saves parameters in a loop; after each restart the ECU powers up with the last set whose
+    save was confirmed, or the one whose save was under way, never less."""
+    flash = tmp_path / "flash.bin"
+    rng = random.Random(7)
+    confirmed: tuple[int | None, float] = (None, 2.0)  # (sequence, pid_kp) last confirmed
+    in_flight: float | None = None  # pid_kp of a save sent but not confirmed
+    outcomes = {"save under way completed": 0, "last confirmed set": 0}
+    cuts_in_a_save = 0
+    for cut in range(ECU_CUTS + 1):
+        ecu, port = start_ecu(flash, f"cut{cut}")
+        client = ServiceClient(open_transport(port), timeout_s=5.0, retries=0)
+        ident = client.identify()
+        kp = client.get("pid_kp")["value"]
+        if in_flight is not None and ident["sequence"] != confirmed[0]:
+            outcomes["save under way completed"] += 1
+            assert (ident["sequence"], kp) == ((confirmed[0] or 0) + 1, in_flight)
+            confirmed = (ident["sequence"], kp)
+        else:
+            outcomes["last confirmed set"] += 1
+            assert (ident["sequence"], kp) == confirmed
+            assert ident["storage"] == ("defaults" if confirmed[0] is None else "loaded")
+        if cut == ECU_CUTS:
+            ecu.send_signal(signal.SIGTERM)
+            ecu.communicate(timeout=30)
+            break
+        kill_at = time.monotonic() + rng.uniform(0.1, 1.0)
+
+        def idle(ecu: subprocess.Popen = ecu, kill_at: float = kill_at) -> None:
+            if time.monotonic() >= kill_at:
+                ecu.send_signal(signal.SIGKILL)
+                raise PowerCut
+            time.sleep(0.001)
+
+        client.idle = idle
+        in_flight = None
+        try:
+            while True:
+                value = 1.0 + rng.randrange(64) / 16
+                client.set("pid_kp", value)
+                in_flight = value
+                saved = client.save()
+                confirmed, in_flight = (saved["sequence"], value), None
+        except PowerCut:
+            ecu.wait()
+            cuts_in_a_save += in_flight is not None
+        client.transport.close()
+    print(f"ECU power cuts: {ECU_CUTS}, {cuts_in_a_save} while a save was under way; {outcomes}")
+    assert cuts_in_a_save >= 1  # the seeded moments do hit saves
