@@ -15,7 +15,8 @@ valid (the ECU then runs on its defaults and flags it).
 :class:`SlotWriter` performs a save one flash operation per :meth:`SlotWriter.step`, so that the
 ECU can spread it over ticks (one operation per tick) and never stall its control loop. The
 emulation does not fsync: a killed process loses nothing the kernel has, which is the power cut
-it models.
+it models. Sequence numbers are 32-bit and not expected to wrap (flash endures about 10^5 erase
+cycles).
 """
 
 from __future__ import annotations

@@ -119,3 +119,19 @@ def test_interactive_console_on_a_terminal(tmp_path):
         os.close(master)
         ecu.send_signal(signal.SIGTERM)
         ecu.communicate(timeout=30)
+
+
+def test_bad_port_or_flash_file_is_named_and_refused(tmp_path):
+    for option, value, message in (
+        ("--serial", "/dev/no-such-tty", "sil ecu: port '/dev/no-such-tty': cannot open it"),
+        ("--flash", str(tmp_path / "no" / "flash.bin"), "cannot open the flash image"),
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "sil.cli", "ecu", "--bus", "virtual:bad", option, value],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2 and message in done.stderr, done.stderr
+    done = _console("/dev/no-such-tty", "identify")
+    assert done.returncode == 2 and "port '/dev/no-such-tty': cannot open it" in done.stderr
