@@ -69,7 +69,6 @@ class ServiceClient:
         self.stream_gaps = 0  # stream samples lost (sequence numbers skipped)
         # a new client starts where its predecessor's numbers are unlikely to be (see REPEAT_S)
         self._seq = random.getrandbits(16) if first_seq is None else first_seq
-        self._specs: list[dict] | None = None
 
     # -- transport ---------------------------------------------------------------------------
     def _write_all(self, data: bytes) -> None:
@@ -144,16 +143,12 @@ class ServiceClient:
 
     def params(self) -> list[dict]:
         """Every parameter with its Q format, unit, limits, run safety and value."""
-        if self._specs is None:
-            count = self.identify()["params"]
-            self._specs = [self.request(Service.PARAM_INFO, {"index": i}) for i in range(count)]
-            for spec in self._specs:
-                scale = 1.0 / (1 << spec["frac"])
-                spec["min"], spec["max"] = spec["lo"] * scale, spec["hi"] * scale
         out = []
-        for spec in self._specs:
-            value = self.get(spec["name"])
-            out.append({**spec, "raw": value["raw"], "value": value["value"]})
+        for index in range(self.identify()["params"]):
+            info = self.request(Service.PARAM_INFO, {"index": index})
+            scale = 1.0 / (1 << info["frac"])
+            bounds = {"min": info["lo"] * scale, "max": info["hi"] * scale}
+            out.append({**info, **bounds, "value": info["raw"] * scale})
         return out
 
     def get(self, name: str) -> dict:
