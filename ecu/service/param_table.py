@@ -132,8 +132,7 @@ class ParamTable:
         self.commit(params, compile_params(params))
 
     def raw(self, name: str) -> int:
-        spec = self.spec(name)
-        return spec.to_raw(_value(self.params, spec))
+        return self._raws[self.spec(name).name]
 
     @staticmethod
     def spec(name: str) -> ParamSpec:
@@ -164,7 +163,8 @@ class ParamTable:
     def commit(self, params: EcuParams, firmware: FirmwareParams) -> None:
         self.params = params
         self.firmware = firmware
-        self._image = msgpack.packb({spec.name: self.raw(spec.name) for spec in TABLE})
+        self._raws = {spec.name: spec.to_raw(_value(params, spec)) for spec in TABLE}
+        self._image = msgpack.packb(self._raws)
         self._crc = crc16(self._image)
 
     def image(self) -> bytes:
