@@ -64,7 +64,7 @@ REPEAT_S = 2.0  # a request repeated (same sequence and service) within this is 
 COUNTER_NAMES = (
     "rx_bytes", "tx_bytes", "frames", "malformed", "crc_errors", "oversized", "bad_messages",
     "unexpected", "requests", "repeats", "queue_overflow", "tx_dropped", "stream_samples", "polls",
-    "worst_us", "worst_cpu_us", "mean_us",
+    "worst_us", "worst_cpu_us", "mean_us", "mean_cpu_us",
 )  # fmt: skip
 
 
@@ -123,6 +123,7 @@ class Counters:
     worst_s: float = 0.0  # wall time of the longest poll (includes preemption by the OS)
     worst_cpu_s: float = 0.0  # this thread's CPU time in the longest-computing poll
     total_s: float = 0.0
+    total_cpu_s: float = 0.0
 
 
 def _arg(body: Any, name: str, kind: type | tuple[type, ...], default: Any = None) -> Any:
@@ -224,6 +225,7 @@ class ServicePort:
         dt = self._clock() - t0
         cpu = self._cpu_clock() - cpu0
         c.total_s += dt
+        c.total_cpu_s += cpu
         if dt > c.worst_s:
             c.worst_s = dt
         if cpu > c.worst_cpu_s:
@@ -325,12 +327,12 @@ class ServicePort:
     def _counter_values(self) -> list[int | float]:
         c = self.counters
         s = self.decoder.stats
-        mean_us = round(c.total_s / c.polls * 1e6, 1) if c.polls else 0.0
+        polls = max(c.polls, 1)
         return [
             c.rx_bytes, c.tx_bytes, s.frames, s.malformed, s.crc_errors, s.oversized,
             c.bad_messages, c.unexpected, c.requests, c.repeats, c.queue_overflow, c.tx_dropped,
             c.stream_samples, c.polls, round(c.worst_s * 1e6, 1), round(c.worst_cpu_s * 1e6, 1),
-            mean_us,
+            round(c.total_s / polls * 1e6, 1), round(c.total_cpu_s / polls * 1e6, 1),
         ]  # fmt: skip
 
     def _counters(self, msg: Message) -> list[int | float]:

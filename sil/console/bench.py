@@ -132,5 +132,6 @@ def run(quick: bool = False) -> dict:
         "service_worst_cpu_us_per_tick": port["worst_cpu_us"],
         "service_p99_us_per_tick": round(polls[int(0.99 * (len(polls) - 1))] * 1e6, 1),
         "service_mean_us_per_tick": round(sum(polls) / len(polls) * 1e6, 1),
+        "service_mean_cpu_us_per_tick": port["mean_cpu_us"],
         "service_polls_that_blocked": port["blocked"] + streamed["blocked"],
     }

@@ -200,7 +200,7 @@ def test_work_per_tick_is_bounded(rig):
 def test_counters_fit_a_frame_at_any_count(rig):
     c = rig.port.counters
     c.rx_bytes = c.tx_bytes = c.requests = c.polls = c.stream_samples = 2**40
-    c.worst_s = c.worst_cpu_s = 1.234567
+    c.worst_s = c.worst_cpu_s = c.total_s = c.total_cpu_s = 1.234567
     got = rig.client.counters()
     assert got["rx_bytes"] >= 2**40 and got["worst_cpu_us"] == 1234567.0
     assert list(got) == list(COUNTER_NAMES)

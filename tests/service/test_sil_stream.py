@@ -104,5 +104,4 @@ def test_lockstep_run_with_the_service_port_streaming_at_50_hz(tmp_path):
     service = ecu["service"]
     assert service["tx_dropped"] == 0 and service["stream_samples"] >= len(ticks)
     assert service["worst_cpu_us"] < 10_000  # CPU time within one 10 ms tick
-    worst, cpu, mean = service["worst_us"], service["worst_cpu_us"], service["mean_us"]
-    print(f"samples {len(ticks)}, service worst {worst} us ({cpu} us CPU), mean {mean} us")
+    print(f"samples {len(ticks)}, service per tick:", {k: service[k] for k in service if "us" in k})
