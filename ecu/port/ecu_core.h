@@ -9,7 +9,7 @@
  * Integration (your scheduler, your CAN driver):
  *
  *     static ecu_params_t params;    // or a const one in flash: python -m ecu.port.export
- *     static ecu_t ecu;                   // all state: no heap, no globals in the core
+ *     static ecu_t ecu;              // all state: no heap, no globals in the core
  *
  *     ecu_params_load(&params, words, ECU_PARAM_WORDS);   // once: calibration words (below)
  *     ecu_init(&ecu, &params);                             // power-on: mode OFF
