@@ -4,6 +4,8 @@ the port takes inside one ECU tick.
 The ECU side runs here (the Python firmware with a running engine's inputs, its service port on a
 new pty); a client runs in another process, as `sil console` would:
 
+- link: live-data frames written to the pty as fast as it takes them, decoded by the client:
+  what the pseudo-terminal and the frame decoder carry;
 - stream: the port polled free-running (no tick period) and streaming a live sample every tick;
   the client decodes what arrives: frames and bytes per second, samples lost;
 - requests: the same loop answering back-to-back parameter reads: round trips per second;
@@ -25,6 +27,9 @@ import time
 
 from ecu.firmware import E2E_OK, Ecu, EcuInputs
 from ecu.params import EcuParams
+from ecu.service import live
+from ecu.service.framing import encode_frame
+from ecu.service.message import Kind, Message, Service, Status, pack
 from ecu.service.port import ServicePort, boot
 from ecu.service.transport import open_pty
 
@@ -35,8 +40,18 @@ from sil.console.client import ServiceClient
 
 mode, seconds = sys.argv[2], float(sys.argv[3])
 c = ServiceClient(open_transport(sys.argv[1]), timeout_s=5.0, retries=0)
-c.identify()
 out = {}
+if mode == "link":
+    print("ready", flush=True)
+    read, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        data = c.transport.read(65536)
+        read += len(data)
+        c.decoder.feed(data)
+    dt = time.perf_counter() - t0
+    print(json.dumps({"frames_s": c.decoder.stats.frames / dt, "bytes_s": read / dt}))
+    sys.exit(0)
+c.identify()
 if mode == "stream":
     c.stream(100)
     frames0, t0 = c.decoder.stats.frames, time.perf_counter()
@@ -114,13 +129,42 @@ def _session(mode: str, seconds: float, period_s: float | None) -> tuple[dict, l
     return json.loads(out), polls, {**port.summary(), "blocked": blocked}
 
 
+def _link(seconds: float) -> dict:
+    """Frames pushed to a pty as fast as it takes them; the client's decoded rate."""
+    transport = open_pty()
+    ecu = Ecu(EcuParams())
+    i = _running_inputs()
+    for _ in range(20):  # a running engine: realistic values, realistic frame lengths
+        ecu.tick(i)
+    sample = Message(Kind.STREAM, 1, Service.STREAM, Status.OK, live.sample(ecu))
+    block = encode_frame(pack(sample)) * 64
+    client = subprocess.Popen(
+        [sys.executable, "-c", CLIENT, transport.name, "link", str(seconds)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert client.stdout is not None
+    if client.stdout.readline() != "ready\n":
+        raise RuntimeError("bench client (link) did not start")
+    offset = 0
+    while client.poll() is None:
+        offset = (offset + transport.write(block[offset:])) % len(block)
+    figures = json.loads(client.stdout.read())
+    transport.close()
+    return {**figures, "frame_bytes": len(block) // 64}
+
+
 def run(quick: bool = False) -> dict:
     seconds = 1.0 if quick else 3.0
+    link = _link(seconds)
     stream, _, streamed = _session("stream", seconds, None)
     requests, _, _ = _session("requests", seconds, None)
     budget, polls, port = _session("budget", seconds, 0.01)
     polls.sort()
     return {
+        "pty_link_frames_per_s": round(link["frames_s"]),
+        "pty_link_bytes_per_s": round(link["bytes_s"]),
+        "live_frame_bytes": link["frame_bytes"],
         "pty_stream_frames_per_s": round(stream["frames_s"]),
         "pty_stream_bytes_per_s": round(stream["bytes_s"]),
         "pty_stream_frames_dropped_by_ecu": streamed["tx_dropped"],

@@ -14,6 +14,7 @@ def test_bench_service_quick():
     )
     assert done.returncode == 0, done.stderr
     figures = json.loads(done.stdout)
+    assert figures["pty_link_frames_per_s"] > 1000 and figures["live_frame_bytes"] > 60
     assert figures["pty_stream_frames_per_s"] > 1000
     assert figures["pty_request_round_trips_per_s"] > 50
     assert figures["budget_stream_samples_lost"] == 0 and figures["budget_client_cycles"] > 0
