@@ -58,6 +58,7 @@ TX_BUFFER = 4096  # bytes of frames waiting for the line
 MAX_TX_BYTES = 1024  # handed to the line per tick
 SESSION_S = 10.0
 FAULT_PAGE = 4  # fault-log entries per response
+ERROR_MAX_BYTES = 200  # of an error text: with the header and map it fits a frame
 MIN_STREAM_HZ = 0.1
 REPEAT_S = 2.0  # a request repeated (same sequence and service) within this is not run again
 # the COUNTERS response: its values in this order
@@ -243,6 +244,11 @@ class ServicePort:
         else:
             self._tx += frame
 
+    def _refuse(self, request: Message, status: Status, why: str) -> None:
+        """An error response; the text is cut to fit a frame (it may quote the request)."""
+        text = why.encode()[:ERROR_MAX_BYTES].decode(errors="ignore")
+        self._respond(request, status, {"error": text})
+
     def _respond(self, request: Message, status: Status, body: Any) -> None:
         frame = encode_frame(
             pack(Message(Kind.RESPONSE, request.seq, request.service, status, body))
@@ -283,17 +289,16 @@ class ServicePort:
         handler = self._handlers.get(msg.service)
         if msg.version != VERSION:
             why = f"protocol version {msg.version} not supported (this ECU: {VERSION})"
-            self._respond(msg, Status.BAD_VERSION, {"error": why})
+            self._refuse(msg, Status.BAD_VERSION, why)
         elif handler is None:
-            why = f"unknown service 0x{msg.service:02X}"
-            self._respond(msg, Status.UNKNOWN_SERVICE, {"error": why})
+            self._refuse(msg, Status.UNKNOWN_SERVICE, f"unknown service 0x{msg.service:02X}")
         else:
             if self._unlocked():
                 self._session_until = c.polls + round(SESSION_S * self.rate_hz)
             try:
                 body = handler(msg)
             except ServiceError as exc:
-                self._respond(msg, exc.status, {"error": str(exc)})
+                self._refuse(msg, exc.status, str(exc))
             else:
                 if body is not None:
                     self._respond(msg, Status.OK, body)

@@ -218,12 +218,13 @@ bodies = st.recursive(
     max_leaves=6,
 )
 field_names = st.sampled_from(["name", "raw", "index", "rate_hz", "start", "key", "x"])
+long_names = st.fixed_dictionaries({"name": st.text(min_size=100, max_size=240), "raw": bodies})
 
 
 @settings(max_examples=400, deadline=None, derandomize=True)
 @given(
     st.sampled_from([*Service, 0x00, 0x7F, 0xFF]),
-    st.one_of(bodies, st.dictionaries(field_names, bodies, max_size=3)),
+    st.one_of(bodies, st.dictionaries(field_names, bodies, max_size=3), long_names),
     st.integers(0, 255),
 )
 def test_any_request_body_gets_an_answer_and_never_raises(service, body, version):
@@ -307,3 +308,18 @@ def test_a_repeated_request_is_answered_again_not_run_again(rig):
     assert answers[0].body == answers[1].body  # the same seed: the request ran once
     assert rig.client.counters()["repeats"] == 1
     assert rig.client.request(Service.UNLOCK_SEED) != answers[0].body  # a new request runs
+
+
+def test_an_error_quoting_a_long_request_still_fits_a_frame(rig):
+    name = "\u00e9" * 120  # 240 bytes of UTF-8: the answer quotes it
+    with pytest.raises(ServiceRequestError, match="UNKNOWN_PARAM: unknown parameter '\u00e9\u00e9"):
+        rig.client.request(Service.PARAM_READ, {"name": name})
+    assert rig.client.identify()["protocol"] == 1  # and the port goes on
+
+
+def test_a_full_fault_log_page_of_extreme_values_fits_a_frame(rig):
+    big = 2**31 - 1
+    for _ in range(6):
+        rig.port.fault_log.record(big, 15, (-big,) * len(fault_log.SNAPSHOT_FIELDS))
+    entries = rig.client.faults()
+    assert len(entries) == 6 and entries[-1]["snapshot"]["pump_ma"] == -big
