@@ -56,6 +56,7 @@ class Status(IntEnum):
     INVALID = 8  # the parameter set as a whole is refused (ecu.params.validate)
     BAD_KEY = 9
     BUSY = 10  # a flash write is in progress
+    STORAGE = 11  # no flash image, or it cannot be read or written
 
 
 UNLOCK_SECRET = b"turbojet-sil service"

@@ -155,7 +155,7 @@ class ParamTable:
         params = _with(self.params, spec, spec.to_value(raw))
         try:
             return params, compile_params(params)
-        except ValueError as exc:
+        except (ValueError, ArithmeticError) as exc:
             raise WriteRefused(
                 "INVALID", f"{name}: refused by the parameter checks: {exc}"
             ) from None
@@ -195,6 +195,6 @@ class ParamTable:
                 params = _with(params, spec, spec.to_value(raw))
         try:
             self.commit(params, compile_params(params))
-        except ValueError as exc:
+        except (ValueError, ArithmeticError) as exc:
             problems.append(f"stored set refused by the parameter checks, defaults kept: {exc}")
         return problems

@@ -216,8 +216,8 @@ class ServicePort:
         self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot())
         if self._stream_every and c.polls % self._stream_every == 0:
             self._send_stream()
-        if self._writer is not None and self._writer.step():
-            self._save_done()
+        if self._writer is not None:
+            self._flash_step()
         if self._tx:
             n = self.transport.write(bytes(self._tx[:MAX_TX_BYTES]))
             del self._tx[:n]
@@ -399,14 +399,26 @@ class ServicePort:
     def _param_save(self, msg: Message) -> None:
         self._need_session("saving the parameters")
         if self.boot.flash is None:
-            raise ServiceError(Status.INVALID, "no flash image (start the ECU with --flash FILE)")
+            raise ServiceError(Status.STORAGE, "no flash image (start the ECU with --flash FILE)")
         if self._writer is not None:
             raise ServiceError(Status.BUSY, "a save is in progress")
-        self._writer = self.boot.flash.writer(self.table.image())
+        try:
+            self._writer = self.boot.flash.writer(self.table.image())
+        except OSError as exc:
+            raise ServiceError(Status.STORAGE, f"flash image unreadable: {exc}") from None
         self._save_request = msg  # answered when the last flash operation is done
 
-    def _save_done(self) -> None:
+    def _flash_step(self) -> None:
+        """One flash operation of the save under way; its answer once the last one is done."""
         assert self._writer is not None and self._save_request is not None
+        try:
+            done = self._writer.step()
+        except OSError as exc:
+            self._refuse(self._save_request, Status.STORAGE, f"flash write failed: {exc}")
+            self._writer = self._save_request = None
+            return
+        if not done:
+            return
         slot = self._writer.slot
         self.boot.state, self.boot.slot, self.boot.sequence = "loaded", slot.index, slot.sequence
         body = {"slot": slot.index, "sequence": slot.sequence, "param_crc": self.table.crc()}

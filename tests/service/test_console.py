@@ -17,7 +17,7 @@ def test_commands(rig):
     assert len(params) == 34 and params[0].split()[:2] == ["pid_kp", "2.5"]
     assert any(line.startswith("trim_v") and line.endswith("(not in RUN)") for line in params)
     assert execute(c, "save") == [
-        "error: PARAM_SAVE: INVALID: no flash image (start the ECU with --flash FILE)"
+        "error: PARAM_SAVE: STORAGE: no flash image (start the ECU with --flash FILE)"
     ]
     rig.ticks(3)
     logged = execute(c, "faults")

@@ -1,6 +1,7 @@
 """Two-slot parameter storage: alternation, fallback to the older slot, a save cut at every
 operation, SIGKILL at random points of saves in a writer process, and start-up from flash."""
 
+import os
 import random
 import signal
 import subprocess
@@ -167,7 +168,7 @@ def test_start_up_without_a_valid_slot_runs_on_defaults_and_flags_it(tmp_path, r
 def test_save_over_the_port_and_power_up_with_it(tmp_path, rig_factory):
     path = tmp_path / "flash.bin"
     rig = rig_factory(EcuParams(), None)
-    with pytest.raises(Exception, match="INVALID: no flash image"):
+    with pytest.raises(Exception, match="STORAGE: no flash image"):
         rig.client.save()
     rig = rig_factory(EcuParams(), path)
     rig.client.set("pid_kp", 2.5)
@@ -260,3 +261,11 @@ def test_power_cut_of_the_ecu_process_during_saves_over_the_port(tmp_path):
         client.transport.close()
     print(f"ECU power cuts: {ECU_CUTS}, {cuts_in_a_save} while a save was under way; {outcomes}")
     assert cuts_in_a_save >= 1  # the seeded moments do hit saves
+
+
+def test_a_flash_write_error_is_answered_and_the_port_goes_on(tmp_path, rig_factory):
+    rig = rig_factory(EcuParams(), tmp_path / "flash.bin")
+    os.close(rig.boot.flash.fd)  # the flash fails under the ECU
+    with pytest.raises(Exception, match="STORAGE: flash write failed: .*Bad file descriptor"):
+        rig.client.save()
+    assert rig.client.identify()["storage"] == "defaults"
