@@ -27,7 +27,7 @@ from ecu.service.storage import (
     read_slots,
 )
 from ecu.service.transport import open_transport
-from sil.console.client import ServiceClient
+from sil.console.client import ServiceClient, ServiceRequestError
 from tests.service.conftest import start_ecu
 
 
@@ -168,7 +168,7 @@ def test_start_up_without_a_valid_slot_runs_on_defaults_and_flags_it(tmp_path, r
 def test_save_over_the_port_and_power_up_with_it(tmp_path, rig_factory):
     path = tmp_path / "flash.bin"
     rig = rig_factory(EcuParams(), None)
-    with pytest.raises(Exception, match="STORAGE: no flash image"):
+    with pytest.raises(ServiceRequestError, match="STORAGE: no flash image"):
         rig.client.save()
     rig = rig_factory(EcuParams(), path)
     rig.client.set("pid_kp", 2.5)
@@ -266,6 +266,6 @@ def test_power_cut_of_the_ecu_process_during_saves_over_the_port(tmp_path):
 def test_a_flash_write_error_is_answered_and_the_port_goes_on(tmp_path, rig_factory):
     rig = rig_factory(EcuParams(), tmp_path / "flash.bin")
     os.close(rig.boot.flash.fd)  # the flash fails under the ECU
-    with pytest.raises(Exception, match="STORAGE: flash write failed: .*Bad file descriptor"):
+    with pytest.raises(ServiceRequestError, match="STORAGE: flash write failed: .*Bad file"):
         rig.client.save()
     assert rig.client.identify()["storage"] == "defaults"
