@@ -24,7 +24,8 @@ def run(elf: Path, vectors: Path, *, icount: bool = False, timeout: float = 300.
         "-serial",
         "none",
         "-semihosting-config",
-        f"enable=on,target=native,arg=replay,arg={vectors.resolve()}",
+        # commas separate QEMU sub-options: a comma in the path is written twice
+        f"enable=on,target=native,arg=replay,arg={str(vectors.resolve()).replace(',', ',,')}",
         "-kernel",
         str(elf),
     ]

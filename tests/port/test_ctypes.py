@@ -69,6 +69,11 @@ def test_c_core_equals_python_on_random_inputs(controller):
     _fuzz(EcuParams(controller=controller), 3000, seed=len(controller), wild=0.05)
 
 
+@pytest.mark.parametrize("rate_hz", [50, 1000])
+def test_c_core_equals_python_at_other_tick_rates(rate_hz):
+    _fuzz(EcuParams(rate_hz=rate_hz, rate_window_s=0.05), 3000, seed=rate_hz, wild=0.05)
+
+
 def test_c_core_equals_python_with_robustness_off_and_wild_inputs():
     params = EcuParams(
         lambda_floor_on=False, dead_zone_on=False, freeze_on=False, limiters_on=False
