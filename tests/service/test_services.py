@@ -323,3 +323,13 @@ def test_a_full_fault_log_page_of_extreme_values_fits_a_frame(rig):
         rig.port.fault_log.record(big, 15, (-big,) * len(fault_log.SNAPSHOT_FIELDS))
     entries = rig.client.faults()
     assert len(entries) == 6 and entries[-1]["snapshot"]["pump_ma"] == -big
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(st.binary(max_size=3000))
+def test_line_noise_never_raises_out_of_a_tick(noise):
+    rig = LoopRig(EcuParams())
+    rig.transport.write(noise)
+    rig.ticks(8)  # up to 512 bytes a tick
+    rig.transport.read(1 << 16)  # whatever the port answered to frames the noise held
+    assert rig.client.identify()["protocol"] == 1
