@@ -27,8 +27,9 @@ from sil.campaign.spec import Campaign, Case, Invariants
 from sil.runner import _die_with_parent
 
 FIGURES = (
-    "ticks", "wall_s", "tracking_rms_pct", "max_n_pct", "max_egt_K", "egt_limit_time_s",
-    "pump_v_min", "pump_v_max", "final_mode", "fault_bits", "stalls",
+    "ticks", "wall_s", "tracking_rms_pct", "tracking_mean_pct", "max_n_pct", "max_egt_K",
+    "max_egt_time_s", "egt_limit_time_s", "pump_v_min", "pump_v_max", "final_mode", "fault_bits",
+    "stalls",
 )  # fmt: skip
 
 

@@ -38,12 +38,15 @@ def figures(r: CaseRun) -> dict:
     n, egt, mode = r.column("n_pct"), r.column("egt_k"), r.column("mode")
     v, words = r.column("pump_v"), r.column("fault_word")
     seen = int(np.bitwise_or.reduce(words)) if words.size else 0
+    error = r.column("speed_pct") - r.column("ref_pct")  # speed minus reference model, %N
     return {
         "ticks": p.tick,
         "wall_s": r.wall_s,
-        "tracking_rms_pct": _rms(r.column("speed_pct") - r.column("ref_pct")),
+        "tracking_rms_pct": _rms(error),
+        "tracking_mean_pct": float(np.mean(error[np.isfinite(error)])) if error.size else math.nan,
         "max_n_pct": float(n.max()) if n.size else math.nan,
         "max_egt_K": float(egt.max()) if egt.size else math.nan,
+        "max_egt_time_s": float(egt.argmax()) / r.scenario.ecu_rate_hz if egt.size else math.nan,
         "egt_limit_time_s": float(np.sum(r.column("owner") == OWNER_EGT)) / r.scenario.ecu_rate_hz,
         "pump_v_min": float(v.min()) if v.size else math.nan,
         "pump_v_max": float(v.max()) if v.size else math.nan,
@@ -100,7 +103,9 @@ def check(r: CaseRun, inv: Invariants) -> tuple[dict, list[dict], list[str]]:
         violations.append(f"overspeed: {fig['max_n_pct']:.2f} %N > {inv.max_speed_pct:g} %N")
     egt_cap = params.egt_limit_k + inv.egt_margin_K
     if fig["max_egt_K"] > egt_cap:
-        violations.append(f"egt: {fig['max_egt_K']:.1f} K > {egt_cap:g} K")
+        violations.append(
+            f"egt: {fig['max_egt_K']:.1f} K > {egt_cap:g} K (peak at {fig['max_egt_time_s']:.2f} s)"
+        )
     v, mode = r.column("pump_v"), r.column("mode")
     running = mode == ecu_modes.RUN
     tol = 0.0015  # the frame's 1 mV resolution and rounding

@@ -59,11 +59,13 @@ def tracking(rows: list[dict]) -> dict[str, dict]:
         varied = np.array([_float(r["tracking_rms_pct"]) for r in rs if r["sample"] != "-1"])
         varied = varied[np.isfinite(varied)]
         nominal = [_float(r["tracking_rms_pct"]) for r in rs if r["sample"] == "-1"]
+        offset = np.array([abs(_float(r.get("tracking_mean_pct", ""))) for r in rs])
         out[name] = {
             "runs": int(varied.size),
             "nominal": nominal[0] if nominal else math.nan,
             **{f"p{q}": _pct(varied, q) for q in (5, 50, 95)},
             "max": float(varied.max()) if varied.size else math.nan,
+            "offset": float(np.nanmedian(offset)) if np.isfinite(offset).any() else math.nan,
             "values": varied,
         }
     return out
@@ -159,13 +161,14 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
     lines.append("")
     if any(t["runs"] for t in track.values()):
         lines += ["## Tracking RMS across engine variation [%N]", "",
-                  "| controller | engines | nominal | p5 | median | p95 | max | p95 / nominal |",
-                  "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+                  "| controller | engines | nominal | p5 | median | p95 | max | p95 / nominal "
+                  "| median of mean error |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for name, t in track.items():
             ratio = t["p95"] / t["nominal"] if t["nominal"] else math.nan
             lines.append(
                 f"| {name} | {t['runs']} | {_fmt(t['nominal'])} | {_fmt(t['p5'])} | "
-                f"{_fmt(t['p50'])} | {_fmt(t['p95'])} | {_fmt(t['max'])} | {_fmt(ratio, '.2f')} |"
+                f"{_fmt(t['p50'])} | {_fmt(t['p95'])} | {_fmt(t['max'])} | {_fmt(ratio, '.2f')} "
+                f"| {_fmt(t['offset'])} |"
             )
         lines.append("")
         lines += _targets(track)
