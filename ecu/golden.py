@@ -12,11 +12,12 @@ File layout (``.gv``, little-endian int32 words, read by ``ecu/port/replay.c``):
 counts of parameter, input and output words and of ticks, the parameter words, then per tick the
 inputs, the outputs and the state digest (FNV-1a over the state words in ``EcuState`` order).
 
-    python -m ecu.golden OUT_DIR [NAME ...]     write the vectors (all when no NAME)
+    python -m ecu.golden OUT_DIR [NAME ...] [--ticks N]   write the vectors (all: no NAME)
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
 import tempfile
@@ -124,7 +125,7 @@ def record_scenario(name: str, scenario_text: str, ticks: int) -> Golden:
     return Golden(name, params, ecu.rows)
 
 
-def record_modes(ticks: int = 2400) -> Golden:
+def record_modes(ticks: int) -> Golden:
     """Scripted inputs through every mode, with lost and corrupt frames and a pump fault.
 
     One phase per 100 ticks: OFF; arm, the starter spools up (ARMED), RUN; demand frames lost
@@ -242,19 +243,33 @@ target = "EGT_OPEN_CIRCUIT"
 value = 1
 """
 
-# name -> how to record it (the default tick counts keep the regeneration test short)
-SOURCES: dict[str, Callable[[], Golden]] = {
-    "mrac-aero": lambda: record_scenario("mrac-aero", "thesis-5.3-mrac-aero", 2500),
-    "mrac-staircase": lambda: record_scenario("mrac-staircase", "thesis-5.4-staircase", 2500),
-    "pid-staircase": lambda: record_scenario("pid-staircase", "thesis-6.2-staircase-pid", 2500),
-    "open-loop-estimator": lambda: record_scenario(
-        "open-loop-estimator", "thesis-4.3-estimator-aero", 2500
-    ),
-    "limiters-hot": lambda: record_scenario("limiters-hot", _HOT_LIMITS, 2500),
-    "faults": lambda: record_scenario("faults", _FAULTS, 2500),
-    "egt-open": lambda: record_scenario("egt-open", _EGT_OPEN, 1000),
-    "modes": record_modes,
+
+@dataclass(frozen=True)
+class Source:
+    record: Callable[[int], Golden]  # ticks -> vectors
+    ticks: int  # default length: keeps the regeneration test short
+
+
+def _scenario(name: str, scenario_text: str, ticks: int) -> Source:
+    return Source(lambda n: record_scenario(name, scenario_text, n), ticks)
+
+
+SOURCES: dict[str, Source] = {
+    "mrac-aero": _scenario("mrac-aero", "thesis-5.3-mrac-aero", 2500),
+    "mrac-staircase": _scenario("mrac-staircase", "thesis-5.4-staircase", 2500),
+    "pid-staircase": _scenario("pid-staircase", "thesis-6.2-staircase-pid", 2500),
+    "open-loop-estimator": _scenario("open-loop-estimator", "thesis-4.3-estimator-aero", 2500),
+    "limiters-hot": _scenario("limiters-hot", _HOT_LIMITS, 2500),
+    "faults": _scenario("faults", _FAULTS, 2500),
+    "egt-open": _scenario("egt-open", _EGT_OPEN, 1000),
+    "modes": Source(record_modes, 2400),
 }
+
+
+def record(name: str, ticks: int | None = None) -> Golden:
+    """The vectors of one source, for its default number of ticks or ``ticks``."""
+    source = SOURCES[name]
+    return source.record(source.ticks if ticks is None else ticks)
 
 
 def write(g: Golden, path: Path) -> None:
@@ -287,23 +302,21 @@ def read_rows(path: Path) -> tuple[list[int], array]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = sys.argv[1:] if argv is None else argv
-    if not args:
-        print(__doc__.strip().splitlines()[-1].strip(), file=sys.stderr)
-        return 2
-    out = Path(args[0])
-    names = args[1:] or list(SOURCES)
-    unknown = [n for n in names if n not in SOURCES]
+    parser = argparse.ArgumentParser(prog="python -m ecu.golden", description=__doc__)
+    parser.add_argument("out", type=Path, metavar="OUT_DIR")
+    parser.add_argument("names", nargs="*", metavar="NAME", help=f"of {', '.join(SOURCES)}")
+    parser.add_argument("--ticks", type=int, help="ticks per vector (default: each one's own)")
+    args = parser.parse_args(argv)
+    unknown = [n for n in args.names if n not in SOURCES]
     if unknown:
-        print(
-            f"ecu.golden: unknown vectors {unknown}; known: {', '.join(SOURCES)}", file=sys.stderr
-        )
-        return 2
-    out.mkdir(parents=True, exist_ok=True)
-    for name in names:
-        g = SOURCES[name]()
-        write(g, out / f"{name}.gv")
-        print(f"{out / f'{name}.gv'}: {g.ticks} ticks")
+        parser.error(f"unknown vectors {unknown}; known: {', '.join(SOURCES)}")
+    if args.ticks is not None and args.ticks < 1:
+        parser.error("--ticks must be at least 1")
+    args.out.mkdir(parents=True, exist_ok=True)
+    for name in args.names or list(SOURCES):
+        g = record(name, args.ticks)
+        write(g, args.out / f"{name}.gv")
+        print(f"{args.out / f'{name}.gv'}: {g.ticks} ticks")
     return 0
 
 

@@ -225,7 +225,7 @@ def sil_figures(quick: bool) -> dict:
 def run(quick: bool = False) -> dict:
     figures: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
-        g = golden.SOURCES[VECTOR]()
+        g = golden.record(VECTOR)
         vectors = Path(tmp) / f"{VECTOR}.gv"
         golden.write(g, vectors)
         figures["vector"] = f"{VECTOR} ({g.ticks} ticks)"
