@@ -18,7 +18,20 @@ import tempfile
 from pathlib import Path
 
 PORT_DIR = Path(__file__).resolve().parent
-BUILD_DIR = Path(os.environ.get("ECU_PORT_BUILD_DIR", PORT_DIR / "build"))
+
+
+def _build_dir() -> Path:
+    """$ECU_PORT_BUILD_DIR, else build/ next to the sources, else the user's cache (when the
+    package is installed read-only)."""
+    if os.environ.get("ECU_PORT_BUILD_DIR"):
+        return Path(os.environ["ECU_PORT_BUILD_DIR"])
+    if os.access(PORT_DIR, os.W_OK):
+        return PORT_DIR / "build"
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "turbojet-sil" / "ecu-port"
+
+
+BUILD_DIR = _build_dir()
 WARNINGS = ("-std=c99", "-Wall", "-Wextra", "-Wconversion", "-pedantic", "-Werror")
 CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c")
 HEADERS = ("ecu_core.h", "ecu_frames.h", "generated/turbojet.h")
