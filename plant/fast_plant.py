@@ -71,7 +71,9 @@ class FastPlant(PlantBase):
         self._pump_changed()  # the pump's gain (config.pump_gain)
         t0, _, t2, t3, t4 = self.theta
         dn = self._x[0]
-        self.trim_pump_voltage = self.reference_voltage - t0 * dn / (t2 + t3 * dn + t4 * dn * dn)
+        self.trim_pump_voltage = float(
+            self.reference_voltage - t0 * dn / (t2 + t3 * dn + t4 * dn * dn)
+        )
         self.trim_duty = self._duty_for(self.trim_pump_voltage)
         self._start(self._at("EGT_K"), self.trim_duty)
 

@@ -1,4 +1,10 @@
-"""The `sil` command line: discovers the subcommands in `sil.commands`."""
+"""The `sil` command line: discovers the subcommands in `sil.commands`.
+
+Each subcommand is one module, named as the command with ``-`` for ``_``. A node process (`sil
+ecu`, `sil plant`) must start fast, so when the command is known only its module is imported
+(scipy, matplotlib and numba stay out of the ECU process); `sil --help` or an unknown command
+imports them all to list them.
+"""
 
 from __future__ import annotations
 
@@ -11,18 +17,22 @@ from types import ModuleType
 from sil import commands
 
 
-def _command_modules() -> list[ModuleType]:
+def _command_modules(argv: list[str]) -> list[ModuleType]:
     names = sorted(m.name for m in pkgutil.iter_modules(commands.__path__))
+    wanted = next((a.replace("-", "_") for a in argv if not a.startswith("-")), None)
+    if wanted in names:
+        names = [wanted]
     return [importlib.import_module(f"sil.commands.{name}") for name in names]
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; with `argv`, only for the command that `argv` names (when it names one)."""
     parser = argparse.ArgumentParser(
         prog="sil",
         description="Turbojet ECU emulator and software-in-the-loop harness over CAN.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for module in sorted(_command_modules(), key=lambda m: m.NAME):
+    for module in sorted(_command_modules(argv or []), key=lambda m: m.NAME):
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
@@ -30,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(argv).parse_args(argv)
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:
