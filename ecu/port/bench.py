@@ -8,7 +8,8 @@
   same run by a loop of known length), both replaying the MRAC golden vector;
 - microseconds per tick called from Python (the C core through ctypes, the Python firmware);
 - the SIL in process with the C ECU and with the Python one on the aero-thermal MRAC scenario
-  (real-time factors), and where the C run's time goes (cProfile, by package).
+  (real-time factors), where the C run's time goes (cProfile), and the bound the plant alone
+  sets (its CPU time per ECU period).
 """
 
 from __future__ import annotations
@@ -164,6 +165,23 @@ def _package(filename: str) -> str:
     return "other"
 
 
+def plant_bound(s, ticks: int = 3000) -> dict:  # noqa: ANN001 (a sil.scenario.Scenario)
+    """CPU time of the plant alone per ECU period, and the real-time factor it allows at most."""
+    from sil import runner
+
+    plant = runner.build_plant(s, s.seed)
+    for _ in range(100):  # compiled, settled
+        plant.step(0.5, True)
+    cpu = time.process_time()
+    for k in range(ticks):
+        plant.step(0.5 + 0.02 * ((k // 500) % 2), True)
+    per_tick = (time.process_time() - cpu) / ticks
+    return {
+        "plant_cpu_us_per_ecu_tick": round(per_tick * 1e6, 1),
+        "plant_alone_max_realtime_factor": round(1.0 / s.ecu_rate_hz / per_tick, 1),
+    }
+
+
 def sil_figures(quick: bool) -> dict:
     from sil import scenario
     from sil.runner import RunOptions
@@ -172,7 +190,7 @@ def sil_figures(quick: bool) -> dict:
     s = scenario.load(SCENARIO)
     if quick:
         s = dataclasses.replace(s, duration_s=30.0)
-    figures: dict = {"sil_scenario": s.name, "sil_sim_time_s": s.duration_s}
+    figures: dict = {"sil_scenario": s.name, "sil_sim_time_s": s.duration_s, **plant_bound(s)}
     with tempfile.TemporaryDirectory() as tmp:
         warm_up = dataclasses.replace(s, duration_s=1.0)  # plant JIT, imports, the C build
         run_scenario(RunOptions(warm_up, Path(tmp) / "warm", mode="inproc", plots=False,
