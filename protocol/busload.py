@@ -76,6 +76,27 @@ class BitCounter:
         if self._pending >= self.batch:
             self.flush()
 
+    def add_many(self, frame_ids: np.ndarray, payload: np.ndarray, lengths: np.ndarray) -> None:
+        """Many frames at once, as :meth:`add` one by one: ``payload`` is (frames, 8) uint8,
+        zero beyond each frame's ``lengths`` (0..8)."""
+        n = len(frame_ids)
+        if n == 0:
+            return
+        records = np.empty((n, _RECORD), np.uint8)
+        ids = np.asarray(frame_ids, np.int64)
+        records[:, 0] = ids & 0xFF
+        records[:, 1] = (ids >> 8) & 0xFF
+        records[:, 2] = lengths
+        records[:, 3:] = payload
+        start = 0
+        while start < n:  # batches of ``batch`` frames, as add() counts them
+            take = min(n - start, self.batch - self._pending)
+            self._buffer += records[start : start + take].tobytes()
+            self._pending += take
+            start += take
+            if self._pending >= self.batch:
+                self.flush()
+
     def flush(self) -> int:
         """Count the buffered frames; returns the total bits so far."""
         if self._pending:

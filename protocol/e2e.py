@@ -40,6 +40,11 @@ def crc8(payload_after_crc: bytes | bytearray | memoryview, crc_start: int) -> i
     return _crc8(payload_after_crc, crc_start)
 
 
+def crc8_function():
+    """The bare CRC-8 function, ``f(data, start) -> int``, for hot loops (no extra call)."""
+    return _crc8
+
+
 def protect(frame: bytearray, data_id: int, counter: int) -> None:
     """Write ``counter`` into the low nibble of byte 1 and the CRC into byte 0 (in place)."""
     frame[1] = (frame[1] & 0xF0) | (counter % COUNTER_MODULO)

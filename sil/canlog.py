@@ -13,8 +13,13 @@ from pathlib import Path
 from typing import TextIO
 
 import can
+import numpy as np
 
 EXTRA_FORMATS = ("asc", "blf")
+_HEX_DIGITS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+# two upper-case hex digits per byte value
+_HEX_PAIRS = np.stack([_HEX_DIGITS[np.arange(256) >> 4], _HEX_DIGITS[np.arange(256) & 15]], axis=1)
+_TS_WIDTH = 20  # right-aligned "%.6f" field; the padding is taken out again
 
 
 class CandumpWriter:
@@ -32,6 +37,58 @@ class CandumpWriter:
         self._file.write(line)
         self.frames += 1
         if self.frames % self.flush_every == 0:
+            self._file.flush()
+
+    def write_many(
+        self,
+        timestamps_s: np.ndarray,
+        frame_ids: np.ndarray,
+        payload: np.ndarray,
+        lengths: np.ndarray,
+    ) -> None:
+        """Many frames at once, byte for byte as :meth:`write` one by one.
+
+        ``payload`` is (frames, 8) uint8, zero beyond each frame's ``lengths`` (0..8). The lines
+        are laid out as a character matrix with a fixed-width field per part, padded with NUL
+        bytes that are taken out at the end; only the timestamps go through %-formatting (one
+        call for all of them).
+        """
+        n = len(frame_ids)
+        if n == 0:
+            return
+        ts_text = (f"%{_TS_WIDTH}.6f" * n) % tuple(timestamps_s.tolist())
+        if len(ts_text) != _TS_WIDTH * n:  # a timestamp wider than the field: one by one
+            for t, i, d, k in zip(
+                timestamps_s.tolist(), frame_ids.tolist(), payload, lengths.tolist(), strict=True
+            ):
+                self.write(t, i, bytes(d[:k]))
+            return
+        ids = frame_ids.astype(np.int64)
+        head = b") " + self.channel.encode("ascii") + b" "
+        w_ts, w_head = _TS_WIDTH, len(head)
+        width = 1 + w_ts + w_head + 8 + 1 + 16 + 1
+        m = np.zeros((n, width), np.uint8)
+        m[:, 0] = ord("(")
+        ts = np.frombuffer(ts_text.encode("ascii"), np.uint8).reshape(n, w_ts)
+        m[:, 1 : 1 + w_ts] = np.where(ts == 32, 0, ts)
+        c = 1 + w_ts
+        m[:, c : c + w_head] = np.frombuffer(head, np.uint8)
+        c += w_head
+        # the ID as "%03X": eight hex digits, leading zeros dropped down to three
+        digits = (ids[:, None] >> np.arange(28, -4, -4)) & 15
+        n_digits = 1 + (ids[:, None] >= 16 ** np.arange(1, 8)).sum(axis=1)
+        keep = np.arange(8) >= 8 - np.maximum(3, n_digits)[:, None]
+        m[:, c : c + 8] = np.where(keep, _HEX_DIGITS[digits], 0)
+        c += 8
+        m[:, c] = ord("#")
+        c += 1
+        hexed = _HEX_PAIRS[payload].reshape(n, 16)
+        m[:, c : c + 16] = np.where(np.arange(16) < 2 * lengths[:, None], hexed, 0)
+        m[:, c + 16] = ord("\n")
+        self._file.write(m[m != 0].tobytes().decode("ascii"))
+        before = self.frames
+        self.frames += n
+        if self.frames // self.flush_every != before // self.flush_every:
             self._file.flush()
 
     def flush(self) -> None:

@@ -14,6 +14,12 @@ simulated time (the tick's start plus 10 us per frame). The log is therefore the
 the frames interleaved. In real time the frames are written as they come, with wall-clock stamps.
 Everything is flushed as it goes, and whatever is pending is written at close, so an aborted run
 keeps what it recorded.
+
+Cost per frame: ``record`` does only what must happen as the frame arrives (E2E check, tick
+bookkeeping, sorting into its tick) and appends the frame to the chunk being written; every
+``CHUNK_ROWS`` rows (and at close) the chunk is decoded and formatted in bulk with numpy: the
+can.log lines as a character matrix, the signals by shifts and masks per message, the trace
+cells sample-and-hold by position, and each distinct value %-formatted once.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy as np
 
 from protocol.busload import BitCounter
 from protocol.codec import Codec
-from protocol.e2e import E2EChecker, E2EStatus
+from protocol.e2e import COUNTER_MODULO, E2EStatus, crc8_function, data_id_crc_start
 from protocol.lockstep import TICK_MODULO, TickTracker
 from sil.canlog import CandumpWriter
 
@@ -37,6 +43,12 @@ _SKIP = ("_CRC", "_Counter")
 SENSORS, ACTUATOR = 0x100, 0x110
 PLANT_IDS = frozenset((0x100, 0x101, 0x300, 0x301))
 ECU_IDS = frozenset((0x110, 0x200, 0x210))
+CHUNK_ROWS = 512  # trace rows (ticks) per bulk write
+_CHUNK_FRAMES = 8192  # frames heard per bulk bit count when no rows come
+_CELL = 24  # "%23.9g," per trace cell; the padding is taken out again
+_PREFIX_TIME, _PREFIX_TICK = 21, 11  # "%20.6f," and "%10d,"
+_STATUS_NAMES = [s.name for s in E2EStatus]
+_crc8 = crc8_function()
 
 Frame = tuple[int, bytes]
 
@@ -48,6 +60,17 @@ class _Tick:
         self.plant: list[Frame] | None = None
         self.command: list[Frame] = []
         self.ecu: list[Frame] | None = None
+
+
+class _Group:
+    """Frames of one message (or one multiplexer index) and the trace columns they set."""
+
+    __slots__ = ("columns", "fields", "single")
+
+    def __init__(self, columns: list[int], fields: list[tuple]) -> None:
+        self.columns = np.array(columns, np.intp)
+        self.fields = fields  # (start, mask, sign bit, scale, offset) per column
+        self.single = True  # no other group writes these columns
 
 
 class Recorder:
@@ -70,17 +93,26 @@ class Recorder:
         self.bits = BitCounter()
         self.frames = 0
         self.unknown_ids: Counter[int] = Counter()
-        self.e2e: dict[str, Counter[str]] = {}
-        self._checkers: dict[int, E2EChecker] = {}
         self.sensor_ticks = TickTracker()
         self.actuator_ticks = TickTracker()
         self.latest_sensor_tick = -1  # full tick of the newest PlantSensors heard
         self._plant_pending: list[Frame] = []
         self._ecu_pending: list[Frame] = []
         self._ticks: dict[int, _Tick] = {}
+        self._complete: set[int] = set()  # ticks whose plant and ECU frames are all in
         self._bad: set[bytes] = set()
         self._sensor_wrap = TickUnwrapper()
         self._actuator_wrap = TickUnwrapper()
+
+        # per frame ID: (length, E2E state or None); E2E state: [CRC start, last counter,
+        # counts per status, message name]
+        self._known: dict[int, tuple[int, list | None]] = {}
+        self._e2e_seen: list[tuple[str, int]] = []  # (message, status) in order of first count
+        for message in codec.messages:
+            state = None
+            if message.protected:
+                state = [data_id_crc_start(message.data_id), -1, [0] * len(E2EStatus), message.name]
+            self._known[message.frame_id] = (message.length, state)
 
         # trace columns: every payload signal of every message, with its unit
         self._columns: dict[str, int] = {}
@@ -95,24 +127,106 @@ class Recorder:
                 if not layout.name.endswith(_SKIP) and layout.name not in self._columns:
                     self._columns[layout.name] = len(units)
                     units.append(layout.unit)
-            if message.protected:
-                self._checkers[message.frame_id] = message.checker(max_delta=14)
         names = list(self._columns)
-        self._values = [math.nan] * len(names)
-        self._scratch = [0.0] * 16
+        self._build_groups()
+        self._carry = np.full(len(names), math.nan)  # the latest value of every column
         self._trace_file: TextIO = (out_dir / "trace.csv").open("w", newline="")
         header = ["time[s]", "tick[-]", "command[%N or V]", "speed_true[%]", "speed_meas[%]"]
         header += [f"{n}[{u or '-'}]" for n, u in zip(names, units, strict=True)]
         self._trace_file.write(",".join(header) + "\n")
-        # one preformatted row: %-formatting is several times faster than csv's float repr
+        # one preformatted row, for rows the bulk path cannot lay out
         self._row_format = "%.6f,%d,%.9g,%.9g,%.9g," + ",".join(["%.9g"] * len(names)) + "\n"
         self.rows = 0
+        self._commands_f = np.asarray(commands, np.float64) if commands is not None else np.zeros(0)
+
+        # the chunk being gathered: frames heard (bit count), frames written in log order with
+        # their timestamps as (base, count) blocks (frame i of a block at base + i * 10 us),
+        # and rows as (tick, frames written before the row)
+        self._heard: list[Frame] = []
+        self._out: list[Frame] = []
+        self._out_base: list[float] = []
+        self._out_count: list[int] = []
+        self._out_done = 0  # frames written in earlier chunks
+        self._no_decode: set[int] = set()  # frames (by write index) not decoded: bad CRC
+        self._row_ticks: list[int] = []
+        self._row_pos: list[int] = []
+
+    def _build_groups(self) -> None:
+        self._groups: dict[int, _Group] = {}  # plain messages by frame ID
+        self._mux: dict[int, tuple[tuple, dict[int, _Group]]] = {}
+        writers: Counter[int] = Counter()
+
+        def field(layout) -> tuple:
+            sign_bit = 1 << (layout.length - 1) if layout.signed else 0
+            return (
+                layout.start,
+                (1 << layout.length) - 1,
+                sign_bit,
+                layout.scale,
+                layout.offset,
+            )
+
+        all_groups: list[_Group] = []
+        for message in self.codec.messages:
+            if message.multiplexed:
+                by_index = {}
+                for index, layout in message.mux_signals.items():
+                    g = _Group([self._columns[layout.name]], [field(layout)])
+                    by_index[index] = g
+                    all_groups.append(g)
+                self._mux[message.frame_id] = (field(message.mux_layout), by_index)
+            else:
+                g = _Group(
+                    [self._columns[n] for n in message.signal_names],
+                    [field(layout) for layout in message.signals],
+                )
+                self._groups[message.frame_id] = g
+                all_groups.append(g)
+        for g in all_groups:
+            writers.update(g.columns.tolist())
+        for g in all_groups:
+            g.single = all(writers[c] == 1 for c in g.columns.tolist())
 
     # -- frames in -------------------------------------------------------------------------------
     def record(self, frame_id: int, data: bytes | bytearray, wall_s: float | None = None) -> None:
         """A frame heard on the bus, or sent by the command node (see the module docstring)."""
         data = bytes(data)
-        self._check(frame_id, data)
+        self.frames += 1
+        heard = self._heard
+        heard.append((frame_id, data))
+        if len(heard) >= _CHUNK_FRAMES:
+            self._count_bits()
+        known = self._known.get(frame_id)
+        if known is None or len(data) != known[0]:
+            self.unknown_ids[frame_id] += 1
+        else:
+            state = known[1]
+            ok = True
+            if state is not None:  # E2E, inline (E2EChecker.check with max_delta=14)
+                if len(data) < 2 or _crc8(data[1:], state[0]) != data[0]:
+                    status = 3  # WRONGCRC
+                else:
+                    counter = data[1] & 0x0F
+                    if counter >= COUNTER_MODULO:
+                        status = 3
+                    else:
+                        last = state[1]
+                        # with max_delta 14 any change of the counter is OK
+                        status = 0 if last < 0 or counter != last else 1
+                        state[1] = counter
+                counts = state[2]
+                n = counts[status]
+                counts[status] = n + 1
+                if not n:
+                    self._e2e_seen.append((state[3], status))
+                if status == 3:
+                    self._bad.add(data)  # logged, never decoded into the trace
+                    ok = False
+            if ok:
+                if frame_id == SENSORS:
+                    self.sensor_ticks.observe(data[2] | data[3] << 8)
+                elif frame_id == ACTUATOR:
+                    self.actuator_ticks.observe(data[2] | data[3] << 8)
         if self.wall_clock:
             self._write(wall_s if wall_s is not None else 0.0, frame_id, data)
             if frame_id == ACTUATOR:
@@ -122,118 +236,107 @@ class Recorder:
             self._plant_pending.append((frame_id, data))
             if frame_id == SENSORS:
                 k = self._sensor_wrap.full(data[2] | data[3] << 8)
-                self.latest_sensor_tick = max(self.latest_sensor_tick, k)
-                self._slot(k).plant = self._plant_pending
+                if k > self.latest_sensor_tick:
+                    self.latest_sensor_tick = k
+                slot = self._ticks.get(k)
+                if slot is None:
+                    slot = self._ticks[k] = _Tick()
+                slot.plant = self._plant_pending
                 self._plant_pending = []
+                if slot.ecu is not None:
+                    self._complete.add(k)
+            # a tick completed by its sensor frame waits for the next frame: the command node's
+            # answers to that sensor frame come first and belong to the tick
+            else:
+                self._flush_ready()
         elif frame_id in ECU_IDS:
             self._ecu_pending.append((frame_id, data))
             if frame_id == ACTUATOR:
                 k = self._actuator_wrap.full(data[2] | data[3] << 8)
-                self._slot(k).ecu = self._ecu_pending
+                slot = self._ticks.get(k)
+                if slot is None:
+                    slot = self._ticks[k] = _Tick()
+                slot.ecu = self._ecu_pending
                 self._ecu_pending = []
+                if slot.plant is not None:
+                    self._complete.add(k)
+            self._flush_ready()
         elif self.latest_sensor_tick < 0:  # before tick 0: the first demands
             self._write(0.0, frame_id, data)
-            return
         else:  # the command node's frames (and foreign ones) go with the newest sensor tick
-            self._slot(self.latest_sensor_tick).command.append((frame_id, data))
-        if frame_id != SENSORS:
-            # a tick completed by its sensor frame waits for the next frame: the command node's
-            # answers to that sensor frame come first and belong to the tick
+            k = self.latest_sensor_tick
+            slot = self._ticks.get(k)
+            if slot is None:
+                slot = self._ticks[k] = _Tick()
+            slot.command.append((frame_id, data))
             self._flush_ready()
 
-    def _slot(self, k: int) -> _Tick:
-        slot = self._ticks.get(k)
-        if slot is None:
-            slot = self._ticks[k] = _Tick()
-        return slot
-
-    def _check(self, frame_id: int, data: bytes) -> None:
-        """E2E and tick-sequence checks, in each sender's own order (as the frames arrive)."""
-        self.frames += 1
-        self.bits.add(frame_id, data)
-        message = self.codec.by_id.get(frame_id)
-        if message is None or len(data) != message.length:
-            self.unknown_ids[frame_id] += 1
-            return
-        checker = self._checkers.get(frame_id)
-        if checker is not None:
-            status = checker.check(data)
-            self.e2e.setdefault(message.name, Counter())[status.name] += 1
-            if status == E2EStatus.WRONGCRC:
-                self._bad.add(data)  # logged, never decoded into the trace
-                return
-        if frame_id == SENSORS:
-            self.sensor_ticks.observe(data[2] | data[3] << 8)
-        elif frame_id == ACTUATOR:
-            self.actuator_ticks.observe(data[2] | data[3] << 8)
+    @property
+    def e2e(self) -> dict[str, Counter[str]]:
+        """E2E verdicts per message name (only messages heard, only verdicts given)."""
+        out: dict[str, Counter[str]] = {}
+        counts = {state[3]: state[2] for _, state in self._known.values() if state is not None}
+        for name, status in self._e2e_seen:
+            out.setdefault(name, Counter())[_STATUS_NAMES[status]] = counts[name][status]
+        return out
 
     # -- ticks out -------------------------------------------------------------------------------
     def _flush_ready(self) -> None:
+        ticks = self._ticks
         while True:
-            slot = self._ticks.get(self.tick)
+            tick = self.tick
+            slot = ticks.get(tick)
             if slot is None or slot.plant is None or slot.ecu is None:
                 # a tick with a lost frame is written once a later one is complete
-                if not any(
-                    k > self.tick and s.plant is not None and s.ecu is not None
-                    for k, s in self._ticks.items()
-                ):
+                if not self._complete or max(self._complete) <= tick:
                     return
-            self._write_tick(self._ticks.pop(self.tick, _Tick()))
+            slot = ticks.pop(tick, None)
+            self._complete.discard(tick)
+            self._write_tick(slot if slot is not None else _Tick())
 
     def _write_tick(self, slot: _Tick) -> None:
-        seq = 0
-        base = self.tick * self.period_s
-        for group in (slot.plant or [], slot.command, slot.ecu or []):
-            for frame_id, data in group:
-                self._write(base + seq * _FRAME_SPACING_S, frame_id, data)
-                seq += 1
+        out = self._out
+        first = len(out)
+        if slot.plant:
+            out += slot.plant
+        if slot.command:
+            out += slot.command
+        if slot.ecu:
+            out += slot.ecu
+        n = len(out) - first
+        if n:
+            self._out_base.append(self.tick * self.period_s)
+            self._out_count.append(n)
+            if self._bad:
+                for i in range(first, first + n):
+                    self._check_bad(i)
         if slot.ecu is not None:
             self._end_row()
         else:
             self.tick += 1
 
     def _write(self, timestamp_s: float, frame_id: int, data: bytes) -> None:
-        self.log.write(timestamp_s, frame_id, data)
-        message = self.codec.by_id.get(frame_id)
-        if message is None or len(data) != message.length:
-            return
-        if data in self._bad:
+        self._out.append((frame_id, data))
+        self._out_base.append(timestamp_s)
+        self._out_count.append(1)
+        if self._bad:
+            self._check_bad(len(self._out) - 1)
+
+    def _check_bad(self, i: int) -> None:
+        """A frame logged with a bad CRC is not decoded (its bytes taken off the bad set)."""
+        frame_id, data = self._out[i]
+        known = self._known.get(frame_id)
+        if known is not None and len(data) == known[0] and data in self._bad:
             self._bad.discard(data)
-            return
-        out = self._scratch
-        message.unpack(data, out)
-        if message.multiplexed:
-            mux = message.mux_signals.get(int(out[0]))
-            if mux is not None:
-                self._values[self._columns[mux.name]] = out[1]
-        else:
-            for i, name in enumerate(message.signal_names):
-                self._values[self._columns[name]] = out[i]
+            self._no_decode.add(self._out_done + i)
 
     def _end_row(self) -> None:
-        v, c = self._values, self._columns
-        k = self.tick
-        command = (
-            float(self.commands[k])
-            if self.commands is not None and k < len(self.commands)
-            else math.nan
-        )
-        self._trace_file.write(
-            self._row_format
-            % (
-                k * self.period_s,
-                k,
-                command,
-                100.0 * v[c["TrueSpeed"]] / N_MAX_RPM,
-                100.0 * v[c["ShaftSpeed"]] / N_MAX_RPM,
-                *v,
-            )
-        )
+        self._row_ticks.append(self.tick)
+        self._row_pos.append(self._out_done + len(self._out))
         self.rows += 1
-        if self.rows % 1000 == 0:
-            self._trace_file.flush()
-            self.log.flush()
         self.tick += 1
+        if len(self._row_ticks) >= CHUNK_ROWS:
+            self._write_chunk()
 
     @property
     def missed_ticks(self) -> int:
@@ -245,16 +348,234 @@ class Recorder:
 
     def close(self) -> None:
         """Write whatever is still pending, in tick order, and close the files."""
+        if self._trace_file.closed:
+            return
         for k in sorted(self._ticks):
             if k >= self.tick:
                 self.tick = k
                 self._write_tick(self._ticks[k])
         self._ticks.clear()
+        self._complete.clear()
         for frame_id, data in self._plant_pending + self._ecu_pending:
             self._write(self.tick * self.period_s, frame_id, data)
+        self._plant_pending, self._ecu_pending = [], []
+        self._write_chunk()
         self.log.close()
         if not self._trace_file.closed:
             self._trace_file.close()
+
+    # -- bulk ------------------------------------------------------------------------------------
+    def _count_bits(self) -> None:
+        heard, self._heard = self._heard, []
+        if not heard:
+            return
+        ids, datas = zip(*heard, strict=True)
+        blob = b"".join(datas)
+        if len(blob) == 8 * len(heard):
+            payload = np.frombuffer(blob, np.uint8).reshape(-1, 8)
+            self.bits.add_many(np.array(ids, np.int64), payload, np.full(len(heard), 8))
+        else:
+            for frame_id, data in heard:
+                self.bits.add(frame_id, data)
+
+    @staticmethod
+    def _frames_array(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        ids, datas = zip(*frames, strict=True)
+        n = len(frames)
+        blob = b"".join(datas)
+        if len(blob) == 8 * n:
+            payload = np.frombuffer(blob, np.uint8).reshape(n, 8)
+            lengths = np.full(n, 8, np.int64)
+        else:
+            payload = np.zeros((n, 8), np.uint8)
+            lengths = np.array([len(d) for d in datas], np.int64)
+            for i, d in enumerate(datas):
+                payload[i, : len(d)] = np.frombuffer(d, np.uint8)
+        return np.array(ids, np.int64), payload, lengths
+
+    def _write_chunk(self) -> None:
+        """Write the gathered frames to can.log and rows to trace.csv, decoded in bulk."""
+        self._count_bits()
+        frames, self._out = self._out, []
+        base, self._out_base = self._out_base, []
+        count, self._out_count = self._out_count, []
+        row_ticks, self._row_ticks = self._row_ticks, []
+        row_pos, self._row_pos = self._row_pos, []
+        done = self._out_done
+        self._out_done += len(frames)
+        n = len(frames)
+        if n:
+            if max(len(d) for _, d in frames) > 8:  # not classical CAN: one by one
+                ids = np.array([f for f, _ in frames], np.int64)
+                payload = np.zeros((n, 8), np.uint8)
+                lengths = np.zeros(n, np.int64)
+                ts = self._timestamps(base, count)
+                for (frame_id, data), t in zip(frames, ts.tolist(), strict=True):
+                    self.log.write(t, frame_id, data)
+            else:
+                ids, payload, lengths = self._frames_array(frames)
+                self.log.write_many(self._timestamps(base, count), ids, payload, lengths)
+        else:
+            ids = np.zeros(0, np.int64)
+            payload = np.zeros((0, 8), np.uint8)
+            lengths = np.zeros(0, np.int64)
+        no_decode = [i - done for i in self._no_decode if done <= i < done + n]
+        self._no_decode.difference_update(i + done for i in no_decode)
+        self._write_rows(ids, payload, lengths, no_decode, row_ticks, row_pos, done)
+        self.log.flush()
+        self._trace_file.flush()
+
+    @staticmethod
+    def _timestamps(base: list[float], count: list[int]) -> np.ndarray:
+        counts = np.array(count, np.int64)
+        starts = np.cumsum(counts) - counts
+        seq = np.arange(int(counts.sum())) - np.repeat(starts, counts)
+        return np.repeat(np.array(base, np.float64), counts) + seq * _FRAME_SPACING_S
+
+    def _write_rows(
+        self,
+        ids: np.ndarray,
+        payload: np.ndarray,
+        lengths: np.ndarray,
+        no_decode: list[int],
+        row_ticks: list[int],
+        row_pos: list[int],
+        done: int,
+    ) -> None:
+        n = len(ids)
+        ncols = len(self._carry)
+        # rows plus one at the chunk's end (the values carried into the next chunk)
+        pos = np.array([*row_pos, done + n], np.int64) - done
+        nrows = len(pos)
+        # the values pool: the carried values first, then every decoded value; each cell of the
+        # trace is an index into it
+        pool = [self._carry]
+        pool_size = ncols
+        cell = np.broadcast_to(np.arange(ncols), (nrows, ncols)).copy()
+        best = None  # per cell, the write index of the frame that set it (columns with several)
+
+        decodable = np.zeros(n, bool)
+        if n:
+            lengths_ok = lengths == 8
+            for frame_id, (length, _) in self._known.items():
+                if length != 8:
+                    lengths_ok |= (ids == frame_id) & (lengths == length)
+            decodable = lengths_ok
+            if no_decode:
+                decodable[no_decode] = False
+            words = payload.view("<u8").ravel() if n else np.zeros(0, np.uint64)
+
+        def place(group: _Group, at: np.ndarray, values: np.ndarray) -> None:
+            nonlocal pool_size, best
+            k = len(at)
+            pool.append(values.ravel())
+            index = np.searchsorted(at, pos, "left") - 1  # the last frame before each row
+            width = len(group.columns)
+            source = pool_size + index[:, None] * width + np.arange(width)
+            pool_size += k * width
+            hit = index >= 0
+            if group.single:
+                cols = group.columns
+                cell[:, cols] = np.where(hit[:, None], source, cell[:, cols])
+            else:
+                if best is None:
+                    best = np.full((nrows, ncols), -1, np.int64)
+                where = np.where(hit, at[np.maximum(index, 0)], -1)
+                for j, c in enumerate(group.columns.tolist()):
+                    take = where > best[:, c]
+                    cell[take, c] = source[take, j]
+                    best[take, c] = where[take]
+
+        if n and decodable.any():
+            for frame_id, group in self._groups.items():
+                at = np.flatnonzero(decodable & (ids == frame_id))
+                if len(at):
+                    place(group, at, _decode(words[at], group.fields))
+            for frame_id, (mux_field, by_index) in self._mux.items():
+                at = np.flatnonzero(decodable & (ids == frame_id))
+                if not len(at):
+                    continue
+                start, mask = mux_field[0], mux_field[1]
+                index = ((words[at] >> np.uint64(start)) & np.uint64(mask)).astype(np.int64)
+                mux_values = _decode(words[at], [mux_field])[:, 0]
+                for value in np.unique(index).tolist():
+                    group = by_index.get(value)
+                    if group is None:
+                        name = self.codec.by_id[frame_id].name
+                        raise ValueError(f"{name}: no signal for multiplexer index {value}")
+                    sel = at[index == value]
+                    # the column is chosen by the multiplexer's physical value, as unpack() does
+                    physical = mux_values[index == value]
+                    if not np.all(physical == value):
+                        continue
+                    place(group, sel, _decode(words[sel], group.fields))
+
+        values = np.concatenate(pool) if len(pool) > 1 else self._carry
+        final = cell[-1]
+        self._carry = values[final].copy()
+        if nrows == 1:
+            return
+        cell = cell[:-1]
+        ticks = np.array(row_ticks, np.int64)
+        c = self._columns
+        true = values[cell[:, c["TrueSpeed"]]]
+        meas = values[cell[:, c["ShaftSpeed"]]]
+        commands = self._commands_f
+        if len(commands):
+            command = np.where(
+                ticks < len(commands), commands[np.minimum(ticks, len(commands) - 1)], math.nan
+            )
+        else:
+            command = np.full(len(ticks), math.nan)
+        extra = np.concatenate([command, 100.0 * true / N_MAX_RPM, 100.0 * meas / N_MAX_RPM])
+        m = len(ticks)
+        size = len(values)
+        cell = np.concatenate(
+            [size + np.arange(3)[None, :] * m + np.arange(m)[:, None], cell], axis=1
+        )
+        values = np.concatenate([values, extra])
+        self._trace_file.write(self._format_rows(ticks, values, cell))
+
+    def _format_rows(self, ticks: np.ndarray, values: np.ndarray, cell: np.ndarray) -> str:
+        """Rows of "%.6f,%d,%.9g,...\n", each distinct value formatted once."""
+        m, width = cell.shape
+        times = ticks * self.period_s
+        distinct, inverse = np.unique(values.view(np.int64), return_inverse=True)
+        text = (f"%{_CELL - 1}.9g," * len(distinct)) % tuple(distinct.view(np.float64).tolist())
+        time_text = (f"%{_PREFIX_TIME - 1}.6f," * m) % tuple(times.tolist())
+        tick_text = (f"%{_PREFIX_TICK - 1}d," * m) % tuple(ticks.tolist())
+        if (
+            len(text) != _CELL * len(distinct)
+            or len(time_text) != _PREFIX_TIME * m
+            or len(tick_text) != _PREFIX_TICK * m
+        ):  # a field wider than its place: row by row
+            rows = values[cell]
+            return "".join(
+                self._row_format % (t, k, *r)
+                for t, k, r in zip(times.tolist(), ticks.tolist(), rows.tolist(), strict=True)
+            )
+        strings = np.frombuffer(text.encode("ascii"), np.uint64).reshape(-1, _CELL // 8)
+        row_width = _PREFIX_TIME + _PREFIX_TICK + width * _CELL
+        out = np.empty((m, row_width), np.uint8)
+        out[:, :_PREFIX_TIME] = np.frombuffer(time_text.encode("ascii"), np.uint8).reshape(m, -1)
+        out[:, _PREFIX_TIME : _PREFIX_TIME + _PREFIX_TICK] = np.frombuffer(
+            tick_text.encode("ascii"), np.uint8
+        ).reshape(m, -1)
+        body = out[:, _PREFIX_TIME + _PREFIX_TICK :]
+        body.view(np.uint64).reshape(m, width, _CELL // 8)[:] = strings[inverse.ravel()[cell]]
+        out[:, -1] = ord("\n")
+        return out[out != 32].tobytes().decode("ascii")
+
+
+def _decode(words: np.ndarray, fields: list[tuple]) -> np.ndarray:
+    """Physical values (frames, signals) of 64-bit little-endian frame words."""
+    out = np.empty((len(words), len(fields)), np.float64)
+    for j, (start, mask, sign_bit, scale, offset) in enumerate(fields):
+        raw = ((words >> np.uint64(start)) & np.uint64(mask)).astype(np.int64)
+        if sign_bit:
+            raw = np.where(raw & sign_bit, raw - (sign_bit << 1), raw)
+        out[:, j] = raw.astype(np.float64) * scale + offset
+    return out
 
 
 class TickUnwrapper:
