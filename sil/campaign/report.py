@@ -199,6 +199,12 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
     lines += ["## Invariant violations", ""]
     if not violating:
         lines += ["None.", ""]
+    else:
+        kinds: dict[str, int] = defaultdict(int)
+        for r in violating:
+            for v in r["violations"].split("; "):
+                kinds[f"{v.split(':')[0]} ({r.get(CONTROLLER) or 'base'})"] += 1
+        lines += ["By kind: " + ", ".join(f"{k} {n}" for k, n in sorted(kinds.items())), ""]
     for r in violating:
         lines += [f"- run {r['run_id']}: {r['violations']}", f"  `{repro(out, r)}`"]
     if failed:
