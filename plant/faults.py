@@ -76,11 +76,14 @@ class Fault:
 
 
 class FaultSchedule:
-    """Start and end events in time order; ``due(t)`` pops those at or before t."""
+    """Start and end events in time order; ``due(t)`` pops those at or before t. ``next_s`` is
+    the time of the next event (inf when there is none): a step with ``next_s <= t + 1e-9``
+    false has nothing due."""
 
     def __init__(self, faults: tuple[Fault, ...] | list[Fault] = ()) -> None:
         self._events: list[tuple[float, int, bool, Fault]] = []
         self._n = 0
+        self.next_s = math.inf
         for f in faults:
             self.add(f)
 
@@ -92,6 +95,7 @@ class FaultSchedule:
     def _push(self, t: float, start: bool, fault: Fault) -> None:
         heapq.heappush(self._events, (t, self._n, start, fault))
         self._n += 1
+        self.next_s = self._events[0][0]
 
     def due(self, t_s: float) -> list[tuple[Fault, bool]]:
         """Events with time <= t_s as (fault, starts) in order; an end has starts = False."""
@@ -99,4 +103,5 @@ class FaultSchedule:
         while self._events and self._events[0][0] <= t_s + 1e-9:
             _, _, start, fault = heapq.heappop(self._events)
             out.append((fault, start))
+        self.next_s = self._events[0][0] if self._events else math.inf
         return out

@@ -7,6 +7,11 @@ guards its denominators); and the fast-math flags that do not change what a floa
 approximate library functions. On the trim and a 15 s staircase these change the states by
 less than 3e-15 relative and make the engine about 1.7 times faster.
 
+Per-period code around the engine (pump driver, sensors, truth: plant/periphery.py) compiles with
+EXACT instead: no fast-math at all, so that its arithmetic is the IEEE arithmetic Python does
+and a compiled period gives the same bits as the Python it replaced. It calls the fast-math
+engine as a separate compiled function, whose flags stay its own.
+
 Cache: numba checks a cached function only against its own file, but the engine's compiled
 step inlines component functions from other files. On import, a digest of every plant source is
 compared with the one stored beside the cache; when they differ, the cached machine code of
@@ -19,6 +24,7 @@ import hashlib
 from pathlib import Path
 
 JIT = {"cache": True, "error_model": "numpy", "fastmath": {"nsz", "arcp", "contract", "afn"}}
+EXACT = {"cache": True, "error_model": "numpy"}
 
 PLANT_DIR = Path(__file__).resolve().parent
 CACHE_DIR = PLANT_DIR / "__pycache__"
