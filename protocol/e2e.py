@@ -40,9 +40,21 @@ def crc8(payload_after_crc: bytes | bytearray | memoryview, crc_start: int) -> i
     return _crc8(payload_after_crc, crc_start)
 
 
-def crc8_function():
-    """The bare CRC-8 function, ``f(data, start) -> int``, for hot loops (no extra call)."""
-    return _crc8
+_TABLE = None  # CRC-8 table for crc8_rows, as a numpy array (numpy imported on first use)
+
+
+def crc8_rows(data, crc_start: int):
+    """Vectorised :func:`crc8`: the CRC-8 of every row of ``data`` ((frames, bytes) uint8 numpy
+    array, bytes 1..n of each frame), continuing from ``crc_start``; a uint8 array."""
+    global _TABLE
+    import numpy as np
+
+    if _TABLE is None:
+        _TABLE = np.array([_crc8(bytes((b,)), 0) for b in range(256)], np.uint8)
+    crc = np.full(len(data), crc_start, np.uint8)
+    for j in range(data.shape[1]):
+        crc = _TABLE[crc ^ data[:, j]]
+    return crc
 
 
 def protect(frame: bytearray, data_id: int, counter: int) -> None:

@@ -33,7 +33,7 @@ import numpy as np
 
 from protocol.busload import BitCounter
 from protocol.codec import Codec
-from protocol.e2e import COUNTER_MODULO, E2EStatus, crc8_function, data_id_crc_start
+from protocol.e2e import COUNTER_MODULO, E2EStatus, crc8_rows, data_id_crc_start
 from protocol.lockstep import TICK_MODULO, TickTracker
 from sil.canlog import CandumpWriter
 
@@ -44,11 +44,10 @@ SENSORS, ACTUATOR = 0x100, 0x110
 PLANT_IDS = frozenset((0x100, 0x101, 0x300, 0x301))
 ECU_IDS = frozenset((0x110, 0x200, 0x210))
 CHUNK_ROWS = 512  # trace rows (ticks) per bulk write
-_CHUNK_FRAMES = 8192  # frames heard per bulk bit count when no rows come
+_CHUNK_FRAMES = 8192  # frames heard per bulk write when no rows come
 _CELL = 24  # "%23.9g," per trace cell; the padding is taken out again
 _PREFIX_TIME, _PREFIX_TICK = 21, 11  # "%20.6f," and "%10d,"
 _STATUS_NAMES = [s.name for s in E2EStatus]
-_crc8 = crc8_function()
 
 Frame = tuple[int, bytes]
 
@@ -92,15 +91,16 @@ class Recorder:
         self.tick = 0  # ticks written (full count; the frames carry it modulo 2**16)
         self.bits = BitCounter()
         self.frames = 0
-        self.unknown_ids: Counter[int] = Counter()
-        self.sensor_ticks = TickTracker()
-        self.actuator_ticks = TickTracker()
+        self._unknown_ids: Counter[int] = Counter()
+        self._sensor_ticks = TickTracker()
+        self._actuator_ticks = TickTracker()
         self.latest_sensor_tick = -1  # full tick of the newest PlantSensors heard
         self._plant_pending: list[Frame] = []
         self._ecu_pending: list[Frame] = []
         self._ticks: dict[int, _Tick] = {}
         self._complete: set[int] = set()  # ticks whose plant and ECU frames are all in
-        self._bad: set[bytes] = set()
+        self._bad: set[bytes] = set()  # bytes of frames with a bad CRC, not yet logged
+        self._bad_events: list[tuple[int, bytes]] = []  # (arrival, bytes): bad CRCs to replay
         self._sensor_wrap = TickUnwrapper()
         self._actuator_wrap = TickUnwrapper()
 
@@ -146,8 +146,8 @@ class Recorder:
         self._out: list[Frame] = []
         self._out_base: list[float] = []
         self._out_count: list[int] = []
+        self._out_heard: list[int] = []  # per block: frames heard when it was written
         self._out_done = 0  # frames written in earlier chunks
-        self._no_decode: set[int] = set()  # frames (by write index) not decoded: bad CRC
         self._row_ticks: list[int] = []
         self._row_pos: list[int] = []
 
@@ -195,43 +195,13 @@ class Recorder:
         heard = self._heard
         heard.append((frame_id, data))
         if len(heard) >= _CHUNK_FRAMES:
-            self._count_bits()
-        known = self._known.get(frame_id)
-        if known is None or len(data) != known[0]:
-            self.unknown_ids[frame_id] += 1
-        else:
-            state = known[1]
-            ok = True
-            if state is not None:  # E2E, inline (E2EChecker.check with max_delta=14)
-                if len(data) < 2 or _crc8(data[1:], state[0]) != data[0]:
-                    status = 3  # WRONGCRC
-                else:
-                    counter = data[1] & 0x0F
-                    if counter >= COUNTER_MODULO:
-                        status = 3
-                    else:
-                        last = state[1]
-                        # with max_delta 14 any change of the counter is OK
-                        status = 0 if last < 0 or counter != last else 1
-                        state[1] = counter
-                counts = state[2]
-                n = counts[status]
-                counts[status] = n + 1
-                if not n:
-                    self._e2e_seen.append((state[3], status))
-                if status == 3:
-                    self._bad.add(data)  # logged, never decoded into the trace
-                    ok = False
-            if ok:
-                if frame_id == SENSORS:
-                    self.sensor_ticks.observe(data[2] | data[3] << 8)
-                elif frame_id == ACTUATOR:
-                    self.actuator_ticks.observe(data[2] | data[3] << 8)
+            self._write_chunk()
         if self.wall_clock:
             self._write(wall_s if wall_s is not None else 0.0, frame_id, data)
             if frame_id == ACTUATOR:
                 self._end_row()
             return
+        # (_flush_ready has nothing to do while no tick is complete)
         if frame_id in PLANT_IDS:
             self._plant_pending.append((frame_id, data))
             if frame_id == SENSORS:
@@ -247,7 +217,7 @@ class Recorder:
                     self._complete.add(k)
             # a tick completed by its sensor frame waits for the next frame: the command node's
             # answers to that sensor frame come first and belong to the tick
-            else:
+            elif self._complete:
                 self._flush_ready()
         elif frame_id in ECU_IDS:
             self._ecu_pending.append((frame_id, data))
@@ -260,7 +230,8 @@ class Recorder:
                 self._ecu_pending = []
                 if slot.plant is not None:
                     self._complete.add(k)
-            self._flush_ready()
+            if self._complete:
+                self._flush_ready()
         elif self.latest_sensor_tick < 0:  # before tick 0: the first demands
             self._write(0.0, frame_id, data)
         else:  # the command node's frames (and foreign ones) go with the newest sensor tick
@@ -269,11 +240,13 @@ class Recorder:
             if slot is None:
                 slot = self._ticks[k] = _Tick()
             slot.command.append((frame_id, data))
-            self._flush_ready()
+            if self._complete:
+                self._flush_ready()
 
     @property
     def e2e(self) -> dict[str, Counter[str]]:
         """E2E verdicts per message name (only messages heard, only verdicts given)."""
+        self._check_heard()
         out: dict[str, Counter[str]] = {}
         counts = {state[3]: state[2] for _, state in self._known.values() if state is not None}
         for name, status in self._e2e_seen:
@@ -307,9 +280,7 @@ class Recorder:
         if n:
             self._out_base.append(self.tick * self.period_s)
             self._out_count.append(n)
-            if self._bad:
-                for i in range(first, first + n):
-                    self._check_bad(i)
+            self._out_heard.append(self.frames)
         if slot.ecu is not None:
             self._end_row()
         else:
@@ -319,16 +290,7 @@ class Recorder:
         self._out.append((frame_id, data))
         self._out_base.append(timestamp_s)
         self._out_count.append(1)
-        if self._bad:
-            self._check_bad(len(self._out) - 1)
-
-    def _check_bad(self, i: int) -> None:
-        """A frame logged with a bad CRC is not decoded (its bytes taken off the bad set)."""
-        frame_id, data = self._out[i]
-        known = self._known.get(frame_id)
-        if known is not None and len(data) == known[0] and data in self._bad:
-            self._bad.discard(data)
-            self._no_decode.add(self._out_done + i)
+        self._out_heard.append(self.frames)
 
     def _end_row(self) -> None:
         self._row_ticks.append(self.tick)
@@ -337,6 +299,24 @@ class Recorder:
         self.tick += 1
         if len(self._row_ticks) >= CHUNK_ROWS:
             self._write_chunk()
+
+    @property
+    def unknown_ids(self) -> Counter[int]:
+        """Frames of IDs not in the contract, or of the wrong length, per ID."""
+        self._check_heard()
+        return self._unknown_ids
+
+    @property
+    def sensor_ticks(self) -> TickTracker:
+        """SensorTick of every PlantSensors frame that passed its E2E check, in arrival order."""
+        self._check_heard()
+        return self._sensor_ticks
+
+    @property
+    def actuator_ticks(self) -> TickTracker:
+        """ActuatorTick of every EcuActuator frame that passed its E2E check."""
+        self._check_heard()
+        return self._actuator_ticks
 
     @property
     def missed_ticks(self) -> int:
@@ -365,62 +345,133 @@ class Recorder:
             self._trace_file.close()
 
     # -- bulk ------------------------------------------------------------------------------------
-    def _count_bits(self) -> None:
+    def _check_heard(self) -> None:
+        """E2E and tick-sequence checks and bit counts of the frames heard, in arrival order."""
         heard, self._heard = self._heard, []
         if not heard:
             return
-        ids, datas = zip(*heard, strict=True)
-        blob = b"".join(datas)
-        if len(blob) == 8 * len(heard):
-            payload = np.frombuffer(blob, np.uint8).reshape(-1, 8)
-            self.bits.add_many(np.array(ids, np.int64), payload, np.full(len(heard), 8))
+        first = self.frames - len(heard)  # arrival number of heard[0]
+        ids, payload, lengths = self._frames_array(heard)
+        if (lengths == 8).all():
+            self.bits.add_many(ids, payload, lengths)
         else:
             for frame_id, data in heard:
                 self.bits.add(frame_id, data)
+        good = np.zeros(len(ids), bool)  # known ID, right length, E2E not WRONGCRC
+        for frame_id, (length, _) in self._known.items():
+            good |= (ids == frame_id) & (lengths == length)
+        if not good.all():
+            for frame_id in ids[~good].tolist():
+                self._unknown_ids[frame_id] += 1
+        seen: list[tuple[int, str, int]] = []
+        bad: list[int] = []
+        for frame_id, (length, state) in self._known.items():
+            if state is None:
+                continue
+            rows = np.flatnonzero(good & (ids == frame_id))
+            if not len(rows):
+                continue
+            p = payload[rows]
+            counter = (p[:, 1] & 0x0F).astype(np.int64)
+            valid = (crc8_rows(p[:, 1:length], state[0]) == p[:, 0]) & (counter < COUNTER_MODULO)
+            if length < 2:
+                valid[:] = False
+            status = np.full(len(rows), int(E2EStatus.WRONGCRC), np.int64)
+            accepted = counter[valid]
+            if len(accepted):
+                # as E2EChecker.check with max_delta=14: any change of the counter is OK
+                previous = np.concatenate(([state[1]], accepted[:-1]))
+                status[valid] = np.where(
+                    (previous >= 0) & (accepted == previous), int(E2EStatus.REPEATED), 0
+                )
+                state[1] = int(accepted[-1])
+            counts = state[2]
+            for s, c in enumerate(np.bincount(status, minlength=len(counts)).tolist()):
+                if c:
+                    if not counts[s]:
+                        seen.append((int(rows[np.argmax(status == s)]), state[3], s))
+                    counts[s] += c
+            if not valid.all():
+                invalid = rows[~valid]
+                good[invalid] = False
+                bad += invalid.tolist()
+        seen.sort()
+        self._e2e_seen += [(name, s) for _, name, s in seen]
+        for i in sorted(bad):  # logged, never decoded into the trace
+            self._bad_events.append((first + i, heard[i][1]))
+        for frame_id, tracker in ((SENSORS, self._sensor_ticks), (ACTUATOR, self._actuator_ticks)):
+            rows = np.flatnonzero(good & (ids == frame_id))
+            if len(rows):
+                ticks = payload[rows, 2].astype(np.int64) | payload[rows, 3].astype(np.int64) << 8
+                for tick in ticks.tolist():
+                    tracker.observe(tick)
+
+    def _not_decoded(self, frames: list[Frame], count: list[int], heard: list[int]) -> list[int]:
+        """Frames logged with a bad CRC (by index in ``frames``): never decoded into the trace.
+
+        Replays, in the order they happened, a bad frame heard (its bytes go into the bad set)
+        and a frame logged (bytes found in the set are taken out, and the frame not decoded).
+        """
+        events, self._bad_events = self._bad_events, []
+        bad = self._bad
+        out: list[int] = []
+        e = 0
+        i = 0
+        for n, heard_then in zip(count, heard, strict=True):
+            while e < len(events) and events[e][0] < heard_then:
+                bad.add(events[e][1])
+                e += 1
+            if bad:
+                for j in range(i, i + n):
+                    frame_id, data = frames[j]
+                    known = self._known.get(frame_id)
+                    if known is not None and len(data) == known[0] and data in bad:
+                        bad.discard(data)
+                        out.append(j)
+            i += n
+        self._bad_events = events[e:]
+        return out
 
     @staticmethod
     def _frames_array(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         ids, datas = zip(*frames, strict=True)
         n = len(frames)
         blob = b"".join(datas)
-        if len(blob) == 8 * n:
+        if len(blob) == 8 * n and max(map(len, datas)) == 8:
             payload = np.frombuffer(blob, np.uint8).reshape(n, 8)
             lengths = np.full(n, 8, np.int64)
         else:
             payload = np.zeros((n, 8), np.uint8)
             lengths = np.array([len(d) for d in datas], np.int64)
             for i, d in enumerate(datas):
-                payload[i, : len(d)] = np.frombuffer(d, np.uint8)
+                payload[i, : min(len(d), 8)] = np.frombuffer(d[:8], np.uint8)
         return np.array(ids, np.int64), payload, lengths
 
     def _write_chunk(self) -> None:
         """Write the gathered frames to can.log and rows to trace.csv, decoded in bulk."""
-        self._count_bits()
+        self._check_heard()
         frames, self._out = self._out, []
         base, self._out_base = self._out_base, []
         count, self._out_count = self._out_count, []
+        heard, self._out_heard = self._out_heard, []
         row_ticks, self._row_ticks = self._row_ticks, []
         row_pos, self._row_pos = self._row_pos, []
         done = self._out_done
         self._out_done += len(frames)
         n = len(frames)
         if n:
-            if max(len(d) for _, d in frames) > 8:  # not classical CAN: one by one
-                ids = np.array([f for f, _ in frames], np.int64)
-                payload = np.zeros((n, 8), np.uint8)
-                lengths = np.zeros(n, np.int64)
+            ids, payload, lengths = self._frames_array(frames)
+            if lengths.max() > 8:  # not classical CAN: one by one
                 ts = self._timestamps(base, count)
                 for (frame_id, data), t in zip(frames, ts.tolist(), strict=True):
                     self.log.write(t, frame_id, data)
             else:
-                ids, payload, lengths = self._frames_array(frames)
                 self.log.write_many(self._timestamps(base, count), ids, payload, lengths)
         else:
             ids = np.zeros(0, np.int64)
             payload = np.zeros((0, 8), np.uint8)
             lengths = np.zeros(0, np.int64)
-        no_decode = [i - done for i in self._no_decode if done <= i < done + n]
-        self._no_decode.difference_update(i + done for i in no_decode)
+        no_decode = self._not_decoded(frames, count, heard) if self._bad or self._bad_events else []
         self._write_rows(ids, payload, lengths, no_decode, row_ticks, row_pos, done)
         self.log.flush()
         self._trace_file.flush()
