@@ -55,6 +55,96 @@ def frames_bits(ids: np.ndarray, dlc: int, data: np.ndarray) -> np.ndarray:
     return bits.shape[1] + stuffed + _UNSTUFFED_TAIL_BITS
 
 
+_TABLES: dict[str, np.ndarray] = {}
+
+
+def _tables() -> dict[str, np.ndarray]:
+    """CRC-15 per byte, and the bit-stuffing automaton per byte (and per 1..7 leading bits).
+
+    Stuffing state: 0 before the first bit, else 1 + 4 * last bit + (run length - 1), run 1..4
+    (a fifth equal bit brings a complement bit, which starts the next run).
+    """
+    if _TABLES:
+        return _TABLES
+    crc = np.zeros(256, np.int32)
+    for byte in range(256):
+        c = 0
+        for i in range(7, -1, -1):
+            feedback = ((byte >> i) & 1) ^ ((c >> 14) & 1)
+            c = ((c << 1) & 0x7FFF) ^ (feedback * CRC15_POLY)
+        crc[byte] = c
+    # next[bits][state, value]: state after `bits` leading bits of a byte; stuffed likewise
+    # (every state and byte value at once, a bit at a time)
+    nxt = np.zeros((9, 9, 256), np.int64)
+    stuffed = np.zeros((9, 9, 256), np.int64)
+    st = np.repeat(np.arange(9), 256)
+    byte = np.tile(np.arange(256), 9)
+    count = np.zeros(9 * 256, np.int64)
+    for bits in range(1, 9):
+        b = (byte >> (8 - bits)) & 1
+        last, run = (st - 1) // 4, (st - 1) % 4 + 1
+        same = (st != 0) & (b == last)
+        hit = same & (run == 4)
+        count = count + hit
+        st = np.where(same & ~hit, 1 + 4 * b + run, 1 + 4 * np.where(hit, 1 - b, b))
+        nxt[bits] = st.reshape(9, 256)
+        stuffed[bits] = count.reshape(9, 256)
+    # one flat table per bit count: index state * 256 + byte, entry next state * 256 + stuffed
+    # bits (the next state comes out ready as the next index's base)
+    step = (nxt * 256 + stuffed).reshape(9, -1).astype(np.int32)
+    _TABLES.update(crc=crc, step8=step[8], step2=step[2])
+    return _TABLES
+
+
+def frames_bits_bytewise(ids: np.ndarray, dlc: int, data: np.ndarray) -> np.ndarray:
+    """As :func:`frames_bits` (same lengths), a byte at a time with tables instead of a bit at
+    a time: several times faster on large batches."""
+    if np.any(ids >= 0x800):
+        raise ValueError("an ID does not fit 11 bits")
+    if not 0 <= dlc <= 8:
+        raise ValueError(f"DLC {dlc}: classical CAN carries at most 8 data bytes")
+    t = _tables()
+    n = len(ids)
+    ids = ids.astype(np.int64)
+    # the stuffed part: SOF, ID, RTR, IDE, r0, DLC (19 bits), data, CRC (15 bits); 34 + 8 dlc
+    # bits in all, so 4 + dlc whole bytes and 2 bits. Header bits 0..18 as one integer.
+    header = (ids << 7) | dlc  # SOF 0 | ID (11) | RTR, IDE, r0 = 0 | DLC (4)
+    # CRC-15 over the body: 3 header bits one at a time, then whole bytes
+    crc = np.zeros(n, np.int64)
+    for i in range(18, 15, -1):
+        feedback = ((header >> i) & 1) ^ ((crc >> 14) & 1)
+        crc = ((crc << 1) & 0x7FFF) ^ (feedback * CRC15_POLY)
+    body = np.empty((n, 2 + dlc), np.int64)
+    body[:, 0] = (header >> 8) & 0xFF
+    body[:, 1] = header & 0xFF
+    body[:, 2:] = data[:, :dlc]
+    for j in range(2 + dlc):
+        crc = ((crc << 8) & 0x7FFF) ^ t["crc"][((crc >> 7) ^ body[:, j]) & 0xFF]
+    # the whole stream as bytes: 3 header bits, the body bytes, the CRC; shifted to start at
+    # a byte boundary: stream = header bits 18..16, body (16 + 8 dlc bits), crc (15 bits)
+    stream = np.empty((n, 5 + dlc), np.int64)
+    top = (header >> 16) & 0b111  # the 3 leading bits
+    carry = top
+    for j in range(2 + dlc):  # each byte: 3 bits carried in, 5 bits of the body byte
+        stream[:, j] = (carry << 5) | (body[:, j] >> 3)
+        carry = body[:, j] & 0b111
+    # then 3 carried bits + 15 CRC bits = 18 bits: two whole bytes and 2 bits
+    tail = (carry << 15) | crc
+    stream[:, 2 + dlc] = (tail >> 10) & 0xFF
+    stream[:, 3 + dlc] = (tail >> 2) & 0xFF
+    stream[:, 4 + dlc] = (tail & 0b11) << 6
+    stream = stream.astype(np.int32)
+    step8 = t["step8"]
+    base = np.zeros(n, np.int32)  # state * 256
+    stuffed = np.zeros(n, np.int32)
+    for j in range(4 + dlc):
+        entry = step8.take(base | stream[:, j])
+        stuffed += entry & 0xFF
+        base = entry & ~0xFF
+    stuffed += t["step2"].take(base | stream[:, 4 + dlc]) & 0xFF
+    return 34 + 8 * dlc + stuffed + _UNSTUFFED_TAIL_BITS
+
+
 class BitCounter:
     """Adds up the exact length of every frame it is given (batches of ``batch`` frames)."""
 
@@ -104,7 +194,7 @@ class BitCounter:
             ids = records[:, 0].astype(np.uint16) | (records[:, 1].astype(np.uint16) << 8)
             for dlc in np.unique(records[:, 2]):
                 rows = records[:, 2] == dlc
-                self.bits += int(frames_bits(ids[rows], int(dlc), records[rows, 3:]).sum())
+                self.bits += int(frames_bits_bytewise(ids[rows], int(dlc), records[rows, 3:]).sum())
             self.frames += self._pending
             self._buffer.clear()
             self._pending = 0
