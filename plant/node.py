@@ -14,18 +14,26 @@ Either way, after ``watchdog_ticks`` ticks in a row without a valid actuator fra
 driver's watchdog removes pump power, as a real one would; a valid frame restores it.
 FaultInject frames schedule faults at their FaultTick (at once when that tick has passed);
 a fault the plant cannot represent, or a value out of range, is counted and ignored.
-The node reuses its buffers: nothing it keeps grows per frame or per tick.
+The node reuses its buffers: nothing it keeps grows per frame or per tick. With a plant of
+plant/periphery.py the frames of a tick are packed by one compiled call (``pack_plant_frames``:
+the codec's layout, saturation, alive counters and E2E CRC, from the plant's state array), which
+gives the bytes the codec's ``pack_raw`` gives; any other plant goes through the codec.
 """
 
 from __future__ import annotations
 
 import copy
 
+import numpy as np
+from numba import njit
+
 from plant import flags as fl
 from plant.faults import Fault, FaultKind
 from plant.interface import Plant
-from protocol.codec import Codec
-from protocol.e2e import E2EStatus
+from plant.jit import EXACT
+from plant.periphery import OUT, PlantBase
+from protocol.codec import Codec, MessageCodec
+from protocol.e2e import COUNTER_MODULO, E2EStatus, crc8
 from protocol.lockstep import TICK_MODULO, every_ticks
 from protocol.node import SendFn
 
@@ -56,6 +64,115 @@ DEFAULT_WATCHDOG_TICKS = 10
 
 def _clamp(x: int, lo: int, hi: int) -> int:
     return lo if x < lo else hi if x > hi else x
+
+
+# ---- compiled packing of the plant's frames ---------------------------------------------------
+# messages in the order they go out at a tick; their payloads are 8 bytes each of one buffer
+FRAMES = ("PlantTruthA", "PlantTruthB", "PlantAnalog", "PlantSensors")
+DUE_TRUTH, DUE_ANALOG = 1, 2
+MAX_FIELDS = 8
+# the int64 layout array: the CRC-8 table, then per message its alive counter, the CRC register
+# after its data ID, its number of fields and (start, mask, raw_min, raw_max) per field
+CRC_TABLE = 0
+MESSAGE = 256
+MESSAGE_SLOTS = 3 + 4 * MAX_FIELDS
+COUNTER, CRC_START, N_FIELDS, FIELDS = range(4)
+_O_TIME, _O_SPEED, _O_EGT, _O_SUPPLY, _O_CURRENT, _O_N_RPM = range(OUT, OUT + 6)
+_O_P3, _O_P5, _O_T4, _O_FUEL, _O_THRUST = OUT + 7, OUT + 8, OUT + 9, OUT + 11, OUT + 13
+_CLAMPED = fl.COMPRESSOR_MAP_CLAMPED | fl.TURBINE_MAP_CLAMPED | fl.PUMP_MAP_CLAMPED
+
+
+def frame_layout(messages: list[MessageCodec]) -> np.ndarray:
+    """The int64 layout array of ``pack_plant_frames`` for these messages (counters as now)."""
+    lay = np.zeros(MESSAGE + MESSAGE_SLOTS * len(messages), dtype=np.int64)
+    lay[CRC_TABLE : CRC_TABLE + 256] = [crc8(bytes((i,)), 0) for i in range(256)]
+    for k, m in enumerate(messages):
+        if not m.protected or m.multiplexed or len(m._fields) > MAX_FIELDS:
+            raise ValueError(f"{m.name}: not a plain E2E-protected message")
+        b = MESSAGE + MESSAGE_SLOTS * k
+        lay[b + COUNTER], lay[b + CRC_START], lay[b + N_FIELDS] = (
+            m.counter,
+            m._crc_start,
+            len(m._fields),
+        )
+        for i, (start, mask, _sign, raw_min, raw_max) in enumerate(m._fields):
+            lay[b + FIELDS + 4 * i : b + FIELDS + 4 * i + 4] = (start, mask, raw_min, raw_max)
+    return lay
+
+
+@njit(**EXACT, inline="always")
+def _field(lay: np.ndarray, b: int, i: int, raw: int) -> int:
+    """One raw value saturated to its range and shifted into place (MessageCodec.pack_raw)."""
+    f = b + FIELDS + 4 * i
+    if raw < lay[f + 2]:
+        raw = lay[f + 2]
+    elif raw > lay[f + 3]:
+        raw = lay[f + 3]
+    return (raw & lay[f + 1]) << lay[f]
+
+
+@njit(**EXACT, inline="always")
+def _rounded(lay: np.ndarray, b: int, i: int, value: float) -> int:
+    """round(value) (half to even) saturated to field i's range, shifted into place."""
+    f = b + FIELDS + 4 * i
+    r = np.rint(value)
+    if r < lay[f + 2]:
+        raw = lay[f + 2]
+    elif r > lay[f + 3]:
+        raw = lay[f + 3]
+    else:
+        raw = int(r)
+    return (raw & lay[f + 1]) << lay[f]
+
+
+@njit(**EXACT, inline="always")
+def _finish(lay: np.ndarray, k: int, word: int, buf: np.ndarray) -> None:
+    """Alive counter, little-endian bytes and CRC of message k into buf[8k:8k+8]."""
+    b = MESSAGE + MESSAGE_SLOTS * k
+    counter = lay[b + COUNTER]
+    word |= counter << 8
+    lay[b + COUNTER] = counter + 1 if counter < COUNTER_MODULO - 1 else 0
+    at = 8 * k
+    crc = lay[b + CRC_START]
+    for i in range(1, 8):
+        byte = (word >> (8 * i)) & 0xFF
+        buf[at + i] = byte
+        crc = lay[CRC_TABLE + (crc ^ byte)]
+    buf[at] = crc
+
+
+@njit(**EXACT)
+def pack_plant_frames(
+    s: np.ndarray, lay: np.ndarray, buf: np.ndarray, flags: int, tick16: int, due: int
+) -> None:
+    """Pack the frames due at this tick (FRAMES order; PlantSensors always) from the plant's
+    outputs in its state array s, as PlantNode packs them through the codec."""
+    if due & DUE_TRUTH:
+        b = MESSAGE
+        word = _field(lay, b, 0, 1 if flags & fl.FLAMEOUT else 0)
+        word |= _field(lay, b, 1, 1 if flags & _CLAMPED else 0)
+        word |= _field(lay, b, 2, 1 if flags & fl.OVERSPEED else 0)
+        word |= _field(lay, b, 3, 1 if flags & fl.OVERTEMPERATURE else 0)
+        word |= _rounded(lay, b, 4, s[_O_P3] * 0.1)
+        word |= _rounded(lay, b, 5, s[_O_P5] * 0.1)
+        word |= _rounded(lay, b, 6, s[_O_T4] * 10.0)
+        _finish(lay, 0, word, buf)
+        b = MESSAGE + MESSAGE_SLOTS
+        word = _rounded(lay, b, 0, s[_O_FUEL] * 1e6)
+        word |= _rounded(lay, b, 1, s[_O_THRUST] * 20.0)
+        word |= _rounded(lay, b, 2, s[_O_N_RPM])
+        _finish(lay, 1, word, buf)
+    if due & DUE_ANALOG:
+        b = MESSAGE + 2 * MESSAGE_SLOTS
+        word = _field(lay, b, 0, tick16)
+        word |= _rounded(lay, b, 1, s[_O_SUPPLY] * 1000.0)
+        word |= _rounded(lay, b, 2, s[_O_CURRENT] * 1000.0)
+        _finish(lay, 2, word, buf)
+    b = MESSAGE + 3 * MESSAGE_SLOTS
+    word = _field(lay, b, 0, tick16)
+    word |= _rounded(lay, b, 1, s[_O_SPEED])
+    word |= _rounded(lay, b, 2, s[_O_EGT] * 10.0)
+    _finish(lay, 3, word, buf)
 
 
 class PlantNode:
@@ -112,6 +229,14 @@ class PlantNode:
         self._pending: list[tuple[int, int, float]] = []  # (absolute tick, target, value)
         self.timeout_s: float | None = None  # set while the ECU is silent (see on_timeout)
         self.finished = False
+        # compiled packing (plants of plant/periphery.py): layout, counters and the payloads
+        self._state = plant._s if isinstance(plant, PlantBase) else None
+        self._messages = [codec[name] for name in FRAMES]
+        self._ids = [m.frame_id for m in self._messages]
+        self._layout = frame_layout(self._messages)
+        self._frames = bytearray(8 * len(FRAMES))
+        self._buf = np.frombuffer(self._frames, dtype=np.uint8)
+        self._payload = [memoryview(self._frames)[8 * k : 8 * k + 8] for k in range(len(FRAMES))]
 
     # -- frames in ---------------------------------------------------------------------------
     def start(self, send: SendFn) -> None:
@@ -207,6 +332,25 @@ class PlantNode:
         self.plant.inject(Fault(self.plant.time_s, kind, value))
 
     def _send_tick(self, send: SendFn) -> None:
+        if self._state is None:
+            self._send_tick_codec(send)
+            return
+        k = self.tick
+        due = (DUE_TRUTH if k % self.every_truth == 0 else 0) | (
+            DUE_ANALOG if k % self.every_analog == 0 else 0
+        )
+        pack_plant_frames(
+            self._state, self._layout, self._buf, self.plant.outputs.flags, k % TICK_MODULO, due
+        )
+        ids, payload = self._ids, self._payload
+        if due & DUE_TRUTH:
+            send(ids[0], payload[0])
+            send(ids[1], payload[1])
+        if due & DUE_ANALOG:
+            send(ids[2], payload[2])
+        send(ids[3], payload[3])
+
+    def _send_tick_codec(self, send: SendFn) -> None:
         o = self.plant.outputs
         k = self.tick
         tick16 = k % TICK_MODULO

@@ -300,6 +300,7 @@ class PlantBase:
         values += (thrust, v_pump, self._effectiveness)
         for name, value in zip(OUT_FIELDS, values, strict=True):
             setattr(o, name, value)
+        self._s[OUT : OUT + len(OUT_FIELDS)] = values
         o.tick = 0
         o.flags = int(flags)
 

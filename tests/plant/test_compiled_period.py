@@ -1,5 +1,6 @@
 """The compiled period gives the bits of the Python it replaced: pump driver, sensors, the fast
-plant's running-line lookup (numpy.interp), and a copied plant goes on as the original."""
+plant's running-line lookup (numpy.interp), the node's frames (the codec's); a copied plant goes
+on as the original."""
 
 from __future__ import annotations
 
@@ -11,14 +12,18 @@ from dataclasses import astuple
 import numpy as np
 import pytest
 
+from plant import flags as fl
 from plant.aerothermal import AeroThermalPlant, default_maps
 from plant.fast_plant import FastPlant, _interp_at, _locate
 from plant.faults import Fault, FaultKind
 from plant.interface import PlantConfig
+from plant.node import frame_layout
 from plant.periphery import (
     BATTERY_R,
     BATTERY_V,
     IDLE_A,
+    OUT,
+    OUT_FIELDS,
     PER_PA,
     PER_VOLT,
     PUMP_STATE,
@@ -45,6 +50,7 @@ from plant.sensors import (
     speed_reading,
     thermocouple_reading,
 )
+from protocol.codec import Codec
 
 
 def bits(values) -> list[str]:
@@ -156,3 +162,39 @@ def test_a_copied_plant_goes_on_as_the_original(cls):
         b = astuple(twin.step(0.6))
         assert a == b
     assert plant.speed_pickup.burst_noise_rpm == twin.speed_pickup.burst_noise_rpm == 0.0
+
+
+def test_compiled_frames_are_the_codec_frames_also_when_saturated():
+    from plant.node import FRAMES, pack_plant_frames
+
+    codec, packed = Codec(), Codec()
+    messages = [codec[name] for name in FRAMES]
+    lay = frame_layout([packed[name] for name in FRAMES])
+    buf = np.zeros(8 * len(FRAMES), dtype=np.uint8)
+    s = np.zeros(OUT + len(OUT_FIELDS))
+    rng = np.random.default_rng(4)
+    for k in range(400):
+        values = rng.choice([0.0, -5.0, 0.5, 2.5, 1e7, 1e12], size=len(OUT_FIELDS))
+        values = np.where(rng.random(len(OUT_FIELDS)) < 0.5, values, rng.uniform(0, 2e5))
+        s[OUT:] = values
+        o = dict(zip(OUT_FIELDS, values.tolist(), strict=True))
+        flags, tick16 = int(rng.integers(1 << 10)), k % 70_000 % 65536
+        pack_plant_frames(s, lay, buf, flags, tick16, 3)
+        clamped = fl.COMPRESSOR_MAP_CLAMPED | fl.TURBINE_MAP_CLAMPED | fl.PUMP_MAP_CLAMPED
+        raws = (
+            [
+                1 if flags & fl.FLAMEOUT else 0,
+                1 if flags & clamped else 0,
+                1 if flags & fl.OVERSPEED else 0,
+                1 if flags & fl.OVERTEMPERATURE else 0,
+                round(o["p3_pa"] * 0.1),
+                round(o["p5_pa"] * 0.1),
+                round(o["t4_k"] * 10.0),
+            ],
+            [round(o["fuel_kg_s"] * 1e6), round(o["thrust_n"] * 20.0), round(o["n_rpm"])],
+            [tick16, round(o["supply_v"] * 1000.0), round(o["pump_current_a"] * 1000.0)],
+            [tick16, round(o["speed_rpm"]), round(o["egt_k"] * 10.0)],
+        )
+        for i, (m, raw) in enumerate(zip(messages, raws, strict=True)):
+            m.pack_raw(raw)
+            assert bytes(buf[8 * i : 8 * i + 8]) == bytes(m.data), (m.name, raw)

@@ -9,6 +9,8 @@ import pytest
 
 from plant import flags as fl
 from plant.fast_plant import FastPlant
+from plant.faults import Fault, FaultKind
+from plant.interface import PlantConfig
 from plant.node import PlantNode
 from protocol.codec import Codec
 from protocol.node import InProcessBus, run_lockstep
@@ -202,3 +204,26 @@ def test_sil_plant_refuses_a_bad_fault(capsys):
     with pytest.raises(SystemExit):
         main(["plant", "--fault", "30:pump_effectiveness:2.0"])
     assert "pump_effectiveness value must be in" in capsys.readouterr().err
+
+
+def test_compiled_frames_are_the_frames_the_codec_packs():
+    def frames(codec_path: bool) -> list[tuple[int, bytes]]:
+        faults = (Fault(0.3, FaultKind.PUMP_DRY, None, 0.2),)
+        node = PlantNode(FastPlant(PlantConfig(seed=2, faults=faults)))
+        if codec_path:
+            node._state = None  # as for a plant that is not plant.periphery's
+        act = Codec()["EcuActuator"]
+        sent = []
+
+        def send(frame_id, data):
+            sent.append((frame_id, bytes(data)))
+
+        node.start(send)
+        for k in range(300):
+            duty = 0.0 if 100 < k < 120 else (1.0 if 200 < k < 250 else node.plant.trim_duty)
+            act.pack_raw([1 if k % 97 else 0, 2, k, round(duty * 1e4), 0])
+            node.on_frame(act.frame_id, bytes(act.data), send)
+        return sent
+
+    compiled = frames(False)
+    assert len(compiled) == 301 + 2 * 151 + 61 and compiled == frames(True)
