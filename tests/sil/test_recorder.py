@@ -1,10 +1,16 @@
 """The recorder: candump log readable by python-can and cantools, one trace row per tick."""
 
+import random
+
 import can
 import numpy as np
 import pytest
 
+import sil.recorder as recorder_module
+from protocol.busload import frames_bits, frames_bits_bytewise
 from protocol.codec import Codec
+from protocol.e2e import crc8, crc8_rows, data_id_crc_start
+from sil.canlog import CandumpWriter
 from sil.metrics import load_trace, summarize, tracking_rms_pct
 from sil.recorder import Recorder
 
@@ -124,3 +130,137 @@ def test_frames_arriving_out_of_order_are_logged_in_canonical_order(tmp_path):
         logs.append((tmp_path / name / "can.log").read_text())
     assert logs[0] == logs[1]
     assert logs[0].count("vcan0 080#") == 3  # every demand kept, each in its tick
+
+
+def _messy_stream(seed: int) -> list[tuple[int, bytes]]:
+    """Ticks with frames lost, duplicated, corrupted, cut short, unknown and out of order."""
+    rng = random.Random(seed)
+    codec = Codec()
+    frames: list[tuple[int, bytes]] = []
+    demand = codec["Demand"]
+    demand.pack([1, 0, 90.0, 0.0, 0])
+    frames.append((demand.frame_id, bytes(demand.data)))
+    for k in range(rng.randint(30, 200)):
+        plant, command, ecu = [], [], []
+        for name, values, out in (
+            ("PlantTruthB", [0.008, 150.0, 100_000 + rng.randint(0, 999)], plant),
+            ("PlantAnalog", [k, 22.0 + rng.random(), 2.1], plant),
+            ("PlantSensors", [k, 100_000 + rng.randint(0, 999), 1000 + rng.random() * 50], plant),
+            ("Demand", [1, 0, rng.uniform(70, 100), 0.0, (k + 5) % 65536], command),
+            ("EcuStatus", [2, rng.choice([0, 1 << 14]), 100.0, rng.randint(0, 2), 89.0], ecu),
+            ("EcuTelemetry", [rng.randint(0, 12), rng.uniform(-10, 10)], ecu),
+            ("EcuActuator", [1, 2, k, rng.uniform(0, 100), 6.0], ecu),
+        ):
+            last = name in ("PlantSensors", "EcuActuator")
+            if not last and rng.random() < 0.3:
+                continue
+            message = codec[name]
+            message.pack(values)
+            data = bytes(message.data)
+            r = rng.random()
+            if r < 0.05:  # a flipped bit: WRONGCRC, logged but never decoded
+                flipped = bytearray(data)
+                flipped[rng.randrange(8)] ^= 1 << rng.randrange(8)
+                data = bytes(flipped)
+            elif r < 0.07 and not last:
+                data = data[: rng.randrange(8)]  # cut short: an unknown frame
+            elif r < 0.09 and not last:
+                continue  # lost
+            out.append((message.frame_id, data))
+            if rng.random() < 0.03:
+                out.append((message.frame_id, data))  # duplicated
+        if rng.random() < 0.05:
+            plant.append((0x555, bytes(8)))
+        senders = [plant, command, ecu]
+        while any(senders):  # each sender's own order kept, interleaved at random
+            frames.append(rng.choice([s for s in senders if s]).pop(0))
+    return frames
+
+
+def _record_all(out_dir, frames, *, wall_clock: bool = False) -> dict:
+    out_dir.mkdir()
+    rec = Recorder(
+        out_dir, Codec(), period_s=0.01, commands=np.linspace(70, 100, 150), wall_clock=wall_clock
+    )
+    for i, (frame_id, data) in enumerate(frames):
+        rec.record(frame_id, bytearray(data), i * 0.0037)
+    rec.close()
+    return {
+        "log": (out_dir / "can.log").read_bytes(),
+        "trace": (out_dir / "trace.csv").read_bytes(),
+        "e2e": {m: dict(c) for m, c in rec.e2e.items()},
+        "unknown": list(rec.unknown_ids.items()),
+        "missed": rec.missed_ticks,
+        "frames": rec.frames,
+        "bits": rec.bits.flush(),
+        "tick": rec.tick,
+    }
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bulk_writes_do_not_depend_on_the_chunk_size(tmp_path, monkeypatch, seed):
+    """Frames are decoded and written per chunk: any chunk size gives the same files."""
+    frames = _messy_stream(seed)
+    wall_clock = seed == 5
+    results = []
+    for rows, heard in ((1, 3), (7, 50), (512, 8192)):
+        monkeypatch.setattr(recorder_module, "CHUNK_ROWS", rows)
+        monkeypatch.setattr(recorder_module, "_CHUNK_FRAMES", heard)
+        results.append(_record_all(tmp_path / f"c{rows}", frames, wall_clock=wall_clock))
+    assert results[0] == results[1] == results[2]
+    assert sum(c.get("WRONGCRC", 0) for c in results[0]["e2e"].values()) > 0
+    assert results[0]["unknown"]
+
+
+def test_a_corrupted_frame_is_logged_but_never_decoded(tmp_path):
+    codec, rx = Codec(), Codec()
+    rec = Recorder(tmp_path, rx, period_s=0.01)
+    _tick(codec, rec, 0, rpm=100_000, ref=90.0)
+    status = codec["EcuStatus"]
+    status.pack([2, 0, 100.0, 0, 80.0])
+    bad = bytearray(status.data)
+    bad[7] ^= 0x10  # ReferenceSpeed changed, CRC not: WRONGCRC
+    sensors, actuator = codec["PlantSensors"], codec["EcuActuator"]
+    sensors.pack([1, 100_000, 1000.0])
+    rec.record(sensors.frame_id, sensors.data)
+    rec.record(status.frame_id, bad)
+    actuator.pack([1, 2, 1, 50.0, 6.0])
+    rec.record(actuator.frame_id, actuator.data)
+    rec.close()
+    trace = load_trace(tmp_path / "trace.csv")
+    assert list(trace["ReferenceSpeed"]) == [90.0, 90.0]
+    assert rec.e2e["EcuStatus"] == {"OK": 1, "WRONGCRC": 1}
+    assert (tmp_path / "can.log").read_text().count(f"200#{bytes(bad).hex().upper()}") == 1
+
+
+def test_bulk_candump_lines_equal_line_by_line(tmp_path):
+    rng = np.random.default_rng(7)
+    n = 300
+    ts = np.concatenate([rng.uniform(0, 1e5, n - 3), [0.0, 0.0000005, 123456.5]])
+    ids = rng.integers(0, 0x800, n)
+    ids[:4] = [0, 0xF, 0x7FF, 0x1FFFFFFF]
+    lengths = rng.integers(0, 9, n)
+    payload = rng.integers(0, 256, (n, 8)).astype(np.uint8)
+    payload[np.arange(8)[None, :] >= lengths[:, None]] = 0
+    one, many = CandumpWriter(tmp_path / "one.log"), CandumpWriter(tmp_path / "many.log")
+    for t, i, d, k in zip(ts.tolist(), ids.tolist(), payload, lengths.tolist(), strict=True):
+        one.write(t, i, bytes(d[:k]))
+    many.write_many(ts, ids, payload, lengths)
+    one.close()
+    many.close()
+    assert (tmp_path / "one.log").read_bytes() == (tmp_path / "many.log").read_bytes()
+
+
+def test_vectorised_crc_and_bit_counts_equal_the_reference():
+    rng = np.random.default_rng(3)
+    data = rng.integers(0, 256, (500, 7)).astype(np.uint8)
+    for data_id in (1, 0x100, 0xBEEF):
+        start = data_id_crc_start(data_id)
+        assert crc8_rows(data, start).tolist() == [crc8(bytes(r), start) for r in data]
+    for dlc in range(9):
+        ids = rng.integers(0, 0x800, 2000)
+        frames = rng.integers(0, 256, (2000, 8)).astype(np.uint8)
+        frames[:500] = 0  # long runs: many stuff bits
+        frames[500:1000] = 0xFF
+        ids[:700] = rng.choice([0, 0x7FF], 700)
+        assert (frames_bits(ids, dlc, frames) == frames_bits_bytewise(ids, dlc, frames)).all()
