@@ -138,6 +138,7 @@ class AeroThermalPlant(PlantBase):
     """
 
     ENGINE_SLOTS = N_SUB + 1 - ENGINE
+    KERNEL = staticmethod(aero_period)
 
     def __init__(self, config: PlantConfig | None = None) -> None:
         config = PlantConfig() if config is None else config
@@ -160,9 +161,6 @@ class AeroThermalPlant(PlantBase):
         self.trim_pump_voltage = self._voltage_for(config.initial_fuel_kg_s)
         self.trim_duty = self._duty_for(self.trim_pump_voltage)
         self._start(steady.stations.t5, self.trim_duty)
-
-    def _kernel(self, u: float, pump_enabled: bool, tick: int, pump_in_loop: bool) -> int:
-        return aero_period(self._s, self._tables, u, pump_enabled, tick, pump_in_loop)
 
     def step_fuel(self, fuel_kg_s: float) -> PlantOutputs:
         """Advance one ECU period with the fuel flow commanded directly (pump bypassed, no pump

@@ -4,7 +4,11 @@
   the loop), the issue's target being >= 500;
 - ``step_api_realtime_factor``: the same through ``AeroThermalPlant.step`` at the default 10 ms
   ECU period, with sensors, faults and the pump driver (what the SIL harness sees);
-- the same two for the fast engine model of eq. 3.24.
+- the same two for the fast engine model of eq. 3.24;
+- per ECU period, in microseconds of CPU: the compiled RK4 steps alone (``*_rk4_us_per_period``),
+  through ``step`` (``*_step_us_per_period``) and through the CAN node in lockstep
+  (``*_node_us_per_period``: an EcuActuator frame in, E2E check, the step, the plant's frames
+  packed and handed to a send that drops them).
 Each figure is the best of a few repeats (the machine is shared); compilation is excluded.
 """
 
@@ -19,6 +23,8 @@ from plant.aerothermal import AeroThermalPlant
 from plant.engine import advance_pump
 from plant.fast_plant import FastPlant, advance_fast
 from plant.interface import SUBSTEP_S
+from plant.node import PlantNode
+from protocol.codec import Codec
 
 REPEATS = 3
 
@@ -58,13 +64,43 @@ def run(quick: bool = False) -> dict[str, float]:
 
         return api_s / _best_seconds(loop, 2)
 
+    def node_us(cls: type[AeroThermalPlant] | type[FastPlant]) -> float:
+        node = PlantNode(cls())
+        ticks = int(round(api_s / node.plant.config.ecu_period_s))
+        act = Codec()["EcuActuator"]
+        duty = round(node.plant.trim_duty * 1e4)
+        frames = []
+        for k in range(3 * ticks):  # answers to ticks 0.. in order, packed beforehand
+            act.pack_raw([1, 2, k % 65536, duty, 0])
+            frames.append(bytes(act.data))
+        batches = iter([frames[i * ticks : (i + 1) * ticks] for i in range(3)])
+
+        def drop(frame_id: int, data: object) -> None:
+            pass
+
+        node.start(drop)
+
+        def loop() -> None:
+            for data in next(batches):
+                node.on_frame(act.frame_id, data, drop)
+
+        return _best_seconds(loop, 3) / ticks * 1e6
+
+    substeps, period_us = aero.config.substeps, aero.config.ecu_period_s * 1e6
+    aero_api, fast_api = api(aero), api(fast)
     return {
         "realtime_factor": round(sim_s / wall, 1),
         "aero_thermal_us_per_rk4_step": round(wall / n * 1e6, 3),
         "aero_thermal_simulated_s": sim_s,
-        "step_api_realtime_factor": round(api(aero), 1),
+        "step_api_realtime_factor": round(aero_api, 1),
         "fast_realtime_factor": round(sim_s / wall_fast, 1),
-        "fast_step_api_realtime_factor": round(api(fast), 1),
+        "fast_step_api_realtime_factor": round(fast_api, 1),
+        "aero_thermal_rk4_us_per_period": round(wall / n * 1e6 * substeps, 2),
+        "aero_thermal_step_us_per_period": round(period_us / aero_api, 2),
+        "aero_thermal_node_us_per_period": round(node_us(AeroThermalPlant), 2),
+        "fast_rk4_us_per_period": round(wall_fast / n * 1e6 * substeps, 3),
+        "fast_step_us_per_period": round(period_us / fast_api, 2),
+        "fast_node_us_per_period": round(node_us(FastPlant), 2),
         "ecu_period_s": aero.config.ecu_period_s,
         "load_average_1min": round(os.getloadavg()[0], 2),
     }

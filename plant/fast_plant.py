@@ -155,6 +155,7 @@ class FastPlant(PlantBase):
     """Eq. 3.24 plant; ``step`` = one ECU period of 1 ms RK4 steps."""
 
     ENGINE_SLOTS = N_SUB + 1 - ENGINE
+    KERNEL = staticmethod(fast_period)
 
     def __init__(
         self, config: PlantConfig | None = None, theta: tuple[float, ...] = THETA_EQ_3_23
@@ -188,9 +189,6 @@ class FastPlant(PlantBase):
         )
         self.trim_duty = self._duty_for(self.trim_pump_voltage)
         self._start(self._at("EGT_K"), self.trim_duty)
-
-    def _kernel(self, u: float, pump_enabled: bool, tick: int, pump_in_loop: bool) -> int:
-        return fast_period(self._s, self._tables, u, pump_enabled, tick, pump_in_loop)
 
     @property
     def state(self) -> np.ndarray:

@@ -208,14 +208,16 @@ def pump_table_at(t: np.ndarray, k: int, s: np.ndarray) -> PumpTable:
 class PlantBase:
     """One ECU period: faults due -> pump driver -> engine (subclass) -> sensors -> outputs.
 
-    Subclasses set ``ENGINE_SLOTS`` (their part of the state array) and implement
-    ``_kernel(duty, pump_enabled, tick) -> flags`` (the compiled period), ``_truth()`` (the
+    Subclasses set ``ENGINE_SLOTS`` (their part of the state array), ``KERNEL`` (the compiled
+    period: ``KERNEL(state, tables, u, pump_enabled, tick, pump_in_loop) -> flags``, u the duty
+    when pump_in_loop, else the fuel flow) and ``_tables``, and implement ``_truth()`` (the
     engine's present values, for the outputs of tick 0), ``_pump_outlet_gauge() -> Pa``,
     ``_pump_changed()``, and for ENGINE_FAULTS ``_supports(kind)`` and
     ``_apply_engine(kind, value or None to end)``.
     """
 
     ENGINE_SLOTS = 0
+    KERNEL = None
 
     def __init__(self, config: PlantConfig, pump: PumpTable, n_max_rpm: float) -> None:
         self.config = config
@@ -323,7 +325,7 @@ class PlantBase:
         if not self._noise_left:
             self._refill_noise()
         tick = self._tick + 1
-        flags = self._kernel(u, pump_enabled, tick, pump_in_loop)
+        flags = self.KERNEL(self._s, self._tables, u, pump_enabled, tick, pump_in_loop)
         self._noise_left -= 1
         self._tick = tick
         o = self.outputs
@@ -435,10 +437,6 @@ class PlantBase:
         return 0.5 * (lo + hi)
 
     # ---- engine side (subclasses) -------------------------------------------------------------
-    def _kernel(self, u: float, pump_enabled: bool, tick: int, pump_in_loop: bool) -> int:
-        """The compiled period: u is the duty when pump_in_loop, else the fuel flow."""
-        raise NotImplementedError
-
     def _truth(
         self, v_pump: float
     ) -> tuple[float, float, float, float, float, float, float, float, int]:
