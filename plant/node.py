@@ -237,6 +237,9 @@ class PlantNode:
         self._frames = bytearray(8 * len(FRAMES))
         self._buf = np.frombuffer(self._frames, dtype=np.uint8)
         self._payload = [memoryview(self._frames)[8 * k : 8 * k + 8] for k in range(len(FRAMES))]
+        if self._state is not None:  # compiled now too, on copies (the counters stay as they are)
+            due = DUE_TRUTH | DUE_ANALOG
+            pack_plant_frames(self._state, self._layout.copy(), self._buf.copy(), 0, 0, due)
 
     # -- frames in ---------------------------------------------------------------------------
     def start(self, send: SendFn) -> None:
