@@ -192,8 +192,9 @@ class Recorder:
         """A frame heard on the bus, or sent by the command node (see the module docstring)."""
         data = bytes(data)
         self.frames += 1
+        frame = (frame_id, data)
         heard = self._heard
-        heard.append((frame_id, data))
+        heard.append(frame)
         if len(heard) >= _CHUNK_FRAMES:
             self._write_chunk()
         if self.wall_clock:
@@ -203,7 +204,7 @@ class Recorder:
             return
         # (_flush_ready has nothing to do while no tick is complete)
         if frame_id in PLANT_IDS:
-            self._plant_pending.append((frame_id, data))
+            self._plant_pending.append(frame)
             if frame_id == SENSORS:
                 k = self._sensor_wrap.full(data[2] | data[3] << 8)
                 if k > self.latest_sensor_tick:
@@ -220,7 +221,7 @@ class Recorder:
             elif self._complete:
                 self._flush_ready()
         elif frame_id in ECU_IDS:
-            self._ecu_pending.append((frame_id, data))
+            self._ecu_pending.append(frame)
             if frame_id == ACTUATOR:
                 k = self._actuator_wrap.full(data[2] | data[3] << 8)
                 slot = self._ticks.get(k)
@@ -229,6 +230,10 @@ class Recorder:
                 slot.ecu = self._ecu_pending
                 self._ecu_pending = []
                 if slot.plant is not None:
+                    if k == self.tick and not self._complete:  # the usual case: this tick, now
+                        del self._ticks[k]
+                        self._write_tick(slot)
+                        return
                     self._complete.add(k)
             if self._complete:
                 self._flush_ready()
@@ -239,7 +244,7 @@ class Recorder:
             slot = self._ticks.get(k)
             if slot is None:
                 slot = self._ticks[k] = _Tick()
-            slot.command.append((frame_id, data))
+            slot.command.append(frame)
             if self._complete:
                 self._flush_ready()
 
