@@ -44,6 +44,7 @@ SENSORS, ACTUATOR = 0x100, 0x110
 PLANT_IDS = frozenset((0x100, 0x101, 0x300, 0x301))
 ECU_IDS = frozenset((0x110, 0x200, 0x210))
 CHUNK_ROWS = 512  # trace rows (ticks) per bulk write
+WALL_CLOCK_CHUNK_ROWS = 100  # in real time: on disk at least every 100 ECU periods
 _CHUNK_FRAMES = 8192  # frames heard per bulk write when no rows come
 _CELL = 16  # "%15.9g," per trace cell (%.9g takes at most 15); the padding is taken out again
 _PREFIX_TIME, _PREFIX_TICK = 21, 11  # "%20.6f," and "%10d,"
@@ -150,6 +151,7 @@ class Recorder:
         self._out_done = 0  # frames written in earlier chunks
         self._row_ticks: list[int] = []
         self._row_pos: list[int] = []
+        self._chunk_rows = min(CHUNK_ROWS, WALL_CLOCK_CHUNK_ROWS) if wall_clock else CHUNK_ROWS
 
     def _build_groups(self) -> None:
         self._groups: dict[int, _Group] = {}  # plain messages by frame ID
@@ -302,7 +304,7 @@ class Recorder:
         self._row_pos.append(self._out_done + len(self._out))
         self.rows += 1
         self.tick += 1
-        if len(self._row_ticks) >= CHUNK_ROWS:
+        if len(self._row_ticks) >= self._chunk_rows:
             self._write_chunk()
 
     @property
