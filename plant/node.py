@@ -204,6 +204,7 @@ class PlantNode:
         self.truth_b = codec["PlantTruthB"]
         self.actuator = codec["EcuActuator"]
         self.fault = codec["FaultInject"]
+        self._actuator_id, self._fault_id = self.actuator.frame_id, self.fault.frame_id
         self.actuator_check = self.actuator.checker(max_delta=2)
         self.fault_check = self.fault.checker(max_delta=14)  # event frames: any step forward
         rate_hz = 1.0 / plant.config.ecu_period_s
@@ -246,9 +247,9 @@ class PlantNode:
         self._send_tick(send)
 
     def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
-        if frame_id == self.actuator.frame_id:
+        if frame_id == self._actuator_id:
             self._on_actuator(data, send)
-        elif frame_id == self.fault.frame_id:
+        elif frame_id == self._fault_id:
             if self.fault_check.check(data) == E2EStatus.OK:
                 raw = self._fault_raw
                 self.fault.unpack_raw(data, raw)
