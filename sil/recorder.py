@@ -25,6 +25,8 @@ cells sample-and-hold by position, and each distinct value %-formatted once.
 from __future__ import annotations
 
 import math
+import signal
+import threading
 from collections import Counter
 from pathlib import Path
 from typing import TextIO
@@ -49,6 +51,7 @@ _CHUNK_FRAMES = 8192  # frames heard per bulk write when no rows come
 _CELL = 16  # "%15.9g," per trace cell (%.9g takes at most 15); the padding is taken out again
 _PREFIX_TIME, _PREFIX_TICK = 21, 11  # "%20.6f," and "%10d,"
 _STATUS_NAMES = [s.name for s in E2EStatus]
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)  # held off while a chunk is written
 
 Frame = tuple[int, bytes]
 
@@ -461,7 +464,29 @@ class Recorder:
         return np.array(ids, np.int64), payload, lengths
 
     def _write_chunk(self) -> None:
-        """Write the gathered frames to can.log and rows to trace.csv, decoded in bulk."""
+        """Write the gathered frames to can.log and rows to trace.csv, decoded in bulk.
+
+        Ctrl-C and SIGTERM wait until the chunk is written (a few milliseconds): an interrupted
+        chunk would leave a gap in the files that close() could not fill.
+        """
+        if threading.current_thread() is not threading.main_thread():
+            self._write_chunk_now()  # signals are handled in the main thread only
+            return
+        held: list[int] = []
+        previous = {}
+        for signum in _SIGNALS:
+            handler = signal.getsignal(signum)
+            if handler is not None:  # (None: a handler not installed from Python; left alone)
+                previous[signum] = signal.signal(signum, lambda n, _f: held.append(n))
+        try:
+            self._write_chunk_now()
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+            for signum in held:
+                signal.raise_signal(signum)  # now, to the handler it was meant for
+
+    def _write_chunk_now(self) -> None:
         self._check_heard()
         frames, self._out = self._out, []
         base, self._out_base = self._out_base, []

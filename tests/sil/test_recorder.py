@@ -1,6 +1,7 @@
 """The recorder: candump log readable by python-can and cantools, one trace row per tick."""
 
 import random
+import signal
 
 import can
 import numpy as np
@@ -264,3 +265,36 @@ def test_vectorised_crc_and_bit_counts_equal_the_reference():
         frames[500:1000] = 0xFF
         ids[:700] = rng.choice([0, 0x7FF], 700)
         assert (frames_bits(ids, dlc, frames) == frames_bits_bytewise(ids, dlc, frames)).all()
+
+
+def test_ctrl_c_while_a_chunk_is_written_leaves_no_gap(tmp_path, monkeypatch):
+    """The interrupt waits until the chunk is on disk; close() then writes the rest."""
+    monkeypatch.setattr(recorder_module, "CHUNK_ROWS", 5)
+    frames = _messy_stream(11)
+    original = Recorder._write_rows
+    interrupted = []
+
+    def write_rows(self, *args):
+        if not interrupted:  # after can.log, before trace.csv
+            interrupted.append(True)
+            signal.raise_signal(signal.SIGINT)
+        original(self, *args)
+
+    monkeypatch.setattr(Recorder, "_write_rows", write_rows)
+    (tmp_path / "a").mkdir()
+    rec = Recorder(tmp_path / "a", Codec(), period_s=0.01)
+    heard = 0
+    with pytest.raises(KeyboardInterrupt):
+        for frame_id, data in frames:
+            heard += 1
+            rec.record(frame_id, data)
+    rec.close()
+    assert interrupted and 0 < heard < len(frames)
+    monkeypatch.setattr(Recorder, "_write_rows", original)
+    (tmp_path / "b").mkdir()
+    reference = Recorder(tmp_path / "b", Codec(), period_s=0.01)
+    for frame_id, data in frames[:heard]:
+        reference.record(frame_id, data)
+    reference.close()
+    for name in ("can.log", "trace.csv"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
