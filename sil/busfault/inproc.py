@@ -46,7 +46,6 @@ class FaultyInProcessBus:
             plant.actuator.frame_id: (2, plant.actuator_check),
             plant.fault.frame_id: (2, plant.fault_check),
         }
-        self.frames = 0
         self.stalls = {"ecu": 0, "plant": 0}
 
     def _sender(self, index: int) -> SendFn:
@@ -74,7 +73,6 @@ class FaultyInProcessBus:
                 return
 
     def _deliver(self, origin: int, frame_id: int, data: bytes) -> None:
-        self.frames += 1
         if origin != 0:
             self.command.on_frame(frame_id, data, self._senders[0])
         now = self.plant.tick

@@ -33,7 +33,6 @@ class Probe:
         self.tick = 0  # rows written
         self.latest_sensor_tick = -1
         self._sensor_wrap = TickUnwrapper()
-        self.frames = 0
         # sample-and-hold values
         self._speed = self._ref = math.nan
         self._fault_word = self._owner = 0
@@ -48,7 +47,6 @@ class Probe:
         self.pump_v: list[float] = []
 
     def record(self, frame_id: int, data: bytes | bytearray, wall_s: float | None = None) -> None:
-        self.frames += 1
         if frame_id == SENSORS:
             k = self._sensor_wrap.full(data[2] | data[3] << 8)
             if k > self.latest_sensor_tick:

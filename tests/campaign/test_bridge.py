@@ -50,6 +50,7 @@ def test_bridge_drops_at_its_rate_flips_bits_and_passes_the_rest_both_ways():
     sigma = math.sqrt(n * 0.3 * 0.7)
     assert abs(len(through_b) - n * 0.7) < 4.5 * sigma
     assert len(through_a) == 50
+    assert bridge.forwarded == [50, len(through_b)]
     assert not any(e2e_p01_check(bytearray(m.data), actuator.data_id) for m in through_a)
     for bus in (node_a, node_b, bridge_a, bridge_b):
         bus.shutdown()
