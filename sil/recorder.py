@@ -1,8 +1,8 @@
 """The recorder: every frame into ``can.log``, every signal per tick into ``trace.csv``.
 
 It hears the whole bus (or is handed the frames in-process), checks E2E on every protected
-message as frames arrive, counts bits for the bus load, and keeps, sample-and-hold, the latest
-value of every DBC signal; the trace gets one row per tick.
+message in the order the frames arrived, counts bits for the bus load, and keeps, sample-and-hold,
+the latest value of every DBC signal; the trace gets one row per tick.
 
 In lockstep, frames from different senders may reach the recorder in either order (the kernel
 delivers one multicast frame to each listener in turn, and a fast ECU can answer before the
@@ -12,14 +12,16 @@ the command node's frames sent on PlantSensors(k), then the ECU's frames up to a
 EcuActuator(k). A tick is written once both ends are in, in that canonical order, stamped with
 simulated time (the tick's start plus 10 us per frame). The log is therefore the same however
 the frames interleaved. In real time the frames are written as they come, with wall-clock stamps.
-Everything is flushed as it goes, and whatever is pending is written at close, so an aborted run
-keeps what it recorded.
+Files are flushed chunk by chunk (every ``CHUNK_ROWS`` ticks, every 100 in real time), and
+whatever is pending is written at close, so an aborted run keeps what it recorded.
 
-Cost per frame: ``record`` does only what must happen as the frame arrives (E2E check, tick
-bookkeeping, sorting into its tick) and appends the frame to the chunk being written; every
-``CHUNK_ROWS`` rows (and at close) the chunk is decoded and formatted in bulk with numpy: the
-can.log lines as a character matrix, the signals by shifts and masks per message, the trace
-cells sample-and-hold by position, and each distinct value %-formatted once.
+Cost per frame: ``record`` does only what must happen as the frame arrives (tick bookkeeping,
+sorting into its tick, which the command node reads back) and appends the frame to the chunk;
+each chunk is then checked and written in bulk with numpy: E2E (table CRC-8), tick sequences,
+unknown IDs and bit counts in arrival order; the can.log lines as a character matrix; the
+signals decoded by shifts and masks per message; the trace cells sample-and-hold by position,
+each distinct value %-formatted once. ``e2e``, ``unknown_ids`` and the tick trackers check the
+frames still pending when read; ``bits`` is complete after close.
 """
 
 from __future__ import annotations
