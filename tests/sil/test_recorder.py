@@ -11,7 +11,7 @@ import sil.recorder as recorder_module
 from protocol.busload import frames_bits, frames_bits_bytewise
 from protocol.codec import Codec
 from protocol.e2e import crc8, crc8_rows, data_id_crc_start
-from sil.canlog import CandumpWriter
+from sil.canlog import CandumpWriter, fixed6
 from sil.metrics import load_trace, summarize, tracking_rms_pct
 from sil.recorder import Recorder
 
@@ -298,3 +298,22 @@ def test_ctrl_c_while_a_chunk_is_written_leaves_no_gap(tmp_path, monkeypatch):
     reference.close()
     for name in ("can.log", "trace.csv"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+def test_timestamps_formatted_without_percent_equal_percent_6f():
+    rng = np.random.default_rng(5)
+    values = np.concatenate(
+        [
+            rng.uniform(0, 1e6, 20_000),
+            rng.uniform(0, 1e-3, 2_000),
+            np.arange(30_000) / 640,  # ties at half a microsecond
+            np.arange(30_000) * 0.01 + np.arange(30_000) % 5 * 1e-5,
+            [0.0, 1e-7, 0.9999996, 999_999.9999994],
+        ]
+    )
+    scaled = values * 1e6
+    near_tie = np.abs(scaled - np.floor(scaled) - 0.5) < 0.01
+    assert fixed6(values) is None and fixed6(values[near_tie][:1]) is None
+    sure = values[~near_tie]
+    text = [row[row != 0].tobytes().decode() for row in fixed6(sure)]
+    assert text == [f"{v:.6f}" for v in sure.tolist()]  # as CandumpWriter.write
