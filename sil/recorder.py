@@ -39,7 +39,7 @@ from protocol.busload import BitCounter
 from protocol.codec import Codec
 from protocol.e2e import COUNTER_MODULO, E2EStatus, crc8_rows, data_id_crc_start
 from protocol.lockstep import TICK_MODULO, TickTracker
-from sil.canlog import CandumpWriter
+from sil.canlog import CandumpWriter, fixed6
 
 N_MAX_RPM = 112_500.0
 _FRAME_SPACING_S = 10e-6
@@ -633,7 +633,12 @@ class Recorder:
         times = ticks * self.period_s
         distinct, inverse = np.unique(values.view(np.int64), return_inverse=True)
         text = (f"%{_CELL - 1}.9g," * len(distinct)) % tuple(distinct.view(np.float64).tolist())
-        time_text = (f"%{_PREFIX_TIME - 1}.6f," * m) % tuple(times.tolist())
+        fast_times = fixed6(times)  # "%.6f" without %-formatting, when sure
+        time_text = (
+            (f"%{_PREFIX_TIME - 1}.6f," * m) % tuple(times.tolist())
+            if fast_times is None
+            else " " * (_PREFIX_TIME * m)
+        )
         tick_text = (f"%{_PREFIX_TICK - 1}d," * m) % tuple(ticks.tolist())
         if (
             len(text) != _CELL * len(distinct)
@@ -648,7 +653,14 @@ class Recorder:
         strings = np.frombuffer(text.encode("ascii"), np.uint64).reshape(-1, _CELL // 8)
         row_width = _PREFIX_TIME + _PREFIX_TICK + width * _CELL
         out = np.empty((m, row_width), np.uint8)
-        out[:, :_PREFIX_TIME] = np.frombuffer(time_text.encode("ascii"), np.uint8).reshape(m, -1)
+        if fast_times is None:
+            out[:, :_PREFIX_TIME] = np.frombuffer(time_text.encode("ascii"), np.uint8).reshape(
+                m, -1
+            )
+        else:
+            out[:, : _PREFIX_TIME - 15] = 32
+            out[:, _PREFIX_TIME - 15 : _PREFIX_TIME - 1] = np.where(fast_times == 0, 32, fast_times)
+            out[:, _PREFIX_TIME - 1] = ord(",")
         out[:, _PREFIX_TIME : _PREFIX_TIME + _PREFIX_TICK] = np.frombuffer(
             tick_text.encode("ascii"), np.uint8
         ).reshape(m, -1)
