@@ -19,6 +19,10 @@ emulated guest than python-can alone). The probe
    ...]}``, one entry per injected frame.
 
 Exits non-zero with one line on stderr when any step fails.
+
+    python -m tools.vcan_probe --capture FILE -- COMMAND...
+
+runs COMMAND while ``candump -L vcan0`` writes FILE, and exits with COMMAND's status.
 """
 
 from __future__ import annotations
@@ -45,7 +49,10 @@ class ProbeError(RuntimeError):
 
 def raw_receivers(channel: str) -> int:
     """How many CAN_RAW receive filters the kernel holds for `channel` (sockets listening)."""
-    lines = Path("/proc/net/can/rcvlist_all").read_text().splitlines()
+    table = Path("/proc/net/can/rcvlist_all")
+    if not table.exists():  # the can module is not loaded yet: no CAN socket exists
+        return 0
+    lines = table.read_text().splitlines()
     return sum(1 for line in lines if line.split()[:1] == [channel])
 
 
@@ -111,10 +118,29 @@ def run(folder: Path) -> dict[str, list[str]]:
     return {"received": received, "verdicts": verdicts}
 
 
+def capture_while(capture: Path, command: list[str]) -> int:
+    """Run `command` while ``candump -L`` records everything on CHANNEL into `capture`."""
+    candump = start_candump(capture)
+    try:
+        return subprocess.call(command)
+    finally:
+        stop_candump(candump)
+
+
+USAGE = """usage: python -m tools.vcan_probe DIR
+       python -m tools.vcan_probe --capture FILE -- COMMAND..."""
+
+
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
+    if len(args) >= 4 and args[0] == "--capture" and args[2] == "--":
+        try:
+            return capture_while(Path(args[1]), args[3:])
+        except (ProbeError, OSError) as error:
+            print(f"vcan_probe: {error}", file=sys.stderr)
+            return 1
     if len(args) != 1:
-        print("usage: python -m tools.vcan_probe DIR", file=sys.stderr)
+        print(USAGE, file=sys.stderr)
         return 2
     folder = Path(args[0])
     try:

@@ -5,7 +5,7 @@ virtme-ng boots Debian's stock kernel under QEMU with the host's root filesystem
 into the guest: the host's Python, the project's .venv and can-utils are all visible inside, and
 folders given as rwdir are writable there (that is how a capture or a log comes back out).
 
-    python -m tools.vcan_vm [--rwdir DIR] [--timeout S] [--boot-console] -- COMMAND...
+    python -m tools.vcan_vm [--rwdir DIR] [--timeout S] [--cpus N] [--boot-console] -- COMMAND...
 
 COMMAND runs in the guest as root, in the current directory, with vcan0 up. Its arguments are
 quoted as given (use `-- sh -c '...'` for shell syntax). The exit status is the command's own;
@@ -66,6 +66,7 @@ DEFAULT_TIMEOUT_S = 300.0
 EXIT_VM_FAILED = 125
 
 BOOT_CONSOLE_HINT = "`python -m tools.vcan_vm --boot-console -- true` shows the guest's boot log"
+_COMMAND = "command.sh"  # the command, as a shell script the guest runs
 _READY = "ready"  # marker file: written by the guest once vcan0 is up, before the command
 # Marker file: the command's exit status, written by the guest. vng 1.42 returns that status too,
 # but also returns 255 when the guest died, which a command can return as well.
@@ -211,14 +212,21 @@ def find_kernel() -> Path:
 
 
 def _guest_script(command: str, control: Path) -> str:
-    """Shell text run in the guest: vcan0 up, then the command, with markers for the host."""
+    """Shell text run in the guest: vcan0 up, then the command, with markers for the host.
+
+    virtme-ng hands this text to the guest on the kernel command line, which x86 cuts at 2048
+    bytes (the guest then hangs in its init): the command itself goes through a file in the
+    control folder, so it may be as long as it likes.
+    """
+    script = control / _COMMAND
+    script.write_text(command + "\n")
     ready = shlex.quote(str(control / _READY))
     status = shlex.quote(str(control / _STATUS))
     return (
         "modprobe vcan && ip link add dev vcan0 type vcan && ip link set up vcan0"
         f" || {{ echo 'vcan_vm: could not bring up vcan0 in the guest' >&2; exit 1; }}; "
         f"touch {ready}; "
-        f"/bin/sh -c {shlex.quote(command)}; "
+        f"/bin/sh {shlex.quote(str(script))}; "
         f"echo $? > {status}"
     )
 
@@ -240,12 +248,14 @@ def run_in_vcan_vm(
     rwdir: Path | None = None,
     timeout_s: float = DEFAULT_TIMEOUT_S,
     boot_console: bool = False,
+    cpus: int = GUEST_CPUS,
 ) -> VmResult:
     """Boot a throwaway VM with vcan0 up, run the shell `command` as root there, return its result.
 
     `rwdir` is a host folder that the guest can write (at the same path); everything else of the
     host filesystem is read-only in the guest. The command runs in the current directory.
     `boot_console` puts the guest kernel's console into the output (to see why a boot fails).
+    `cpus` is the number of virtual CPUs.
     Raises VcanVmError, with the reason, when the prerequisites cannot be installed, there is no
     kernel, the VM does not boot or bring up vcan0 in time, or the VM stops before the command
     has finished. Every process started here, QEMU included, is gone when this returns.
@@ -265,7 +275,7 @@ def run_in_vcan_vm(
             "--memory",
             GUEST_MEMORY,
             "--cpus",
-            str(GUEST_CPUS),
+            str(cpus),
             "--user",
             "root",
             "--append",
@@ -351,6 +361,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--timeout", type=float, default=DEFAULT_TIMEOUT_S, help="seconds, boot included"
     )
+    parser.add_argument(
+        "--cpus", type=int, default=GUEST_CPUS, help=f"virtual CPUs (default {GUEST_CPUS})"
+    )
     parser.add_argument("command", nargs=argparse.REMAINDER, help="-- COMMAND [ARG...]")
     args = parser.parse_args(argv)
     # SIGTERM (a CI cancelling, `timeout`) unwinds like Ctrl-C, so the VM is killed on the way out.
@@ -359,7 +372,9 @@ def main(argv: list[str] | None = None) -> int:
     if not command:
         parser.error("no COMMAND given")
     try:
-        result = run_in_vcan_vm(shlex.join(command), args.rwdir, args.timeout, args.boot_console)
+        result = run_in_vcan_vm(
+            shlex.join(command), args.rwdir, args.timeout, args.boot_console, args.cpus
+        )
     except VcanVmError as error:
         print(f"vcan_vm: error: {error}", file=sys.stderr)
         return EXIT_VM_FAILED

@@ -1,30 +1,48 @@
-"""Real SocketCAN: our codec's frames on vcan0 in a throwaway VM, candump, cantools, one bad CRC.
+"""Real SocketCAN in a throwaway VM: our codec's frames, one bad CRC, and a lockstep SIL run.
 
-The host kernel has no CAN support, so tools.vcan_vm boots a VM (software emulation, about a
-minute in all) where tools.vcan_probe sends the frames encoded here through python-can's socketcan
-interface while ``candump -L vcan0`` captures them, then injects a good and a bad-CRC frame with
-``cansend`` and runs our E2E checker on what python-can received. Back on the host, ``cantools
-decode`` with our DBC must give the values encoded here. When the VM cannot start, the test fails
-with the reason: it is never skipped. Leave it out with ``-m "not vcan"``.
+The host kernel has no CAN support, so tools.vcan_vm boots one VM (software emulation) for the
+module, in which
+
+1. tools.vcan_probe sends the frames encoded here through python-can's socketcan interface while
+   ``candump -L vcan0`` captures them, then injects a good and a bad-CRC frame with ``cansend``
+   and runs our E2E checker on what python-can received. Back on the host, ``cantools decode``
+   with our DBC must give the values encoded here.
+2. A 20 s lockstep scenario (MRAC on the fast model) runs as plant and ECU processes on
+   ``socketcan:vcan0`` while ``candump -L vcan0`` captures the bus; ``cantools decode`` of the
+   capture must agree with the run's can.log, which must equal the host's in-process run of the
+   same scenario byte for byte. The plant's compiled code comes from a numba cache written on the
+   host for a generic CPU (compiling it under emulation would take many minutes).
+
+When the VM cannot start, the tests fail with the reason: they are never skipped. Leave them out
+with ``-m "not vcan"``. The whole module takes 3 to 7 minutes (the run is some 100 times slower
+than on the host under software emulation).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import shlex
 import subprocess
 import sys
+from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 from protocol.codec import Codec, MessageCodec
 from protocol.dbc import DBC_PATH
-from tools.vcan_vm import VcanVmError, run_in_vcan_vm
+from sil.scenario import SCENARIO_DIR
+from tools.vcan_vm import VcanVmError, VmResult, run_in_vcan_vm
 
-VM_TIMEOUT_S = 300.0
+VM_TIMEOUT_S = 1200.0
 CANTOOLS = Path(sys.executable).with_name("cantools")
+SIL_SCENARIO = "thesis-5.2-mrac-fast"
+SIL_DURATION_S = 20
+# The plant's numba code, compiled on the host for a CPU that the emulated guest also has.
+NUMBA_ENV = {"NUMBA_CPU_NAME": "generic"}
 
 # Values on each signal's resolution, inside its DBC range, so the codec saturates nothing.
 SENT: tuple[tuple[str, dict[str, float]], ...] = (
@@ -105,9 +123,16 @@ def decode_capture(capture: Path) -> list[tuple[str, dict[str, float]]]:
     return frames
 
 
-@pytest.mark.vcan
-@pytest.mark.slow
-def test_codec_frames_on_real_vcan0(tmp_path: Path) -> None:
+@dataclass
+class VmRun:
+    folder: Path
+    result: VmResult
+    plan_frames: list[dict]
+    good: str
+    bad: str
+
+
+def _plan(folder: Path) -> tuple[list[dict], str, str]:
     codec = Codec()
     plan_frames = [
         {"frame_id": codec[name].frame_id, "data": encode(codec[name], values)}
@@ -124,15 +149,79 @@ def test_codec_frames_on_real_vcan0(tmp_path: Path) -> None:
             "frames": [good, bad],
         },
     }
-    (tmp_path / "plan.json").write_text(json.dumps(plan, indent=1))
+    (folder / "plan.json").write_text(json.dumps(plan, indent=1))
+    return plan_frames, good, bad
 
-    command = shlex.join([sys.executable, "-m", "tools.vcan_probe", str(tmp_path)])
+
+def _sil_scenario(folder: Path) -> Path:
+    text = (SCENARIO_DIR / f"{SIL_SCENARIO}.toml").read_text()
+    text, count = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {SIL_DURATION_S}", text)
+    assert count == 1
+    path = folder / f"{SIL_SCENARIO}-{SIL_DURATION_S}s.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def vm_run(tmp_path_factory: pytest.TempPathFactory) -> VmRun:
+    folder = tmp_path_factory.mktemp("vcan")
+    plan_frames, good, bad = _plan(folder)
+    scenario = _sil_scenario(folder)
+    env = {**NUMBA_ENV, "NUMBA_CACHE_DIR": str(folder / "numba")}
+    sil = [sys.executable, "-m", "sil.cli", "run", str(scenario), "--no-plots"]
+    # on the host, in one process: the reference can.log, and the numba cache for the guest
+    host = subprocess.run(
+        [*sil, "--mode", "inproc", "--out", str(folder / "host")],
+        env={**os.environ, **env},
+        capture_output=True,
+        text=True,
+    )
+    assert host.returncode == 0, host.stderr
+    probe = [sys.executable, "-m", "tools.vcan_probe"]
+    guest = " ".join(
+        [
+            f"{shlex.join([*probe, str(folder)])} > {folder}/probe.out 2>&1;",
+            f"echo $? > {folder}/probe.status;",
+            f"{' '.join(f'{k}={shlex.quote(v)}' for k, v in env.items())}",
+            shlex.join(
+                [
+                    *probe,
+                    "--capture",
+                    str(folder / "sil-capture.log"),
+                    "--",
+                    *sil,
+                    "--bus",
+                    "socketcan:vcan0",
+                    "--out",
+                    str(folder / "sil"),
+                ]
+            ),
+            f"> {folder}/sil.out 2>&1;",
+            f"echo $? > {folder}/sil.status",
+        ]
+    )
     try:
-        run = run_in_vcan_vm(command, rwdir=tmp_path, timeout_s=VM_TIMEOUT_S)
+        result = run_in_vcan_vm(guest, rwdir=folder, timeout_s=VM_TIMEOUT_S)
     except VcanVmError as error:
         pytest.fail(f"the vcan VM did not run the probe: {error}")
-    print(f"vcan VM: vcan0 up after {run.boot_s:.1f} s, whole run {run.wall_s:.1f} s")
-    assert run.returncode == 0, f"probe failed in the VM (exit {run.returncode}):\n{run.output}"
+    print(f"vcan VM: vcan0 up after {result.boot_s:.1f} s, whole run {result.wall_s:.1f} s")
+    return VmRun(folder, result, plan_frames, good, bad)
+
+
+def _guest_status(run: VmRun, step: str) -> None:
+    status = run.folder / f"{step}.status"
+    output = run.folder / f"{step}.out"
+    assert status.exists(), f"{step} did not run in the VM:\n{run.result.output}"
+    log = output.read_text() if output.exists() else ""
+    assert status.read_text().strip() == "0", f"{step} failed in the VM:\n{log}"
+
+
+@pytest.mark.vcan
+@pytest.mark.slow
+def test_codec_frames_on_real_vcan0(vm_run: VmRun) -> None:
+    _guest_status(vm_run, "probe")
+    tmp_path, plan_frames, good, bad = vm_run.folder, vm_run.plan_frames, vm_run.good, vm_run.bad
+    injected = Codec()[INJECTED[0]]
 
     # candump saw exactly the bytes sent, in order: ours through python-can, then the injected.
     capture = tmp_path / "capture.log"
@@ -156,3 +245,51 @@ def test_codec_frames_on_real_vcan0(tmp_path: Path) -> None:
     result = json.loads((tmp_path / "result.json").read_text())
     assert result["received"] == [good, bad]
     assert result["verdicts"] == ["OK", "WRONGCRC"]
+
+
+def _frames(log: Path) -> list[tuple[str, str]]:
+    """(ID, data) of every frame of a candump -L log, in order."""
+    frames = []
+    for number, line in enumerate(log.read_text().splitlines(), 1):
+        match = re.fullmatch(r"\(\d+\.\d+\) \w+ ([0-9A-F]{3})#([0-9A-F]*)", line)
+        assert match, f"{log.name} line {number}: not a candump -L frame: {line!r}"
+        frames.append((match.group(1), match.group(2)))
+    return frames
+
+
+@pytest.mark.vcan
+@pytest.mark.slow
+def test_lockstep_sil_on_real_vcan0(vm_run: VmRun) -> None:
+    _guest_status(vm_run, "sil")
+    run = vm_run.folder / "sil"
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["bus"] == "socketcan:vcan0"
+    assert summary["sim_time_s"] == pytest.approx(SIL_DURATION_S, abs=0.02)
+    assert summary["missed_ticks"] == 0
+    print(f"SIL on vcan0 in the VM: {summary['wall_time_s']:.0f} s for {SIL_DURATION_S} s")
+
+    # The same frames as the host's in-process run, byte for byte (timestamps are sim time).
+    can_log = (run / "can.log").read_text().splitlines()
+    host_log = (vm_run.folder / "host" / "can.log").read_text().splitlines()
+    pairs = enumerate(zip(can_log, host_log, strict=False))
+    line = next((i for i, (a, b) in pairs if a != b), None)
+    assert line is None, f"line {line + 1}: {can_log[line]} != {host_log[line]}"
+    assert len(can_log) == len(host_log)
+
+    # candump saw what the recorder wrote: the capture's frames, up to the last one recorded,
+    # are can.log's (the recorder orders each tick's frames by sender; candump by arrival). The
+    # plant's frames after the recorder stopped are the only extra ones.
+    recorded = _frames(run / "can.log")
+    captured = _frames(vm_run.folder / "sil-capture.log")
+    assert len(captured) >= len(recorded)
+    assert Counter(captured[: len(recorded)]) == Counter(recorded)
+    assert len(captured) - len(recorded) < 20
+
+    # cantools decodes that part of the capture to what it decodes from can.log.
+    head = vm_run.folder / "capture-head.log"
+    head.write_text("".join(f"(0.0) vcan0 {i}#{d}\n" for i, d in captured[: len(recorded)]))
+    key = lambda item: (item[0], sorted(item[1].items()))  # noqa: E731
+    from_capture = sorted(decode_capture(head), key=key)
+    from_log = sorted(decode_capture(run / "can.log"), key=key)
+    assert len(from_capture) == len(recorded)
+    assert from_capture == from_log
