@@ -39,6 +39,11 @@ def _clamp(x: int, lo: int, hi: int) -> int:
     return lo if x < lo else hi if x > hi else x
 
 
+def _ahead(tick: int, now: int) -> bool:
+    """``tick`` is after ``now`` (16-bit lockstep ticks)."""
+    return 0 < (tick - now) % TICK_MODULO < TICK_MODULO // 2
+
+
 class EcuNode:
     """The firmware on the bus. ``lockstep`` selects the clocking (see the module docstring);
     ``max_ticks`` makes the node finish after answering that many ticks (None: run until
@@ -77,7 +82,9 @@ class EcuNode:
         self.i.sensor_status = self.i.analog_status = self.i.demand_status = E2E_NONEWDATA
         self._sensor_raw = [0] * len(self.sensors.signal_names)
         self._analog_raw = [0] * len(self.analog.signal_names)
+        # the Demands held until their tick: the earliest, and one with a later DemandTick
         self._demand_raw = [0] * len(self.demand.signal_names)
+        self._demand_next = [0] * len(self.demand.signal_names)
         self._actuator_raw = [0] * len(self.actuator.signal_names)
         self._status_raw = [0] * len(self.status.signal_names)
         self._telemetry_raw = [0, 0]
@@ -86,7 +93,8 @@ class EcuNode:
         self.telemetry_index = 0
         self.ticked_demands = False  # the command node sends Demand frames with their tick
         self.demand_tick = -1  # DemandTick of the last valid Demand
-        self.demand_pending = False  # a valid Demand not yet handed to the firmware
+        self.demand_pending = 0  # valid Demands not yet handed to the firmware (0, 1 or 2)
+        self.applied_tick = -1  # DemandTick of the last Demand handed to the firmware
         self.waiting = False  # a sensor frame waits for its Demand (lockstep)
         self.demand_waits = 0  # ticks run without their due Demand after the guard time
         self.sensor_seen = False  # a sensor frame has come (the plant is, or was, alive)
@@ -130,22 +138,39 @@ class EcuNode:
         elif frame_id == self.demand.frame_id:
             status = self.demand_check.check(data)
             if status == E2E_OK:
-                self.demand.unpack_raw(data, self._demand_raw)  # applies from its DemandTick
-                self.demand_tick = self._demand_raw[4]
-                self.demand_pending = True
                 self.ticked_demands = self.lockstep
+                self._hold_demand(data)
             elif i.demand_status != E2E_OK:
                 i.demand_status = status
             if self.waiting and not self._demand_due():
                 self._run_tick(send)
 
+    def _hold_demand(self, data: bytes | bytearray) -> None:
+        """Keep a valid Demand until its DemandTick (at once when unticked). Two are held, so
+        that the next one arriving before the present one's tick has run (the ECU ticking late,
+        on its own clock while sensor frames are lost) does not overwrite it; a third replaces
+        the later of the two."""
+        if self.demand_pending == 0 or not self.ticked_demands:
+            self.demand.unpack_raw(data, self._demand_raw)
+            self.demand_pending = 1
+        else:
+            self.demand.unpack_raw(data, self._demand_next)
+            if _ahead(self._demand_next[4], self._demand_raw[4]):
+                self.demand_pending = 2
+            else:  # the same or an earlier tick: it replaces the one held
+                self._demand_raw, self._demand_next = self._demand_next, self._demand_raw
+                self.demand_pending = 1
+        self.demand_tick = (self._demand_next if self.demand_pending == 2 else self._demand_raw)[4]
+
     def _demand_due(self) -> bool:
         """Lockstep: a Demand is due at this tick and the one carrying this tick has not come."""
-        return (
-            self.ticked_demands
-            and self.tick % self.every_demand == 0
-            and self.demand_tick != self.tick
+        if not self.ticked_demands or self.tick % self.every_demand != 0:
+            return False
+        tick = self.tick
+        held = (self.demand_pending >= 1 and self._demand_raw[4] == tick) or (
+            self.demand_pending == 2 and self._demand_next[4] == tick
         )
+        return not held and self.applied_tick != tick
 
     def on_timeout(self, send: SendFn) -> None:
         """Lockstep guard time passed: run the waiting tick without its Demand; or, when the
@@ -166,11 +191,16 @@ class EcuNode:
 
     # -- tick and frames out -----------------------------------------------------------------
     def _apply_demand(self) -> None:
-        """Hand a received Demand to the firmware once its tick has come (at once if unticked)."""
+        """Hand the latest held Demand whose tick has come to the firmware (at once if
+        unticked); one still ahead stays held."""
         if not self.demand_pending:
             return
-        if self.ticked_demands and (self.tick - self.demand_tick) % TICK_MODULO >= TICK_MODULO // 2:
-            return  # DemandTick still ahead
+        if self.ticked_demands:
+            if _ahead(self._demand_raw[4], self.tick):
+                return  # DemandTick still ahead
+            if self.demand_pending == 2 and not _ahead(self._demand_next[4], self.tick):
+                self._demand_raw, self._demand_next = self._demand_next, self._demand_raw
+                self.demand_pending = 1  # both due: the later one wins
         raw = self._demand_raw
         i = self.i
         i.arm = raw[0]
@@ -178,7 +208,10 @@ class EcuNode:
         i.demand_cpct = raw[2]
         i.open_loop_mv = raw[3]
         i.demand_status = E2E_OK
-        self.demand_pending = False
+        self.applied_tick = raw[4]
+        if self.demand_pending == 2:
+            self._demand_raw, self._demand_next = self._demand_next, self._demand_raw
+        self.demand_pending -= 1
 
     def _run_tick(self, send: SendFn) -> None:
         self.waiting = False

@@ -224,3 +224,50 @@ def test_real_time_node_ticks_on_its_own_clock() -> None:
         if k == 10:
             assert node.ecu.out.fault_word & F.SENSOR_FRAME_LOST
     assert node.finished and node.ecu.out.mode == RUN and raw[0] == 1
+
+
+def _late_ecu_feed(node: EcuNode, codec: Codec, script: list[tuple[str, int]]) -> dict[int, int]:
+    """Feed Demand ("D", tick) and PlantSensors ("S", tick) frames in the script's order; the
+    firmware's speed demand (%N x 100) after each tick it ran."""
+    demand, sensors = codec["Demand"], codec["PlantSensors"]
+    seen: dict[int, int] = {}
+    for kind, tick in script:
+        if kind == "D":
+            demand.pack_raw([1, 0, 8000 + tick, 0, tick])  # a speed that names its tick
+            node.on_frame(demand.frame_id, demand.data, lambda f, d: None)
+        else:
+            sensors.pack_raw([tick, 100_000, 10_480])
+            node.on_frame(sensors.frame_id, sensors.data, lambda f, d: None)
+            seen[tick] = round(node.ecu.s.demand_q24 * 100 / (1 << 24))
+    return seen
+
+
+def test_a_demand_arriving_before_the_late_tick_it_follows_does_not_overwrite_it() -> None:
+    """While sensor frames are lost the ECU ticks late, on its own clock, and the Demand for
+    tick k + 5 can arrive before tick k has run: both are held, each applies at its tick, and
+    the demand never goes stale (no DEMAND_LOST)."""
+    codec = Codec()
+    node = EcuNode(codec=codec)
+    script = [("D", 0), ("S", 0), ("D", 5)] + [("S", k) for k in range(1, 4)]
+    script += [("D", 10), ("S", 4), ("S", 5), ("D", 15)] + [("S", k) for k in range(6, 10)]
+    script += [("D", 20), ("S", 10), ("S", 11)]
+    seen = _late_ecu_feed(node, codec, script)
+    assert [seen[k] for k in (0, 4, 5, 9, 10, 11)] == [8000, 8000, 8005, 8005, 8010, 8010]
+    assert node.demand_pending == 1 and node.demand_waits == 0
+    assert not node.ecu.out.fault_word & F.DEMAND_LOST
+
+
+def test_when_two_held_demands_are_both_due_the_later_one_applies() -> None:
+    codec = Codec()
+    node = EcuNode(codec=codec)
+    seen = _late_ecu_feed(node, codec, [("D", 0), ("S", 0), ("D", 5), ("D", 10), ("S", 10)])
+    assert seen == {0: 8000, 10: 8010} and node.demand_pending == 0
+
+
+def test_a_third_held_demand_replaces_the_later_of_the_two() -> None:
+    codec = Codec()
+    node = EcuNode(codec=codec)
+    script = [("D", 0), ("S", 0), ("D", 5), ("D", 10), ("D", 15), ("S", 5)]
+    seen = _late_ecu_feed(node, codec, script)
+    assert seen == {0: 8000, 5: 8005}
+    assert node.demand_pending == 1 and node.demand_tick == 15
