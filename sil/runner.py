@@ -5,6 +5,11 @@
   recorder. Children die with this process (PR_SET_PDEATHSIG) and are stopped at the end.
 - ``inproc``: the same three nodes in this process through the same codec, with no bus.
 
+Bus faults (``[[bus_fault]]``) act in process in ``inproc`` mode; on a bus the ECU goes on a second
+bus and this process bridges the two through the injector (:mod:`sil.busfault.bridge`), counting
+time by the plant's sensor frames in lockstep and by the wall clock in real time. The recorder
+listens on the plant's side.
+
 If a node process dies, or on Ctrl-C, the run keeps recording for a short grace period (to capture
 the other node's reaction), stops the rest, writes everything recorded so far and marks the
 summary aborted with the reason.
@@ -20,6 +25,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -36,11 +42,12 @@ from plant.faults import Fault, FaultKind
 from plant.interface import Ambient, Battery, Plant, PlantConfig
 from plant.node import PlantNode
 from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
-from protocol.bus import BusSpec, default_spec, open_bus, parse_spec
+from protocol.bus import BusSpec, BusSpecError, default_spec, open_bus, parse_spec, unique_udp_spec
 from protocol.busload import bus_load_pct
 from protocol.codec import Codec
 from protocol.node import InProcessBus
 from sil import metrics, profiles
+from sil.busfault.bridge import Bridge, SensorTicks, WallTicks
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
@@ -56,6 +63,7 @@ REPORTED_FAULTS = {
 }
 NODE_GUARD_S = 2.0  # lockstep: silence after which a node runs on its own clock
 GRACE_S = NODE_GUARD_S + 2.0  # recording continues this long after a node died
+BRIDGED_GUARD_S = 0.25  # lockstep through the fault bridge: a lost frame costs this much wall time
 
 
 @dataclass
@@ -71,6 +79,7 @@ class RunOptions:
     commission: Path | None = None  # `sil identify --export` file for the ECU
     ecu_impl: str = "python"  # ECU tick: the Python firmware or its C port ("c", ecu/port)
     ecu_extra_args: tuple[str, ...] = ()  # appended to `sil ecu` (e.g. --serial pty)
+    ecu_bus: str | None = None  # the ECU's side of the fault bridge (default: a second udp bus)
 
 
 @dataclass
@@ -79,6 +88,8 @@ class RunState:
     abort_reason: str | None = None
     children: dict[str, subprocess.Popen] = field(default_factory=dict)
     bus: str = "none (in process)"
+    ecu_bus: str | None = None  # the ECU's side of the fault bridge
+    bridge_errors: list[str] = field(default_factory=list)  # frames the bridge could not send
     bus_fault_events: list[dict] = field(default_factory=list)
 
 
@@ -188,11 +199,8 @@ def run(opts: RunOptions) -> dict:
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     if s.path is not None:
         (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
-    if opts.mode != "inproc" and (s.plant.varied or s.bus_faults):
-        raise ValueError(
-            f"{s.name}: engine variation and [[bus_fault]] need --mode inproc "
-            "(on a bus, put sil.busfault.bridge between the nodes)"
-        )
+    if opts.mode != "inproc" and s.plant.varied:
+        raise ValueError(f"{s.name}: engine variation needs --mode inproc")
     plant = build_plant(s, seed)
     params = ecu_params(s, ecu_trim_voltage(s, plant))
     if opts.commission is not None:
@@ -259,6 +267,8 @@ def _run_on_bus(
         spec, why = default_spec()
         print(why, file=sys.stderr)
     state.bus = str(spec)
+    ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
+    guard = BRIDGED_GUARD_S if s.bus_faults and opts.mode == "lockstep" else NODE_GUARD_S
     ticks = len(command.commands)
     mode = ["--mode", opts.mode]
     ready = opts.out_dir / ".ecu-ready"
@@ -266,14 +276,14 @@ def _run_on_bus(
     ecu_args = [
         "ecu",
         "--bus",
-        str(spec),
+        str(ecu_spec),
         *mode,
         "--preset",
         s.controller.preset or "default",
         "--ready-file",
         str(ready),
         "--guard",
-        str(NODE_GUARD_S),
+        str(guard),
         "--json",
         "--impl",
         opts.ecu_impl,
@@ -310,11 +320,20 @@ def _run_on_bus(
         "--seed",
         str(seed),
         "--guard-s",
-        str(NODE_GUARD_S),
+        str(guard),
     ]
     if opts.mode == "realtime":
         plant_args.append("--realtime")
-    with open_bus(spec) as bus:
+    with open_bus(spec) as bus, ExitStack() as stack:
+        if s.bus_faults:
+            state.ecu_bus = str(ecu_spec)
+            injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, command.codec)
+            state.bus_fault_events = injector.events
+            clock = WallTicks(s.ecu_rate_hz) if opts.mode == "realtime" else SensorTicks()
+            plant_side = stack.enter_context(open_bus(spec))
+            ecu_side = stack.enter_context(open_bus(ecu_spec))
+            bridge = stack.enter_context(Bridge(plant_side, ecu_side, injector, ticks=clock))
+            state.bridge_errors = bridge.errors
         state.children["ecu"] = _spawn("ecu", ecu_args, opts.out_dir)
         deadline = time.monotonic() + 60.0
         while not ready.exists():
@@ -335,6 +354,22 @@ def _run_on_bus(
             realtime=opts.mode == "realtime",
             period=1.0 / s.ecu_rate_hz,
         )
+
+
+def _ecu_side(opts: RunOptions, spec: BusSpec) -> BusSpec:
+    """The ECU's bus behind the fault bridge: ``--ecu-bus``, else a second loopback bus."""
+    if opts.ecu_bus:
+        ecu_spec = parse_spec(opts.ecu_bus)
+    elif spec.interface == "udp":
+        ecu_spec = unique_udp_spec()
+    else:
+        raise BusSpecError(
+            f"bus faults on {spec} need a second bus for the ECU behind the fault bridge: "
+            "give it with --ecu-bus (for example socketcan:vcan1)"
+        )
+    if ecu_spec == spec:
+        raise BusSpecError(f"--ecu-bus {ecu_spec} is the run's bus: the bridge needs two buses")
+    return ecu_spec
 
 
 def _bus_send(bus: can.BusABC):
@@ -400,6 +435,7 @@ def _finish(
         "abort_reason": state.abort_reason,
         "mode": opts.mode,
         "bus": state.bus,
+        **({"ecu_bus": state.ecu_bus} if state.ecu_bus else {}),
         "seed": seed,
         "sim_time_s": sim_time,
         "wall_time_s": wall,
@@ -410,6 +446,7 @@ def _finish(
         **metrics.summarize(trace, 1.0 / s.ecu_rate_hz, REPORTED_FAULTS),
         "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
         "bus_faults_injected": state.bus_fault_events,
+        **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
         "e2e": {m: dict(c) for m, c in recorder.e2e.items() if set(c) - {"OK"}},
         "unknown_ids": {f"0x{k:X}": v for k, v in recorder.unknown_ids.items()},
     }

@@ -436,6 +436,35 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
     )
 
 
+@dataclass(frozen=True)
+class BridgeFaults:
+    """A fault file for ``sil bridge``: the ECU rate its ticks count, a seed, the faults."""
+
+    ecu_rate_hz: float
+    seed: int
+    faults: tuple[BusFault, ...]
+
+
+def load_bridge_faults(path: Path) -> BridgeFaults:
+    """``[[bus_fault]]`` tables with an optional ``ecu_rate_hz`` (100) and ``seed`` (0), as in a
+    scenario (a scenario file is read for these alone); windows may start at any time."""
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"{path}: cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    top = _Reader(str(path), data)
+    rate = top.number("ecu_rate_hz", 100.0, lo=50, hi=1000)
+    seed = top.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise top.fail("seed", "a non-negative integer", seed)
+    faults = tuple(_bus_fault(r, 86_400.0) for r in top.tables("bus_fault"))
+    if not faults:
+        raise ScenarioError(f"{path}: no [[bus_fault]] tables")
+    return BridgeFaults(rate, seed, faults)
+
+
 def load(name_or_path: str | Path) -> Scenario:
     """A shipped scenario by name, or a scenario file by path."""
     path = Path(name_or_path)

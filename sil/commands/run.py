@@ -29,6 +29,12 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         help="bus spec (default: vcan0 if up, else a loopback bus of this run's own)",
     )
     parser.add_argument(
+        "--ecu-bus",
+        metavar="SPEC",
+        help="with [[bus_fault]] on a bus: the ECU's bus behind the fault bridge "
+        "(default: a second loopback bus)",
+    )
+    parser.add_argument(
         "--mode",
         choices=("lockstep", "realtime", "inproc"),
         default="lockstep",
@@ -127,6 +133,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         commission=args.commission,
         plots=not args.no_plots,
         ecu_impl=getattr(args, "ecu_impl", "python"),
+        ecu_bus=getattr(args, "ecu_bus", None),
     )
     _interrupt_on_signals()
     try:
