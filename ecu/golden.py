@@ -157,7 +157,7 @@ def record_modes(ticks: int) -> Golden:
             n_pct -= n_pct * dt / 0.6  # spool down
         i.tick = k % 65536
         i.speed_rpm = max(0, round(n_pct * 1125.0) + (k * 7919) % 41 - 20)  # with noise
-        i.egt_dk = 10480 + round(200 * (n_pct - 89.68))
+        i.egt_dk = max(2900, 10480 + round(200 * (n_pct - 89.68)))  # ambient when cold
         if phase == 11 and j >= 50:
             i.egt_dk = 0  # thermocouple open, reading low: EGT_OPEN, demand limited
         i.supply_mv = 22200 - (3000 if phase == 11 else 0)
@@ -244,6 +244,23 @@ value = 1
 """
 
 
+_EGT_OVERTEMP = """
+description = "PID without its limit loops, the turbine degrades at 3 s: EGT over its maximum"
+duration_s = 10
+[plant]
+model = "aero"
+[controller]
+kind = "pid"
+params = { limiters_on = 0, egt_limit_k = 1050, egt_max_k = 1100 }
+[command]
+base = "trim"
+[[fault]]
+time_s = 3
+target = "TURBINE_EFFICIENCY"
+value = 0.95
+"""
+
+
 @dataclass(frozen=True)
 class Source:
     record: Callable[[int], Golden]  # ticks -> vectors
@@ -262,6 +279,7 @@ SOURCES: dict[str, Source] = {
     "limiters-hot": _scenario("limiters-hot", _HOT_LIMITS, 2500),
     "faults": _scenario("faults", _FAULTS, 2500),
     "egt-open": _scenario("egt-open", _EGT_OPEN, 1000),
+    "egt-overtemp": _scenario("egt-overtemp", _EGT_OVERTEMP, 1000),
     "modes": Source(record_modes, 2400),
 }
 

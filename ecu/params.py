@@ -27,6 +27,9 @@ RATE_WINDOW_MAX_S = 0.05
 RATE_BUF_LEN = RATE_MAX_HZ // 20 + 2  # central-difference ring: 0.05 s at 1000 Hz, +2 samples
 
 CONTROLLERS = ("mrac", "pid", "open_loop")
+# PlantSensors.EGT's full scale (protocol/turbojet.dbc): a thermocouple amplifier's upscale
+# burnout reads it when the thermocouple is open
+EGT_FULL_SCALE_K = 1638.3
 CTRL_MRAC = 0
 CTRL_PID = 1
 CTRL_OPEN_LOOP = 2
@@ -138,7 +141,7 @@ class EcuParams:
     speed_fault_time_s: float = 0.05
     speed_stuck_time_s: float = 0.5
     speed_stuck_dv: float = 0.5
-    egt_open_high_k: float = 1800.0
+    egt_open_high_k: float = 1600.0  # under the EGT signal's full scale (an open circuit reads it)
     egt_open_low_k: float = 200.0
     egt_fault_time_s: float = 0.1
     egt_fail_demand_max_pct: float = 90.0
@@ -304,6 +307,12 @@ def validate(p: EcuParams) -> None:
     )
     _check(800.0 <= p.egt_limit_k < p.egt_max_k, "egt_limit_k", p.egt_limit_k, "800 <= x < max")
     _check(p.egt_max_k < p.egt_open_high_k, "egt_max_k", p.egt_max_k, "below open-circuit level")
+    _check(
+        p.egt_open_high_k < EGT_FULL_SCALE_K,
+        "egt_open_high_k",
+        p.egt_open_high_k,
+        f"below the EGT signal's full scale {EGT_FULL_SCALE_K} K, where an open circuit reads",
+    )
     _check(p.accel_max_pct_s > 0.0, "accel_max_pct_s", p.accel_max_pct_s, "must be > 0")
     _check(p.decel_max_pct_s > 0.0, "decel_max_pct_s", p.decel_max_pct_s, "must be > 0")
     for name in ("egt_engage_k", "rate_engage_pct_s", "n_limit_engage_pct"):

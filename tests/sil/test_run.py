@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 
 from protocol.codec import Codec
@@ -339,3 +340,38 @@ def test_compare_two_runs(tmp_path):
     assert (tmp_path / "b" / "compare.png").stat().st_size > 10_000
     missing = _sil("compare", str(tmp_path / "a"), str(tmp_path / "nowhere"))
     assert missing.returncode == 2 and "no summary.json" in missing.stderr
+
+
+OPEN_THERMOCOUPLE = """
+duration_s = 3
+[plant]
+model = "aero"
+[controller]
+preset = "default"
+[command]
+base = 85
+[[fault]]
+time_s = 1.0
+target = "EGT_OPEN_CIRCUIT"
+value = 1
+"""
+
+
+def test_an_open_thermocouple_reading_its_burnout_value_is_flagged(tmp_path):
+    """The plant's open thermocouple reads the EGT signal's full scale (1638.3 K, the
+    amplifier's upscale burnout); the ECU flags EGT_OPEN after its persistence time."""
+    from ecu.params import EGT_FULL_SCALE_K, EcuParams
+    from sil import scenario as scenarios
+    from sil.runner import RunOptions, run
+
+    path = tmp_path / "open.toml"
+    path.write_text(OPEN_THERMOCOUPLE)
+    summary = run(
+        RunOptions(scenarios.load(path), tmp_path / "r", mode="inproc", plots=False, progress=False)
+    )
+    assert EcuParams().egt_open_high_k < EGT_FULL_SCALE_K
+    assert summary["max_egt_K"] == pytest.approx(EGT_FULL_SCALE_K, abs=0.1)  # the EGT frames
+    egt = load_trace(tmp_path / "r" / "trace.csv")["EGT"]
+    assert np.all(egt[:90] < 1200.0)  # before the fault (1 s at 100 Hz)
+    flagged = [f["time_s"] for f in summary["faults"] if f["fault"] == "EGT_OPEN"]
+    assert flagged and 1.0 < flagged[0] <= 1.0 + EcuParams().egt_fault_time_s + 0.02
