@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ecu.firmware import E2E_NONEWDATA, E2E_OK, Ecu, EcuInputs
+from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, Ecu, EcuInputs
 from ecu.params import EcuParams, FirmwareParams
 from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, every_ticks
@@ -98,6 +98,7 @@ class EcuNode:
         self.waiting = False  # a sensor frame waits for its Demand (lockstep)
         self.demand_waits = 0  # ticks run without their due Demand after the guard time
         self.sensor_seen = False  # a sensor frame has come (the plant is, or was, alive)
+        self.late_sensor_frames = 0  # lockstep: sensor frames of a tick already run
         self.timeout_s: float | None = None  # set while the plant is silent (see on_timeout)
         self.finished = False
         # the service port (ecu.service.port.ServicePort), polled before each tick, or None
@@ -111,17 +112,25 @@ class EcuNode:
         i = self.i
         if frame_id == self.sensors.frame_id:
             self.sensor_seen = True
-            self.timeout_s = None
             status = self.sensors_check.check(data)
-            i.sensor_status = status
-            if status == E2E_OK:
+            if i.sensor_status != E2E_OK:  # an OK frame since the last tick wins
+                i.sensor_status = status
+            tick = (self.tick + 1) % TICK_MODULO  # a corrupt frame: taken as the next tick's
+            if status != E2E_WRONGCRC:  # the CRC holds: the tick is the sender's
                 raw = self._sensor_raw
                 self.sensors.unpack_raw(data, raw)
-                i.tick = raw[0]
-                i.speed_rpm = raw[1]
-                i.egt_dk = raw[2]
+                tick = raw[0]
+                if status == E2E_OK:
+                    i.speed_rpm = raw[1]
+                    i.egt_dk = raw[2]
             if self.lockstep:
-                self.tick = i.tick if status == E2E_OK else (self.tick + 1) % TICK_MODULO
+                if self.ticks > 0 and not _ahead(tick, self.tick):
+                    # a tick already run (on the node's own clock, or a repeated frame): its
+                    # values go to the next tick, as a frame between ticks does in real time
+                    self.late_sensor_frames += 1
+                    return
+                self.timeout_s = None
+                self.tick = tick
                 if self._demand_due():
                     self.waiting = True
                 else:

@@ -271,3 +271,28 @@ def test_a_third_held_demand_replaces_the_later_of_the_two() -> None:
     seen = _late_ecu_feed(node, codec, script)
     assert seen == {0: 8000, 5: 8005}
     assert node.demand_pending == 1 and node.demand_tick == 15
+
+
+def test_a_late_sensor_frame_is_data_for_the_next_tick_not_a_tick_again() -> None:
+    """The ECU ran tick 2 on its own clock (the frame was late); when PlantSensors(2) comes it
+    does not run tick 2 again (nor a repeated frame), its values go to tick 3."""
+    codec = Codec()
+    node = EcuNode(codec=codec)
+    sensors = codec["PlantSensors"]
+    sent: list[int] = []
+
+    def send(frame_id: int, data) -> None:  # noqa: ANN001
+        sent.append(frame_id)
+
+    for k in (0, 1):
+        sensors.pack_raw([k, 100_000, 10_480])
+        node.on_frame(sensors.frame_id, sensors.data, send)
+    node.on_timeout(send)  # tick 2 without its sensor frame
+    assert (node.ticks, node.tick, node.ecu.s.sensor_age) == (3, 2, 1)
+    sensors.pack_raw([2, 101_000, 10_480])
+    node.on_frame(sensors.frame_id, sensors.data, send)
+    node.on_frame(sensors.frame_id, sensors.data, send)  # the same frame again: repeated
+    assert (node.ticks, node.late_sensor_frames) == (3, 2)
+    node.on_timeout(send)  # tick 3 takes the late frame's values as fresh
+    assert (node.ticks, node.tick, node.ecu.s.sensor_age) == (4, 3, 0)
+    assert sent.count(codec["EcuActuator"].frame_id) == 4
