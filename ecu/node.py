@@ -70,6 +70,7 @@ class EcuNode:
         self.actuator = codec["EcuActuator"]
         self.status = codec["EcuStatus"]
         self.telemetry = codec["EcuTelemetry"]
+        self.frame_ids = tuple(m.frame_id for m in (self.sensors, self.analog, self.demand))
         # checkers classify each frame (one lost frame before a good one is tolerated: the good
         # one is fresh); timeouts are counted by the firmware, in ticks
         self.sensors_check = self.sensors.checker(max_delta=2)

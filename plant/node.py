@@ -205,6 +205,7 @@ class PlantNode:
         self.actuator = codec["EcuActuator"]
         self.fault = codec["FaultInject"]
         self._actuator_id, self._fault_id = self.actuator.frame_id, self.fault.frame_id
+        self.frame_ids = (self._actuator_id, self._fault_id)  # all the node handles
         self.actuator_check = self.actuator.checker(max_delta=2)
         self.fault_check = self.fault.checker(max_delta=14)  # event frames: any step forward
         rate_hz = 1.0 / plant.config.ecu_period_s

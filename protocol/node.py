@@ -13,24 +13,30 @@ codec buffer that is reused after the call returns: the callee copies it):
                                       the driver's guard (a node whose peer fell silent sets it to
                                       its own period and so runs on its own clock until frames
                                       come back)
+    frame_ids: Collection[int]        optional: the only frame IDs the node handles; the drivers
+                                      set them as the bus's filters, so that frames of other IDs
+                                      are dropped by the bus (in the kernel on SocketCAN and on the
+                                      loopback multicast bus) and never wake the node
 
 The same node runs over any python-can bus (:func:`run_lockstep`, :func:`run_realtime`) or, in one
 process with no bus at all, through :class:`protocol.node.InProcessBus` (``sil run --mode inproc``).
 Frames that the contract cannot carry (extended IDs, remote, error and CAN FD frames) are counted
-in ``DriverStats`` and never reach a node.
+in ``DriverStats`` and never reach a node; with ``frame_ids``, only those of the node's IDs are
+heard, and counted.
 """
 
 from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import can
 
 SendFn = Callable[[int, bytes | bytearray], None]
+ID_MASK = 0x1FFFFFFF  # every bit of a frame ID (standard or extended)
 
 
 class Node(Protocol):
@@ -79,6 +85,13 @@ def bus_sender(bus: can.BusABC, stats: DriverStats) -> SendFn:
     return send
 
 
+def listen_for(node: Node, bus: can.BusABC) -> None:
+    """Set the node's ``frame_ids`` (if it names them) as the bus's filters."""
+    frame_ids: Collection[int] | None = getattr(node, "frame_ids", None)
+    if frame_ids is not None:
+        bus.set_filters([{"can_id": i, "can_mask": ID_MASK} for i in frame_ids])
+
+
 def _deliver(node: Node, msg: can.Message, send: SendFn, stats: DriverStats) -> None:
     reason = _unusable(msg)
     if reason is not None:
@@ -98,6 +111,7 @@ def run_lockstep(
     """Drive a node by the frames it hears; ``on_timeout`` after ``guard_s`` of silence."""
     stats = DriverStats()
     send = bus_sender(bus, stats)
+    listen_for(node, bus)
     node.start(send)
     while not node.finished and not should_stop():
         msg = bus.recv(getattr(node, "timeout_s", None) or guard_s)
@@ -125,6 +139,7 @@ def run_realtime(
     """
     stats = DriverStats()
     send = bus_sender(bus, stats)
+    listen_for(node, bus)
     node.start(send)
     start = clock()
     k = 0

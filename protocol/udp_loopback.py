@@ -9,56 +9,126 @@ interoperates with plain ``udp_multicast`` peers on the same group and port) but
 - binds the socket to the multicast group address, not to the wildcard address, so nothing
   listens on any unicast address of the machine;
 - does not hear its own frames (multicast loopback delivers them to the sender too): each bus
-  marks what it sends with a channel token of its own and drops frames that carry it.
+  marks what it sends with a channel token of its own and drops frames that carry it;
+- filters by frame ID in the kernel: :meth:`~can.BusABC.set_filters` attaches a socket filter
+  (classic BPF, :func:`kernel_filter`) that drops datagrams whose ID matches no filter before
+  they are queued, so a node is not woken for frames it does not want (python-can's software
+  filter still checks every frame that passes);
+- reads a datagram that is already waiting without a ``select`` call first.
 
 Only IPv4 administratively scoped groups (239.0.0.0/8) are accepted.
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import ipaddress
 import os
+import select
 import socket
 import struct
+import time
+from collections.abc import Sequence
 
 import can
-from can.interfaces.udp_multicast.bus import (
-    SO_TIMESTAMPNS,
-    GeneralPurposeUdpMulticastBus,
-    UdpMulticastBus,
-)
+import msgpack
+from can.interfaces.udp_multicast.bus import SO_TIMESTAMPNS
 from can.interfaces.udp_multicast.utils import is_msgpack_installed
+from can.typechecking import CanFilter, CanFilters
 
 ADMIN_SCOPE = ipaddress.ip_network("239.0.0.0/8")
+MAX_DATAGRAM = 4096
+SO_ATTACH_FILTER, SO_DETACH_FILTER = 26, 27  # <asm-generic/socket.h>
+_TIMESPEC = struct.Struct("@ll")
+_ANCILLARY_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+
+# Where python-can's packing puts the frame ID: a msgpack map of 11 entries whose first keys are
+# "timestamp" (a float64) and "arbitration_id"; the filter's offsets count from the UDP header.
+_UDP_HEADER = 8
+_PREFIX_CHECKS = (  # (offset in the datagram, bytes there)
+    (0, b"\x8b\xa9ti"),  # fixmap(11), fixstr(9) "ti(mestamp)"
+    (11, b"\xcb"),  # float64
+    (20, b"\xaearb"),  # fixstr(14) "arb(itration_id)"
+    (31, b"n_id"),
+)
+_ID_TYPE = 35  # the ID's msgpack type byte, its value after it
+_MIN_DATAGRAM = _ID_TYPE + 3
+_UINT8, _UINT16 = 0xCC, 0xCD  # msgpack types; below 0x80 the type byte is the value itself
+
+# classic BPF opcodes (<linux/filter.h>)
+_LD_W, _LD_H, _LD_B, _LD_LEN = 0x20, 0x28, 0x30, 0x80
+_JA, _JEQ, _JGE, _AND, _TAX, _TXA, _RET = 0x05, 0x15, 0x35, 0x54, 0x07, 0x87, 0x06
+_ACCEPT, _DROP = "accept", "drop"
 
 
-class _LoopbackMulticastSocket(GeneralPurposeUdpMulticastBus):
-    def _create_socket(self, address_family: socket.AddressFamily) -> socket.socket:
-        if address_family != socket.AF_INET:
-            raise OSError("only IPv4 groups are used for loopback multicast")
-        sock = socket.socket(address_family, socket.SOCK_DGRAM)
+class _LoopbackSocket:
+    """The group's UDP socket, configured as the module docstring says."""
+
+    @staticmethod
+    def open(group: str, port: int) -> socket.socket:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
-            try:
-                sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-                self.timestamp_nanosecond = True
-            except OSError:
-                self.timestamp_nanosecond = False
-            sock.bind((self.group, self.port))
-            request = socket.inet_aton(self.group) + struct.pack("@I", socket.INADDR_ANY)
+            sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            sock.bind((group, port))
+            request = socket.inet_aton(group) + struct.pack("@I", socket.INADDR_ANY)
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, request)
             return sock
         except OSError as error:
             sock.close()
             raise can.CanInitializationError(
-                f"could not open loopback multicast {self.group}:{self.port}: {error}"
+                f"could not open loopback multicast {group}:{port}: {error}"
             ) from error
 
 
-class LoopbackUdpMulticastBus(UdpMulticastBus):
+def kernel_filter(filters: Sequence[CanFilter]) -> bytes | None:
+    """A classic BPF socket filter passing the datagrams whose frame ID matches a filter's
+    ``can_id`` under its ``can_mask``, as packed by python-can; datagrams laid out otherwise
+    pass too (python-can's software filter decides). None when no program can express it."""
+    program: list[tuple] = [(_LD_LEN, 0, 0, 0)]
+    program.append((_JGE, 0, _ACCEPT, _UDP_HEADER + _MIN_DATAGRAM))
+    for offset, expected in _PREFIX_CHECKS:
+        load = {4: _LD_W, 1: _LD_B}[len(expected)]
+        program.append((load, 0, 0, _UDP_HEADER + offset))
+        program.append((_JEQ, 0, _ACCEPT, int.from_bytes(expected, "big")))
+    program += [
+        (_LD_B, 0, 0, _UDP_HEADER + _ID_TYPE),
+        (_JGE, 0, "id", 0x80),  # positive fixint: the type byte is the ID
+        (_JEQ, "uint8", 0, _UINT8),
+        (_JEQ, "uint16", _ACCEPT, _UINT16),  # wider IDs: left to the software filter
+        ("uint8", _LD_B, 0, 0, _UDP_HEADER + _ID_TYPE + 1),
+        (_JA, 0, 0, "id"),
+        ("uint16", _LD_H, 0, 0, _UDP_HEADER + _ID_TYPE + 1),
+        ("id", _TAX, 0, 0, 0),
+    ]
+    for f in filters:
+        mask = f["can_mask"]
+        program += [(_TXA, 0, 0, 0), (_AND, 0, 0, mask), (_JEQ, _ACCEPT, 0, f["can_id"] & mask)]
+    program += [(_DROP, _RET, 0, 0, 0), (_ACCEPT, _RET, 0, 0, 0xFFFFFFFF)]
+    return _assemble(program)
+
+
+def _assemble(program: list[tuple]) -> bytes | None:
+    """Instructions ``([label,] code, jt, jf, k)`` to ``struct sock_filter`` bytes; jump targets
+    are 0 (the next instruction) or a label; None when a jump is too long for the format."""
+    labels = {ins[0]: i for i, ins in enumerate(program) if isinstance(ins[0], str)}
+    out = []
+    for i, ins in enumerate(program):
+        code, jt, jf, k = ins[1:] if isinstance(ins[0], str) else ins
+        jt, jf = (labels[j] - i - 1 if isinstance(j, str) else j for j in (jt, jf))
+        if code == _JA:
+            k, jt = labels[k] - i - 1, 0
+        if not (0 <= jt <= 255 and 0 <= jf <= 255):
+            return None
+        out.append(struct.pack("HBBI", code, jt, jf, k))
+    return b"".join(out)
+
+
+class LoopbackUdpMulticastBus(can.BusABC):
     """A ``udp_multicast`` bus whose traffic stays on the local host (see module docstring)."""
 
     def __init__(self, channel: str, port: int, **kwargs) -> None:
@@ -71,22 +141,95 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
             raise can.CanInitializationError(
                 f"group {channel} is not an administratively scoped IPv4 group (239.x.y.z)"
             )
-        can.BusABC.__init__(self, channel, **kwargs)
-        self._multicast = _LoopbackMulticastSocket(channel, port, 0)
+        self._socket = _LoopbackSocket.open(channel, port)
+        self._destination = (channel, port)
+        self._send_timeout: float | None = None
+        self._token = f"udp-{os.urandom(6).hex()}"
         self._can_protocol = can.CanProtocol.CAN_20
         self.channel_info = f"udp loopback multicast {channel}:{port}"
-        self._token = f"udp-{os.urandom(6).hex()}"
+        super().__init__(channel, **kwargs)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        msg.channel = self._token
-        super().send(msg, timeout)
+        if msg.is_fd:
+            raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
+        datagram = msgpack.packb(
+            {  # python-can's layout (pack_message), with this bus's token as the channel
+                "timestamp": msg.timestamp,
+                "arbitration_id": msg.arbitration_id,
+                "is_extended_id": msg.is_extended_id,
+                "is_remote_frame": msg.is_remote_frame,
+                "is_error_frame": msg.is_error_frame,
+                "channel": self._token,
+                "dlc": msg.dlc,
+                "data": msg.data,
+                "is_fd": msg.is_fd,
+                "bitrate_switch": msg.bitrate_switch,
+                "error_state_indicator": msg.error_state_indicator,
+            },
+            use_bin_type=True,
+        )
+        if timeout != self._send_timeout:
+            self._send_timeout = timeout
+            self._socket.settimeout(timeout)
+        try:
+            if self._socket.sendto(datagram, self._destination) < len(datagram):
+                raise TimeoutError
+        except TimeoutError:
+            raise can.CanTimeoutError from None
+        except OSError as error:
+            raise can.CanOperationError("failed to send via socket") from error
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        msg, filtered = super()._recv_internal(timeout)
-        if msg is not None and msg.channel == self._token:
-            return None, False  # our own frame, looped back by the kernel
-        return msg, filtered
+        sock = self._socket
+        try:
+            try:
+                datagram, ancillary, _, _ = sock.recvmsg(
+                    MAX_DATAGRAM, _ANCILLARY_SIZE, socket.MSG_DONTWAIT
+                )
+            except BlockingIOError:
+                if not select.select((sock,), (), (), timeout)[0]:
+                    return None, False
+                datagram, ancillary, _, _ = sock.recvmsg(MAX_DATAGRAM, _ANCILLARY_SIZE)
+        except OSError as error:
+            raise can.CanOperationError(f"failed to receive from the socket: {error}") from error
+        try:
+            fields = msgpack.unpackb(datagram, raw=False)
+            if fields.get("channel") == self._token or fields.get("is_fd"):
+                return None, False  # our own frame (looped back by the kernel), or CAN FD
+            fields["timestamp"] = _timestamp(ancillary)
+            return can.Message(check=True, **fields), False
+        except Exception as exception:
+            raise can.CanOperationError("could not unpack received message") from exception
+
+    def _apply_filters(self, filters: CanFilters | None) -> None:
+        program = kernel_filter(filters) if filters else None
+        if program is None:
+            try:
+                self._socket.setsockopt(socket.SOL_SOCKET, SO_DETACH_FILTER, 0)
+            except OSError as error:
+                if error.errno != errno.ENOENT:  # ENOENT: no filter was attached
+                    raise
+            return
+        code = ctypes.create_string_buffer(program)  # the kernel copies it while attaching
+        fprog = struct.pack("@HP", len(program) // 8, ctypes.addressof(code))
+        self._socket.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER, fprog)
+
+    def fileno(self) -> int:
+        return self._socket.fileno()
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._socket.close()
 
     @property
     def socket(self) -> socket.socket:
-        return self._multicast._socket
+        return self._socket
+
+
+def _timestamp(ancillary: list[tuple[int, int, bytes]]) -> float:
+    """Receive time: the kernel's SO_TIMESTAMPNS stamp when present, else now."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+            seconds, nanoseconds = _TIMESPEC.unpack(data)
+            return seconds + nanoseconds * 1e-9
+    return time.time()

@@ -94,3 +94,55 @@ def test_udp_bus_does_not_hear_itself():
         a.send(can.Message(arbitration_id=0x80, data=bytes(8), is_extended_id=False))
         assert b.recv(1.0).arbitration_id == 0x80
         assert a.recv(0.2) is None
+
+
+def _queued(sock: socket.socket) -> list[bytes]:
+    """Datagrams waiting in a socket's receive queue (read without blocking)."""
+    out = []
+    while True:
+        try:
+            out.append(sock.recv(4096, socket.MSG_DONTWAIT))
+        except BlockingIOError:
+            return out
+
+
+def test_udp_filters_drop_other_ids_in_the_kernel():
+    spec = unique_udp_spec(random.Random(9))
+    ids = (0x7, 0x90, 0x110, 0x100, 0x1FFFFFFF, 0x110)  # 1-, 2- and 3-byte msgpack IDs, extended
+    with open_bus(spec) as a, open_bus(spec) as b, open_bus(spec) as c:
+        b.set_filters([{"can_id": i, "can_mask": 0x1FFFFFFF} for i in (0x7, 0x90, 0x110)])
+        for frame_id in ids:
+            a.send(
+                can.Message(arbitration_id=frame_id, data=bytes(8), is_extended_id=frame_id > 0x7FF)
+            )
+        heard = [c.recv(1.0).arbitration_id for _ in ids]
+        assert heard == list(ids)  # a bus without filters hears everything
+        queued = _queued(b.socket)  # the kernel kept only the filter's IDs; the wider 32-bit
+        assert len(queued) == 5  # msgpack ID is left to the software filter, which drops it
+        b.set_filters(
+            [{"can_id": 0x7, "can_mask": 0x1FFFFFFF}, {"can_id": 0x110, "can_mask": 0x7FF}]
+        )
+        for frame_id in ids:
+            a.send(
+                can.Message(arbitration_id=frame_id, data=bytes(8), is_extended_id=frame_id > 0x7FF)
+            )
+        got = []
+        while (msg := b.recv(0.2)) is not None:
+            got.append(msg.arbitration_id)
+        assert got == [0x7, 0x110, 0x110]
+        b.set_filters(None)  # detached: everything again
+        a.send(can.Message(arbitration_id=0x300, data=bytes(8), is_extended_id=False))
+        assert b.recv(1.0).arbitration_id == 0x300
+
+
+def test_udp_kernel_filter_too_long_falls_back_to_software():
+    from protocol.udp_loopback import kernel_filter
+
+    assert kernel_filter([{"can_id": i, "can_mask": 0x7FF} for i in range(3)]) is not None
+    assert kernel_filter([{"can_id": i, "can_mask": 0x7FF} for i in range(200)]) is None
+    spec = unique_udp_spec(random.Random(13))
+    with open_bus(spec) as a, open_bus(spec) as b:
+        b.set_filters([{"can_id": i, "can_mask": 0x7FF} for i in range(1, 200)])
+        a.send(can.Message(arbitration_id=0x0, data=bytes(8), is_extended_id=False))
+        a.send(can.Message(arbitration_id=0x50, data=bytes(8), is_extended_id=False))
+        assert b.recv(1.0).arbitration_id == 0x50

@@ -1,6 +1,7 @@
 """Node drivers: the same sans-IO nodes in one process and over a bus, lockstep and real time."""
 
 import threading
+import time
 
 import can
 
@@ -113,3 +114,19 @@ def test_realtime_paces_by_the_clock():
     stats = run_realtime(pinger, FakeBus(), 0.01, clock=lambda: now[0])
     assert stats.periods == 10 and stats.overruns == 0
     assert max(stats.jitter_s) < 1e-9
+
+
+def test_a_node_naming_its_ids_hears_only_those():
+    class Listener(Echo):
+        frame_ids = (0x100,)
+
+    with open_bus("virtual:node_ids") as bus_a, open_bus("virtual:node_ids") as bus_b:
+        for frame_id in (0x300, 0x100, 0x110):
+            bus_b.send(can.Message(arbitration_id=frame_id, data=bytes(8), is_extended_id=False))
+        listener = Listener()
+        stop = threading.Event()
+        t = threading.Thread(target=lambda: (time.sleep(0.3), stop.set()))
+        t.start()
+        stats = run_lockstep(listener, bus_a, guard_s=0.05, should_stop=stop.is_set)
+        t.join()
+        assert listener.seen == [0] and stats.received == 1
