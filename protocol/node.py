@@ -37,6 +37,7 @@ import can
 
 SendFn = Callable[[int, bytes | bytearray], None]
 ID_MASK = 0x1FFFFFFF  # every bit of a frame ID (standard or extended)
+Received = tuple[int, bytes] | can.Message  # a frame as a bus's receiver gives it
 
 
 class Node(Protocol):
@@ -78,11 +79,22 @@ def _unusable(msg: can.Message) -> str | None:
 
 
 def bus_sender(bus: can.BusABC, stats: DriverStats) -> SendFn:
+    """``send`` for a node on this bus: through ``bus.send_frame`` where the bus has it (the
+    loopback bus, :mod:`protocol.udp_loopback`), else one ``can.Message`` per frame."""
+    send_frame = getattr(bus, "send_frame", None) or _message_sender(bus)
+
     def send(frame_id: int, data: bytes | bytearray) -> None:
-        bus.send(can.Message(arbitration_id=frame_id, data=bytes(data), is_extended_id=False))
+        send_frame(frame_id, data)
         stats.sent += 1
 
     return send
+
+
+def _message_sender(bus: can.BusABC) -> SendFn:
+    def send_frame(frame_id: int, data: bytes | bytearray) -> None:
+        bus.send(can.Message(arbitration_id=frame_id, data=bytes(data), is_extended_id=False))
+
+    return send_frame
 
 
 def listen_for(node: Node, bus: can.BusABC) -> None:
@@ -92,13 +104,24 @@ def listen_for(node: Node, bus: can.BusABC) -> None:
         bus.set_filters([{"can_id": i, "can_mask": ID_MASK} for i in frame_ids])
 
 
-def _deliver(node: Node, msg: can.Message, send: SendFn, stats: DriverStats) -> None:
-    reason = _unusable(msg)
-    if reason is not None:
-        stats.ignore(reason)
-        return
+def bus_receiver(bus: can.BusABC) -> Callable[[float | None], Received]:
+    """``bus.recv_frame`` where the bus has it (classical standard data frames come as
+    ``(frame_id, data)``, :mod:`protocol.udp_loopback`), else ``bus.recv``."""
+    return getattr(bus, "recv_frame", bus.recv)
+
+
+def _deliver(node: Node, got: Received, send: SendFn, stats: DriverStats) -> None:
+    """Hand a frame to the node, or count why it cannot be (``got`` is not None)."""
+    if type(got) is tuple:
+        frame_id, data = got
+    else:
+        reason = _unusable(got)
+        if reason is not None:
+            stats.ignore(reason)
+            return
+        frame_id, data = got.arbitration_id, got.data
     stats.received += 1
-    node.on_frame(msg.arbitration_id, msg.data, send)
+    node.on_frame(frame_id, data, send)
 
 
 def run_lockstep(
@@ -111,15 +134,16 @@ def run_lockstep(
     """Drive a node by the frames it hears; ``on_timeout`` after ``guard_s`` of silence."""
     stats = DriverStats()
     send = bus_sender(bus, stats)
+    receive = bus_receiver(bus)
     listen_for(node, bus)
     node.start(send)
     while not node.finished and not should_stop():
-        msg = bus.recv(getattr(node, "timeout_s", None) or guard_s)
-        if msg is None:
+        got = receive(getattr(node, "timeout_s", None) or guard_s)
+        if got is None:
             stats.timeouts += 1
             node.on_timeout(send)
         else:
-            _deliver(node, msg, send, stats)
+            _deliver(node, got, send, stats)
     return stats
 
 
@@ -139,6 +163,7 @@ def run_realtime(
     """
     stats = DriverStats()
     send = bus_sender(bus, stats)
+    receive = bus_receiver(bus)
     listen_for(node, bus)
     node.start(send)
     start = clock()
@@ -147,9 +172,9 @@ def run_realtime(
         due = start + k * period_s
         now = clock()
         if now < due:
-            msg = bus.recv(due - now)
-            if msg is not None:
-                _deliver(node, msg, send, stats)
+            got = receive(due - now)
+            if got is not None:
+                _deliver(node, got, send, stats)
             continue
         lateness = now - due
         stats.jitter_s.append(lateness)

@@ -14,7 +14,6 @@ interoperates with plain ``udp_multicast`` peers on the same group and port) but
   (classic BPF, :func:`kernel_filter`) that drops datagrams whose ID matches no filter before
   they are queued, so a node is not woken for frames it does not want (python-can's software
   filter still checks every frame that passes);
-- reads a datagram that is already waiting without a ``select`` call first.
 
 Only IPv4 administratively scoped groups (239.0.0.0/8) are accepted.
 """
@@ -143,31 +142,54 @@ class LoopbackUdpMulticastBus(can.BusABC):
             )
         self._socket = _LoopbackSocket.open(channel, port)
         self._destination = (channel, port)
+        self._poll = select.epoll()
+        self._poll.register(self._socket, select.EPOLLIN)
         self._send_timeout: float | None = None
+        self._accepted: dict[int, bool] = {}  # standard frame ID -> passes the filters
         self._token = f"udp-{os.urandom(6).hex()}"
         self._can_protocol = can.CanProtocol.CAN_20
         self.channel_info = f"udp loopback multicast {channel}:{port}"
         super().__init__(channel, **kwargs)
 
+    # -- sending --------------------------------------------------------------------------------
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if msg.is_fd:
             raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
-        datagram = msgpack.packb(
-            {  # python-can's layout (pack_message), with this bus's token as the channel
-                "timestamp": msg.timestamp,
-                "arbitration_id": msg.arbitration_id,
-                "is_extended_id": msg.is_extended_id,
-                "is_remote_frame": msg.is_remote_frame,
-                "is_error_frame": msg.is_error_frame,
-                "channel": self._token,
-                "dlc": msg.dlc,
-                "data": msg.data,
-                "is_fd": msg.is_fd,
-                "bitrate_switch": msg.bitrate_switch,
-                "error_state_indicator": msg.error_state_indicator,
-            },
-            use_bin_type=True,
-        )
+        fields = {  # python-can's layout (pack_message), with this bus's token as the channel
+            "timestamp": msg.timestamp,
+            "arbitration_id": msg.arbitration_id,
+            "is_extended_id": msg.is_extended_id,
+            "is_remote_frame": msg.is_remote_frame,
+            "is_error_frame": msg.is_error_frame,
+            "channel": self._token,
+            "dlc": msg.dlc,
+            "data": msg.data,
+            "is_fd": msg.is_fd,
+            "bitrate_switch": msg.bitrate_switch,
+            "error_state_indicator": msg.error_state_indicator,
+        }
+        self._sendto(msgpack.packb(fields, use_bin_type=True), timeout)
+
+    def send_frame(self, frame_id: int, data: bytes | bytearray | memoryview) -> None:
+        """Send a classical data frame with a standard ID: the datagram :meth:`send` sends for
+        ``can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)``, made
+        without the message object (the node drivers' path, :mod:`protocol.node`)."""
+        fields = {
+            "timestamp": 0.0,
+            "arbitration_id": frame_id,
+            "is_extended_id": False,
+            "is_remote_frame": False,
+            "is_error_frame": False,
+            "channel": self._token,
+            "dlc": len(data),
+            "data": data,
+            "is_fd": False,
+            "bitrate_switch": False,
+            "error_state_indicator": False,
+        }
+        self._sendto(msgpack.packb(fields, use_bin_type=True), None)
+
+    def _sendto(self, datagram: bytes, timeout: float | None) -> None:
         if timeout != self._send_timeout:
             self._send_timeout = timeout
             self._socket.settimeout(timeout)
@@ -179,29 +201,79 @@ class LoopbackUdpMulticastBus(can.BusABC):
         except OSError as error:
             raise can.CanOperationError("failed to send via socket") from error
 
+    # -- receiving ------------------------------------------------------------------------------
+    def recv_frame(self, timeout: float | None) -> tuple[int, bytes] | can.Message | None:
+        """The next frame heard that passes the filters, or None after ``timeout`` seconds (None:
+        wait for ever): a classical data frame with a standard ID as ``(frame_id, data)``, any
+        other as the ``can.Message`` :meth:`recv` gives. Lighter than :meth:`recv` (no message
+        object, no kernel timestamp): the node drivers' path, :mod:`protocol.node`."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self._wait(timeout):
+            fields = self._fields(self._read(MAX_DATAGRAM)[0])
+            if fields is not None:
+                frame = _classical_standard(fields)
+                if frame is None:
+                    msg = self._message(fields, time.time())
+                    if self._matches_filters(msg):
+                        return msg
+                elif self._accepts(frame[0]):
+                    return frame
+            if deadline is not None:
+                timeout = max(0.0, deadline - time.monotonic())
+        return None
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        sock = self._socket
+        if not self._wait(timeout):
+            return None, False
+        datagram, ancillary = self._read(MAX_DATAGRAM, _ANCILLARY_SIZE)
+        fields = self._fields(datagram)
+        if fields is None:
+            return None, False
+        return self._message(fields, _timestamp(ancillary)), False
+
+    def _wait(self, timeout: float | None) -> bool:
+        """Wait until a datagram can be read (False: ``timeout`` seconds passed first)."""
         try:
-            try:
-                datagram, ancillary, _, _ = sock.recvmsg(
-                    MAX_DATAGRAM, _ANCILLARY_SIZE, socket.MSG_DONTWAIT
-                )
-            except BlockingIOError:
-                if not select.select((sock,), (), (), timeout)[0]:
-                    return None, False
-                datagram, ancillary, _, _ = sock.recvmsg(MAX_DATAGRAM, _ANCILLARY_SIZE)
+            return bool(self._poll.poll(timeout))
+        except OSError as error:
+            raise can.CanOperationError(f"failed to wait for the socket: {error}") from error
+
+    def _read(self, size: int, ancillary_size: int = 0) -> tuple[bytes, list]:
+        try:
+            datagram, ancillary, _, _ = self._socket.recvmsg(size, ancillary_size)
         except OSError as error:
             raise can.CanOperationError(f"failed to receive from the socket: {error}") from error
+        return datagram, ancillary
+
+    def _fields(self, datagram: bytes) -> dict | None:
+        """A datagram's message fields; None for our own frames (looped back by the kernel)
+        and CAN FD frames (this bus is CAN 2.0)."""
         try:
             fields = msgpack.unpackb(datagram, raw=False)
             if fields.get("channel") == self._token or fields.get("is_fd"):
-                return None, False  # our own frame (looped back by the kernel), or CAN FD
-            fields["timestamp"] = _timestamp(ancillary)
-            return can.Message(check=True, **fields), False
+                return None
+            return fields
         except Exception as exception:
             raise can.CanOperationError("could not unpack received message") from exception
 
+    @staticmethod
+    def _message(fields: dict, timestamp: float) -> can.Message:
+        fields["timestamp"] = timestamp
+        try:
+            return can.Message(check=True, **fields)
+        except Exception as exception:
+            raise can.CanOperationError("could not unpack received message") from exception
+
+    def _accepts(self, frame_id: int) -> bool:
+        """A classical data frame with this standard ID passes the filters (cached per ID)."""
+        accepted = self._accepted.get(frame_id)
+        if accepted is None:
+            probe = can.Message(arbitration_id=frame_id, is_extended_id=False)
+            accepted = self._accepted[frame_id] = self._matches_filters(probe)
+        return accepted
+
     def _apply_filters(self, filters: CanFilters | None) -> None:
+        self._accepted = {}
         program = kernel_filter(filters) if filters else None
         if program is None:
             try:
@@ -219,11 +291,29 @@ class LoopbackUdpMulticastBus(can.BusABC):
 
     def shutdown(self) -> None:
         super().shutdown()
+        self._poll.close()
         self._socket.close()
 
     @property
     def socket(self) -> socket.socket:
         return self._socket
+
+
+def _classical_standard(fields: dict) -> tuple[int, bytes] | None:
+    """``(frame_id, data)`` of a valid classical data frame with a standard ID, else None."""
+    frame_id, data = fields.get("arbitration_id"), fields.get("data")
+    if (
+        fields.get("is_extended_id")
+        or fields.get("is_remote_frame")
+        or fields.get("is_error_frame")
+        or type(frame_id) is not int
+        or not 0 <= frame_id <= 0x7FF
+        or type(data) is not bytes
+        or len(data) > 8
+        or fields.get("dlc", len(data)) != len(data)
+    ):
+        return None
+    return frame_id, data
 
 
 def _timestamp(ancillary: list[tuple[int, int, bytes]]) -> float:

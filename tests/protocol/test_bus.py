@@ -146,3 +146,23 @@ def test_udp_kernel_filter_too_long_falls_back_to_software():
         a.send(can.Message(arbitration_id=0x0, data=bytes(8), is_extended_id=False))
         a.send(can.Message(arbitration_id=0x50, data=bytes(8), is_extended_id=False))
         assert b.recv(1.0).arbitration_id == 0x50
+
+
+def test_udp_frame_path_sends_the_message_datagram_and_reads_frames():
+    spec = unique_udp_spec(random.Random(17))
+    with open_bus(spec) as a, open_bus(spec) as b:
+        payload = bytearray(range(8))
+        a.send(can.Message(arbitration_id=0x110, data=payload, is_extended_id=False))
+        a.send_frame(0x110, memoryview(payload))
+        first, second = _queued(b.socket)
+        assert first == second  # the same datagram as python-can's layout, with the token
+        a.send_frame(0x80, payload[:3])
+        a.send(can.Message(arbitration_id=0x1FFFFFFF, data=bytes(8), is_extended_id=True))
+        a.send(can.Message(arbitration_id=0x7, data=bytes(8), is_extended_id=False, dlc=8))
+        assert b.recv_frame(1.0) == (0x80, bytes(range(3)))
+        extended = b.recv_frame(1.0)  # any other frame comes as python-can's message
+        assert isinstance(extended, can.Message) and extended.arbitration_id == 0x1FFFFFFF
+        b.set_filters([{"can_id": 0x7, "can_mask": 0x7FF}])
+        a.send_frame(0x110, payload)
+        assert b.recv_frame(1.0) == (0x7, bytes(8))
+        assert b.recv_frame(0.1) is None and a.recv_frame(0.1) is None  # filtered; own frames
