@@ -188,10 +188,12 @@ def run_realtime(
 
 
 class InProcessBus:
-    """Several nodes in one process with no bus: a FIFO of frames delivered to every other node.
+    """Several nodes in one process with no bus: a FIFO of frames delivered to every other node
+    (that handles the frame's ID, when it names its ``frame_ids``).
 
-    Deterministic by construction (frames are delivered in the order they were sent), and the
-    frames pass through the same codec as on a bus. ``tap`` sees every frame (the recorder).
+    Deterministic by construction (frames are delivered in the order they were sent, to the nodes
+    in their order), and the frames pass through the same codec as on a bus. ``tap`` sees every
+    frame (the recorder).
     """
 
     def __init__(self, nodes: Sequence[Node], tap: Callable[[int, bytes], None] | None = None):
@@ -199,6 +201,7 @@ class InProcessBus:
         self.tap = tap
         self._queue: deque[tuple[int, int, bytes]] = deque()
         self._senders = [self._sender(i) for i in range(len(self.nodes))]
+        self._routes: dict[tuple[int, int], tuple[tuple[Callable, SendFn], ...]] = {}
         self.frames = 0
 
     def _sender(self, index: int) -> SendFn:
@@ -206,6 +209,16 @@ class InProcessBus:
             self._queue.append((index, frame_id, bytes(data)))
 
         return send
+
+    def _route(self, origin: int, frame_id: int) -> tuple[tuple[Callable, SendFn], ...]:
+        """(on_frame, send) of the nodes that hear a frame of this ID from node ``origin``."""
+        route = tuple(
+            (node.on_frame, send)
+            for i, (node, send) in enumerate(zip(self.nodes, self._senders, strict=True))
+            if i != origin and frame_id in getattr(node, "frame_ids", (frame_id,))
+        )
+        self._routes[origin, frame_id] = route
+        return route
 
     def run(
         self,
@@ -216,12 +229,14 @@ class InProcessBus:
         for node, send in zip(self.nodes, self._senders, strict=True):
             node.start(send)
         done = done or (lambda: all(n.finished for n in self.nodes))
-        queue, nodes, senders, tap = self._queue, self.nodes, self._senders, self.tap
+        queue, routes, tap = self._queue, self._routes, self.tap
         while queue and not done() and not should_stop():
             origin, frame_id, data = queue.popleft()
             self.frames += 1
             if tap is not None:
                 tap(frame_id, data)
-            for i, node in enumerate(nodes):
-                if i != origin:
-                    node.on_frame(frame_id, data, senders[i])
+            route = routes.get((origin, frame_id))
+            if route is None:
+                route = self._route(origin, frame_id)
+            for on_frame, send in route:
+                on_frame(frame_id, data, send)

@@ -130,3 +130,12 @@ def test_a_node_naming_its_ids_hears_only_those():
         stats = run_lockstep(listener, bus_a, guard_s=0.05, should_stop=stop.is_set)
         t.join()
         assert listener.seen == [0] and stats.received == 1
+
+
+def test_inprocess_bus_delivers_only_the_ids_a_node_names():
+    class Listener(Echo):
+        frame_ids = (0x200,)
+
+    pinger, listener = Pinger(3), Listener()
+    InProcessBus([pinger, Echo(), listener]).run()
+    assert pinger.log == [0, 1, 2] and listener.seen == []  # 0x100 and 0x110 are not its IDs
