@@ -17,15 +17,45 @@ end, computed with the parameters of the previous step. Explicit Euler (error at
 diverges with the document's sec. 4.2 gains at 100 Hz (Gamma_Theta2 f2^2 dt is about 50);
 the semi-implicit form is stable there, as the continuous laws are.
 
-Robustness (each switchable): Lambda-hat floor (projection), dead zone on |e2| sized from the
-rate noise, and no adaptation when the caller says so (limiter owns the command, V saturates).
+With p12 > 0 the laws are driven by (P e)_2 / p22 = e2 + (p12 / p22) e1 (a full Lyapunov P of
+A_m; the document's diagonal P sees parameter errors only through e2, blind in steady state).
+
+With pump_scaling_on the pump's effectiveness scales the whole fuel path. The commissioned
+fuel term is Lambda_c g(dN) dV with g(dN) = 1 + r1 dN + r2 dN^2, r = Theta_c / Lambda_c; a pump
+of another effectiveness delivers what the commissioned one would at Lambda-hat / Lambda_c
+times the absolute voltage, so the fuel terms of eq. 4.7 become g(dN) (Lambda-hat (u + V0) -
+Lambda_c V0): Lambda-hat u + Theta_f-hat f with Theta_f-hat = Lambda-hat r, plus the bias
+g(dN) (Lambda-hat - Lambda_c) V0 that moves the trim voltage with the pump. One parameter for
+what a worn or failed pump changes, with the regressor g(dN) (u + V0), rich in steady state too;
+Theta_f-hat is not adapted on its own then.
+
+Robustness (each switchable): Lambda-hat floor (projection), dead zone on the driving error
+sized from the rate noise, and no adaptation when the caller says so (limiter owns the command,
+V saturates).
 """
 
 from __future__ import annotations
 
+from array import array
+
 from ecu.fixedpoint import acc_q40, mul_q24, sat32, sub_sat
 from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
+
+
+def pump_bias_q16(th: array, p: FirmwareParams) -> int:
+    """d0 = (Lambda-hat - Lambda_c) (V0 - V_d) in %N/s^2 (Q15.16); 0 without pump scaling. The fuel
+    path's bias is g(dN) d0, with g(dN) = 1 + r1 dN + r2 dN^2 its commissioned shape."""
+    if not p.pump_scaling_on:
+        return 0
+    return sat32(((th[LAM] * p.pump_v0_q24) >> 32) - p.lam_comm_v0_q16)
+
+
+def fuel_shape_q24(p: FirmwareParams, n_q24: int, nn_q16: int) -> int:
+    """g(dN) = 1 + r1 dN + r2 dN^2 (Q7.24) from dN (Q7.24) and dN^2 (Q15.16)."""
+    return sat32(
+        (1 << 24) + ((p.th_per_lam1_q28 * n_q24) >> 28) + ((p.th_per_lam2_q28 * nn_q16) >> 20)
+    )
 
 
 def estimator_step(
@@ -38,6 +68,7 @@ def estimator_step(
     f1 = mul_q24(u, n_mid)  # f1 = dN dV, mid interval (Q7.24)
     nn_q16 = ((n0 * n0) >> 33) + ((n1 * n1) >> 33)  # (dN0^2 + dN1^2) / 2 (Q15.16)
     f2_q16 = sat32((u * nn_q16) >> 24)  # f2 = dN^2 dV, mid interval (Q15.16)
+    g = fuel_shape_q24(p, n_mid, nn_q16)
     # eq. 4.7 row 2 forcing: (A_p-hat - A_m) x + B_p Lambda-hat u + Theta_f-hat f, in %N/s^2;
     # with a fast A_m it exceeds the Q7.24 range in large transients, so it is Q15.16
     c2_q16 = sat32(
@@ -46,6 +77,7 @@ def estimator_step(
         + ((th[LAM] * u) >> 32)
         + ((th[TH1] * f1) >> 32)
         + ((th[TH2] * f2_q16) >> 24)
+        + ((pump_bias_q16(th, p) * g) >> 24)
     )
     # x-hat[k+1] = M x-hat[k] + h c2 (Tustin of x-hat' = A_m x-hat + [0, c2])
     xh1 = s.xh1_q24
@@ -60,14 +92,26 @@ def estimator_step(
     s.e2_q24 = e2
     if not adapt:
         return
-    if p.dead_zone_on and -p.dead_zone_q24 < e2 < p.dead_zone_q24:
+    # (P e)_2 / p22: the error that drives eq. 4.31
+    e = sat32(e2 + ((p.p12_ratio_q24 * sub_sat(s.xh1_q24, n1)) >> 24))
+    if p.dead_zone_on and -p.dead_zone_q24 < e < p.dead_zone_q24:
         return
-    # eq. 4.31: increments -(Gamma P dt) phi e2 in Q7.40 (Q7.24 x Q3.28 >> 12)
-    acc_q40(th, s.theta_ext, AP21, (-sat32((n_mid * e2) >> 24) * p.g_a1_q28) >> 12)
-    acc_q40(th, s.theta_ext, AP22, (-sat32((v_mid * e2) >> 24) * p.g_a2_q28) >> 12)
-    acc_q40(th, s.theta_ext, LAM, (-sat32((u * e2) >> 24) * p.g_lam_q28) >> 12)
-    acc_q40(th, s.theta_ext, TH1, (-sat32((f1 * e2) >> 24) * p.g_th1_q28) >> 12)
-    acc_q40(th, s.theta_ext, TH2, (-sat32((f2_q16 * e2) >> 16) * p.g_th2_q28) >> 12)
+    # eq. 4.31: increments -(Gamma P dt) phi e in Q7.40: phi e in Q15.16 (it exceeds the Q7.24
+    # range in transients) times Gamma P dt in Q3.28, >> 4
+    acc_q40(th, s.theta_ext, AP21, (-sat32((n_mid * e) >> 32) * p.g_a1_q28) >> 4)
+    acc_q40(th, s.theta_ext, AP22, (-sat32((v_mid * e) >> 32) * p.g_a2_q28) >> 4)
+    if p.pump_scaling_on:
+        phi = sat32((g * (u + p.pump_v0_q24)) >> 24)  # Lambda-hat's regressor g(dN) (u + V0 - V_d)
+        acc_q40(th, s.theta_ext, LAM, (-sat32((phi * e) >> 32) * p.g_lam_q28) >> 4)
+    else:
+        acc_q40(th, s.theta_ext, LAM, (-sat32((u * e) >> 32) * p.g_lam_q28) >> 4)
+        acc_q40(th, s.theta_ext, TH1, (-sat32((f1 * e) >> 32) * p.g_th1_q28) >> 4)
+        acc_q40(th, s.theta_ext, TH2, (-sat32((f2_q16 * e) >> 24) * p.g_th2_q28) >> 4)
     if p.lambda_floor_on and th[LAM] < p.lambda_floor_q24:  # projection onto Lambda >= floor
         th[LAM] = p.lambda_floor_q24
         s.theta_ext[LAM] = 0
+    if p.pump_scaling_on:  # Theta_f-hat = Lambda-hat r
+        th[TH1] = sat32((th[LAM] * p.th_per_lam1_q28) >> 28)
+        th[TH2] = sat32((th[LAM] * p.th_per_lam2_q28) >> 28)
+        s.theta_ext[TH1] = 0
+        s.theta_ext[TH2] = 0

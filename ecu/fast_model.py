@@ -2,6 +2,7 @@
 
     dN'  = v                                                     + L1 (N_meas - N-hat)
     v'   = A21 dN + A22 v + Lambda dV + Th1 dN dV + Th2 dN^2 dV  + L2 (N_meas - N-hat)
+           + g(dN) (Lambda - Lambda_c) V0   (the fuel-path bias, with pump_scaling_on)
 
 with the estimator's current parameters (eq. 3.5 in the form of eq. 4.6), forward Euler.
 While the speed sensor is valid the correction keeps the model on the measurement; when it
@@ -11,6 +12,7 @@ that replaces the sensor.
 
 from __future__ import annotations
 
+from ecu.estimator import fuel_shape_q24, pump_bias_q16
 from ecu.fixedpoint import sat32
 from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
@@ -30,6 +32,7 @@ def observer_step(s: EcuState, p: FirmwareParams, u: int, dn_meas: int, valid: i
         + ((th[LAM] * u) >> 32)
         + ((((th[TH1] * n) >> 24) * u) >> 32)
         + ((((th2_n * n) >> 24) * u) >> 32)
+        + ((pump_bias_q16(th, p) * fuel_shape_q24(p, n, (n * n) >> 32)) >> 24)
     )
     s.obs_n_q24 = sat32(n + ((p.dt_q24 * v) >> 24) + ((p.obs_l1_dt_q24 * innov) >> 24))
     s.obs_v_q24 = sat32(v + ((p.dt_q24 * acc_q16) >> 16) + ((p.obs_l2_dt_q24 * innov) >> 24))

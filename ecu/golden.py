@@ -260,6 +260,23 @@ target = "TURBINE_EFFICIENCY"
 value = 0.95
 """
 
+_OVERSPEED = """
+description = "Open loop, no limit loops, EGT trip raised: 19 V drives the engine over 105 %N"
+duration_s = 10
+[plant]
+model = "aero"
+[controller]
+kind = "open_loop"
+params = { limiters_on = 0, egt_limit_k = 1450, egt_max_k = 1550 }
+[command]
+base = "trim"
+[[command.component]]
+kind = "ramp"
+start_s = 1
+end_s = 6
+value = 7.5
+"""
+
 
 @dataclass(frozen=True)
 class Source:
@@ -280,6 +297,7 @@ SOURCES: dict[str, Source] = {
     "faults": _scenario("faults", _FAULTS, 2500),
     "egt-open": _scenario("egt-open", _EGT_OPEN, 1000),
     "egt-overtemp": _scenario("egt-overtemp", _EGT_OVERTEMP, 1000),
+    "overspeed": _scenario("overspeed", _OVERSPEED, 1000),
     "modes": Source(record_modes, 2400),
 }
 

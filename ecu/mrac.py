@@ -6,17 +6,25 @@ B_p = [0, 1]^T, so B_p^T picks row 2 of the extra errors (eq. 5.15); per step (f
     eps_x[i] = A_p-hat[2][i] - A_m[2][i] + Lambda-hat K_x[i]     K_x[i] -= Gamma_x[i] eps_x[i] dt
     eps_r    = -B_m[2] + Lambda-hat K_r                          K_r    -= Gamma_r eps_r dt
     eps_f[i] = Theta_f-hat[2][i] + Lambda-hat K_f[i]             K_f[i] -= Gamma_f[i] eps_f[i] dt
+    eps_b    = d-hat + Lambda-hat K_b                            K_b    -= Gamma_b eps_b dt
 
-Eq. 5.4, u = K_x x + K_r r + K_f f(x, u) with f = [dN u, dN^2 u], is implicit in u; it is
-solved exactly: u = (K_x x + K_r r) / (1 - K_f1 dN - K_f2 dN^2), the divisor kept above a floor.
+d-hat is the estimator's fuel-path bias d0 = (Lambda-hat - Lambda_c) V0 (pump_scaling_on; else
+0, and K_b stays 0). The plant's bias g(dN) d0 has the shape g(dN) = 1 - K_f1 dN - K_f2 dN^2 of
+its input effectiveness Lambda g(dN), so a constant K_b added to u cancels it: 0 = Lambda K_b
++ d0, the matching condition of eq. 5.14 for one more term.
+
+Eq. 5.4, u = K_x x + K_r r + K_f f(x, u) with f = [dN u, dN^2 u], is implicit in u; it is solved
+exactly: u = (K_x x + K_r r) / (1 - K_f1 dN - K_f2 dN^2), the divisor kept above a floor; then
+the bias gain K_b is added.
 The reference model x_m' = A_m x_m + B_m r is discretised by the trapezoidal rule with r held.
 """
 
 from __future__ import annotations
 
-from ecu.fixedpoint import acc_q40, div_trunc, sat32
+from ecu.estimator import pump_bias_q16
+from ecu.fixedpoint import acc_q40, add_sat, div_trunc, sat32
 from ecu.params import FirmwareParams
-from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, TH1, TH2, EcuState
+from ecu.state import AP21, AP22, KB, KF1, KF2, KR, KX1, KX2, LAM, TH1, TH2, EcuState
 
 
 def mrac_control(s: EcuState, p: FirmwareParams, dn: int, dv: int, r: int) -> int:
@@ -27,11 +35,11 @@ def mrac_control(s: EcuState, p: FirmwareParams, dn: int, dv: int, r: int) -> in
     den = sat32((1 << 24) - ((th[KF1] * dn) >> 24) - ((kf2_dn * dn) >> 24))
     if den < p.u_den_min_q24:
         den = p.u_den_min_q24
-    return div_trunc(num << 24, den)
+    return add_sat(div_trunc(num << 24, den), th[KB])
 
 
 def mrac_gain_update(s: EcuState, p: FirmwareParams) -> None:
-    """Eq. 5.15-5.16 for K_x, K_r, K_f, driven by the current estimates."""
+    """Eq. 5.15-5.16 for K_x, K_r, K_f and K_b, driven by the current estimates."""
     th = s.theta_q24
     ext = s.theta_ext
     lam = th[LAM]
@@ -45,6 +53,8 @@ def mrac_gain_update(s: EcuState, p: FirmwareParams) -> None:
     acc_q40(th, ext, KF1, (-eps * p.g_f1_q28) >> 12)
     eps = sat32(th[TH2] + ((lam * th[KF2]) >> 24))
     acc_q40(th, ext, KF2, (-eps * p.g_f2_q28) >> 12)
+    eps = sat32((pump_bias_q16(th, p) << 8) + ((lam * th[KB]) >> 24))
+    acc_q40(th, ext, KB, (-eps * p.g_b_q28) >> 12)
 
 
 def reference_model_step(s: EcuState, p: FirmwareParams, r: int) -> None:

@@ -54,11 +54,18 @@ class EcuParams:
     # online estimator (eq. 4.7, 4.31); row 1 of A_p and Theta_f is kinematic and not adapted
     am_row2: tuple[float, float] = (-25.0, -10.0)  # identification model A_m row 2
     p22: float = 1.0  # P[1][1]; P[0][0] only weighs the row-1 error, which is not adapted
-    # practical defaults: Lambda-hat (pump health) learns fastest, Theta_f slowest (f2 = dN^2 dV
-    # is nearly collinear with dV under small steps, so a large Gamma_Theta2 steals Lambda's role)
-    gamma_a: tuple[float, float] = (0.5, 0.5)
-    gamma_lambda: float = 1.0
-    gamma_theta: tuple[float, float] = (0.01, 0.001)
+    # P[0][1]: weighs the speed error e1 into the row-2 laws, (P e)_2 = p12 e1 + p22 e2. The
+    # document's diagonal P (p12 = 0) sees a parameter error only through e2 = s/(s^2 - am22 s
+    # - am21) of it, which is blind to steady state; a P solving A_m^T P + P A_m = -Q (Q >= 0)
+    # has 0 <= p12 <= -am22 p22 and gives the laws the steady-state error too
+    p12: float = 5.0
+    # practical defaults: only the pump's effectiveness adapts (Lambda-hat, with Theta_f-hat in
+    # proportion: pump_scaling_on); the engine's dynamics (A_p) stay as commissioned. On the
+    # aero-thermal engine, whose fast second pole the fast model lacks, an adapted A_p drifts
+    # along the directions the steps do not excite and takes Lambda-hat with it
+    gamma_a: tuple[float, float] = (0.0, 0.0)
+    gamma_lambda: float = 0.05  # its regressor is the absolute voltage, about 10 V
+    gamma_theta: tuple[float, float] = (0.01, 0.001)  # used with pump_scaling_on off
     init_ap_row2: tuple[float, float] = AP_ROW2_EQ_3_23
     init_lambda: float = LAMBDA_EQ_3_23
     init_theta_row2: tuple[float, float] = THETA_ROW2_EQ_3_23
@@ -72,6 +79,15 @@ class EcuParams:
     speed_noise_rpm: float = 3.0  # speed sensor noise (1 sigma); sizes the dead zone
     dead_zone_sigmas: float = 3.0
     freeze_on: bool = True  # no adaptation while a limiter owns the command or V saturates
+    # the pump's effectiveness scales the whole fuel path: fuel goes with Lambda-hat times the
+    # absolute pump voltage, so a changed Lambda-hat moves the trim voltage (a bias
+    # (Lambda-hat - lambda_commissioned) (trim_v - pump_dead_v) in eq. 4.7, cancelled by the
+    # MRAC's K_b) and
+    # Theta_f-hat in proportion (not adapted on its own); off: eq. 4.7 as printed
+    pump_scaling_on: bool = True
+    # the pump delivers nothing below this voltage (leakage against its outlet pressure): fuel
+    # goes with Lambda-hat (V - pump_dead_v); our plant's pump: about 1.8 V near trim pressure
+    pump_dead_v: float = 1.8
 
     # indirect MRAC (eq. 5.4, 5.15-5.16, 5.18-5.19)
     ref_wn: float = 5.0
@@ -79,6 +95,7 @@ class EcuParams:
     gamma_x: tuple[float, float] = (0.1, 0.1)
     gamma_r: float = 0.1
     gamma_f: tuple[float, float] = (0.1, 0.1)
+    gamma_b: float = 0.1  # K_b, the bias gain (pump_scaling_on), by the law of eq. 5.16
     init_kx: tuple[float, float] = (-4.809, -1.589)
     init_kr: float = 5.185
     init_kf: tuple[float, float] = (0.03805, 0.00002)
@@ -162,6 +179,8 @@ def _doc_common(**kw: object) -> EcuParams:
         lambda_floor_on=False,
         dead_zone_on=False,
         freeze_on=False,
+        pump_scaling_on=False,
+        p12=0.0,
         limiters_on=False,
         rate_window_s=0.02,
     )
@@ -273,12 +292,18 @@ def validate(p: EcuParams) -> None:
     a21, a22 = p.am_row2
     _check(a21 < 0.0 and a22 < 0.0, "am_row2", p.am_row2, "A_m must be Hurwitz (both < 0)")
     _check(p.p22 > 0.0, "p22", p.p22, "P must be positive definite")
+    _check(
+        0.0 <= p.p12 <= -a22 * p.p22,
+        "p12",
+        p.p12,
+        f"a Lyapunov P of A_m has 0 <= p12 <= -am22 * p22 = {-a22 * p.p22:g}",
+    )
     dt = 1.0 / p.rate_hz
     for name in ("gamma_a", "gamma_theta", "gamma_x", "gamma_f"):
         for g in getattr(p, name):
             _check(g >= 0.0, name, getattr(p, name), "learning rates must be >= 0")
             _check(g * p.p22 * dt < 4.0, name, getattr(p, name), "gain * P * dt must be < 4")
-    for name in ("gamma_lambda", "gamma_r"):
+    for name in ("gamma_lambda", "gamma_r", "gamma_b"):
         g = getattr(p, name)
         _check(g >= 0.0, name, g, "learning rates must be >= 0")
         _check(g * p.p22 * dt < 4.0, name, g, "gain * P * dt must be < 4")
@@ -286,6 +311,7 @@ def validate(p: EcuParams) -> None:
     _check(p.lambda_commissioned > 0.0, "lambda_commissioned", p.lambda_commissioned, "> 0")
     _check(0.0 < p.pump_health_alarm < 1.0, "pump_health_alarm", p.pump_health_alarm, "in (0,1)")
     _check(p.lambda_floor > 0.0, "lambda_floor", p.lambda_floor, "must be > 0")
+    _check(0.0 <= p.pump_dead_v < p.trim_v, "pump_dead_v", p.pump_dead_v, "need 0 <= x < trim_v")
     _check(
         2.0 / p.rate_hz <= p.rate_window_s <= RATE_WINDOW_MAX_S,
         "rate_window_s",
@@ -364,6 +390,8 @@ class FirmwareParams:
         "init_theta_q24",
         "lambda_comm_q24", "health_alarm_pm", "rate_half_window", "rate_den",
         "lambda_floor_on", "lambda_floor_q24", "dead_zone_on", "dead_zone_q24", "freeze_on",
+        "p12_ratio_q24", "pump_scaling_on", "th_per_lam1_q28", "th_per_lam2_q28",
+        "pump_v0_q24", "lam_comm_v0_q16", "g_b_q28",
         "ref_am21_q24", "ref_am22_q24", "ref_bm2_q24",
         "refm11_q24", "refm12_q24", "refm21_q24", "refm22_q24", "refh1_q24", "refh2_q24",
         "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
@@ -416,6 +444,10 @@ def compile_params(p: EcuParams) -> FirmwareParams:
     sigma_n = math.hypot(p.speed_noise_rpm, 1.0 / math.sqrt(12.0)) * pct_per_rpm
     sigma_rate = math.sqrt(2.0) * sigma_n / (2.0 * m * dt)
     g_pdt = p.p22 * dt
+    # K_b matching the initial Lambda-hat: Lambda K_b + (Lambda - Lambda_c) V0 = 0 (eq. 5.14 form)
+    v0_pump = p.trim_v - p.pump_dead_v  # pump voltage at trim above the dead voltage
+    kb0 = v0_pump * (p.lambda_commissioned / p.init_lambda - 1.0) if p.pump_scaling_on else 0.0
+    th_scale = p.init_lambda / p.lambda_commissioned if p.pump_scaling_on else 1.0
     return FirmwareParams(
         rate_hz=hz,
         controller=CONTROLLERS.index(p.controller),
@@ -444,14 +476,15 @@ def compile_params(p: EcuParams) -> FirmwareParams:
                 (p.init_ap_row2[0], "init_ap_row2"),
                 (p.init_ap_row2[1], "init_ap_row2"),
                 (p.init_lambda, "init_lambda"),
-                (p.init_theta_row2[0], "init_theta_row2"),
-                (p.init_theta_row2[1], "init_theta_row2"),
+                (p.init_theta_row2[0] * th_scale, "init_theta_row2"),
+                (p.init_theta_row2[1] * th_scale, "init_theta_row2"),
                 (p.init_kx[0], "init_kx"),
                 (p.init_kx[1], "init_kx"),
                 (p.init_kr, "init_kr"),
                 (p.init_kf[0], "init_kf"),
                 (p.init_kf[1], "init_kf"),
                 (0.0, "pid_ki"),  # PID integrator starts at zero
+                (kb0, "init_lambda"),  # K_b: the bias gain matching init_lambda
             )
         ),
         lambda_comm_q24=_q(p.lambda_commissioned, Q24, "lambda_commissioned"),
@@ -463,6 +496,13 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         dead_zone_on=int(p.dead_zone_on),
         dead_zone_q24=_q(p.dead_zone_sigmas * sigma_rate, Q24, "speed_noise_rpm"),
         freeze_on=int(p.freeze_on),
+        p12_ratio_q24=_q(p.p12 / p.p22, Q24, "p12"),
+        pump_scaling_on=int(p.pump_scaling_on),
+        th_per_lam1_q28=_q(p.init_theta_row2[0] / p.lambda_commissioned, Q28, "init_theta_row2"),
+        th_per_lam2_q28=_q(p.init_theta_row2[1] / p.lambda_commissioned, Q28, "init_theta_row2"),
+        pump_v0_q24=_q(v0_pump, Q24, "pump_dead_v"),
+        lam_comm_v0_q16=_q(p.lambda_commissioned * v0_pump, 16, "lambda_commissioned"),
+        g_b_q28=_q(p.gamma_b * dt, Q28, "gamma_b"),
         ref_am21_q24=_q(ref_a21, Q24, "ref_wn"),
         ref_am22_q24=_q(ref_a22, Q24, "ref_zeta"),
         ref_bm2_q24=_q(p.ref_wn**2, Q24, "ref_wn"),

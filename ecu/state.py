@@ -22,7 +22,8 @@ KR = 7
 KF1 = 8
 KF2 = 9
 PID_I = 10  # PID integrator (V), a slow integrator like the others
-N_THETA = 11
+KB = 11  # MRAC bias gain (V): cancels the fuel-path bias of a changed pump (pump_scaling_on)
+N_THETA = 12
 
 
 class EcuState:

@@ -184,6 +184,25 @@ static int32_t pump_current_checks(ecu_t *e, int32_t pump_ma, int32_t v_q24)
 
 /* ---- ecu/estimator.py (eq. 4.7, 4.31) ------------------------------------------------------ */
 
+/* d0 = (Lambda-hat - Lambda_c) (V0 - V_d), %N/s^2 (Q15.16); 0 without pump scaling */
+static int32_t pump_bias_q16(ecu_t *e)
+{
+    const ecu_params_t *p = e->p;
+    if (!p->pump_scaling_on) {
+        return 0;
+    }
+    return sat32(e, (((int64_t)e->s.theta_q24[ECU_LAM] * p->pump_v0_q24) >> 32) -
+                        p->lam_comm_v0_q16);
+}
+
+/* g(dN) = 1 + r1 dN + r2 dN^2 (Q7.24) from dN (Q7.24) and dN^2 (Q15.16) */
+static int32_t fuel_shape_q24(ecu_t *e, int32_t n_q24, int64_t nn_q16)
+{
+    const ecu_params_t *p = e->p;
+    return sat32(e, ONE_Q24 + (((int64_t)p->th_per_lam1_q28 * n_q24) >> 28) +
+                        ((p->th_per_lam2_q28 * nn_q16) >> 20));
+}
+
 static void estimator_step(ecu_t *e, int32_t n0, int32_t v0, int32_t n1, int32_t v1, int32_t u,
                            int adapt)
 {
@@ -196,14 +215,17 @@ static void estimator_step(ecu_t *e, int32_t n0, int32_t v0, int32_t n1, int32_t
     int32_t f1 = mul_q24(e, u, n_mid);
     int64_t nn_q16 = (((int64_t)n0 * n0) >> 33) + (((int64_t)n1 * n1) >> 33);
     int32_t f2_q16 = sat32(e, (u * nn_q16) >> 24);
+    int32_t g = fuel_shape_q24(e, n_mid, nn_q16);
     int32_t c2_q16 = sat32(e, ((((int64_t)th[ECU_AP21] - p->am21_q24) * n_mid) >> 32) +
                                   ((((int64_t)th[ECU_AP22] - p->am22_q24) * v_mid) >> 32) +
                                   (((int64_t)th[ECU_LAM] * u) >> 32) +
                                   (((int64_t)th[ECU_TH1] * f1) >> 32) +
-                                  (((int64_t)th[ECU_TH2] * f2_q16) >> 24));
+                                  (((int64_t)th[ECU_TH2] * f2_q16) >> 24) +
+                                  (((int64_t)pump_bias_q16(e) * g) >> 24));
     int32_t xh1 = s->xh1_q24;
     int32_t xh2 = s->xh2_q24;
     int32_t e2;
+    int32_t err;
     s->xh1_q24 = sat32(e, (((int64_t)p->idm11_q24 * xh1) >> 24) +
                               (((int64_t)p->idm12_q24 * xh2) >> 24) +
                               (((int64_t)p->idh1_q24 * c2_q16) >> 16));
@@ -215,22 +237,38 @@ static void estimator_step(ecu_t *e, int32_t n0, int32_t v0, int32_t n1, int32_t
     if (!adapt) {
         return;
     }
-    if (p->dead_zone_on && -p->dead_zone_q24 < e2 && e2 < p->dead_zone_q24) {
+    /* (P e)_2 / p22: the error that drives eq. 4.31 */
+    err = sat32(e, (int64_t)e2 + (((int64_t)p->p12_ratio_q24 *
+                                   sat32(e, (int64_t)s->xh1_q24 - n1)) >> 24));
+    if (p->dead_zone_on && -p->dead_zone_q24 < err && err < p->dead_zone_q24) {
         return;
     }
+    /* increments in Q7.40: phi e in Q15.16 times Gamma P dt in Q3.28, >> 4 */
     acc_q40(e, &th[ECU_AP21], &ext[ECU_AP21],
-            (-(int64_t)sat32(e, ((int64_t)n_mid * e2) >> 24) * p->g_a1_q28) >> 12);
+            (-(int64_t)sat32(e, ((int64_t)n_mid * err) >> 32) * p->g_a1_q28) >> 4);
     acc_q40(e, &th[ECU_AP22], &ext[ECU_AP22],
-            (-(int64_t)sat32(e, ((int64_t)v_mid * e2) >> 24) * p->g_a2_q28) >> 12);
-    acc_q40(e, &th[ECU_LAM], &ext[ECU_LAM],
-            (-(int64_t)sat32(e, ((int64_t)u * e2) >> 24) * p->g_lam_q28) >> 12);
-    acc_q40(e, &th[ECU_TH1], &ext[ECU_TH1],
-            (-(int64_t)sat32(e, ((int64_t)f1 * e2) >> 24) * p->g_th1_q28) >> 12);
-    acc_q40(e, &th[ECU_TH2], &ext[ECU_TH2],
-            (-(int64_t)sat32(e, ((int64_t)f2_q16 * e2) >> 16) * p->g_th2_q28) >> 12);
+            (-(int64_t)sat32(e, ((int64_t)v_mid * err) >> 32) * p->g_a2_q28) >> 4);
+    if (p->pump_scaling_on) {
+        int32_t phi = sat32(e, ((int64_t)g * ((int64_t)u + p->pump_v0_q24)) >> 24);
+        acc_q40(e, &th[ECU_LAM], &ext[ECU_LAM],
+                (-(int64_t)sat32(e, ((int64_t)phi * err) >> 32) * p->g_lam_q28) >> 4);
+    } else {
+        acc_q40(e, &th[ECU_LAM], &ext[ECU_LAM],
+                (-(int64_t)sat32(e, ((int64_t)u * err) >> 32) * p->g_lam_q28) >> 4);
+        acc_q40(e, &th[ECU_TH1], &ext[ECU_TH1],
+                (-(int64_t)sat32(e, ((int64_t)f1 * err) >> 32) * p->g_th1_q28) >> 4);
+        acc_q40(e, &th[ECU_TH2], &ext[ECU_TH2],
+                (-(int64_t)sat32(e, ((int64_t)f2_q16 * err) >> 24) * p->g_th2_q28) >> 4);
+    }
     if (p->lambda_floor_on && th[ECU_LAM] < p->lambda_floor_q24) {
         th[ECU_LAM] = p->lambda_floor_q24;
         ext[ECU_LAM] = 0;
+    }
+    if (p->pump_scaling_on) { /* Theta_f-hat = Lambda-hat r */
+        th[ECU_TH1] = sat32(e, ((int64_t)th[ECU_LAM] * p->th_per_lam1_q28) >> 28);
+        th[ECU_TH2] = sat32(e, ((int64_t)th[ECU_LAM] * p->th_per_lam2_q28) >> 28);
+        ext[ECU_TH1] = 0;
+        ext[ECU_TH2] = 0;
     }
 }
 
@@ -248,7 +286,7 @@ static int32_t mrac_control(ecu_t *e, int32_t dn, int32_t dv, int32_t r)
     if (den < e->p->u_den_min_q24) {
         den = e->p->u_den_min_q24;
     }
-    return div_trunc(e, (int64_t)num * ONE_Q24, den);
+    return sat32(e, (int64_t)div_trunc(e, (int64_t)num * ONE_Q24, den) + th[ECU_KB]);
 }
 
 static void mrac_gain_update(ecu_t *e)
@@ -268,6 +306,8 @@ static void mrac_gain_update(ecu_t *e)
     acc_q40(e, &th[ECU_KF1], &ext[ECU_KF1], (-(int64_t)eps * p->g_f1_q28) >> 12);
     eps = sat32(e, (int64_t)th[ECU_TH2] + ((lam * th[ECU_KF2]) >> 24));
     acc_q40(e, &th[ECU_KF2], &ext[ECU_KF2], (-(int64_t)eps * p->g_f2_q28) >> 12);
+    eps = sat32(e, (int64_t)pump_bias_q16(e) * 256 + ((lam * th[ECU_KB]) >> 24));
+    acc_q40(e, &th[ECU_KB], &ext[ECU_KB], (-(int64_t)eps * p->g_b_q28) >> 12);
 }
 
 static void reference_model_step(ecu_t *e, int32_t r)
@@ -402,7 +442,9 @@ static void observer_step(ecu_t *e, int32_t u, int32_t dn_meas, int valid)
                                    (((int64_t)th[ECU_AP22] * v) >> 32) +
                                    (((int64_t)th[ECU_LAM] * u) >> 32) +
                                    mul_wide_shr(((int64_t)th[ECU_TH1] * n) >> 24, u, 32) +
-                                   mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32));
+                                   mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32) +
+                                   (((int64_t)pump_bias_q16(e) *
+                                     fuel_shape_q24(e, n, ((int64_t)n * n) >> 32)) >> 24));
     s->obs_n_q24 = sat32(e, (int64_t)n + (((int64_t)p->dt_q24 * v) >> 24) +
                                 ((p->obs_l1_dt_q24 * innov) >> 24));
     s->obs_v_q24 = sat32(e, (int64_t)v + (((int64_t)p->dt_q24 * acc_q16) >> 16) +

@@ -42,13 +42,13 @@
 extern "C" {
 #endif
 
-#define ECU_N_THETA 11     /* adaptive parameters and slow integrators (ecu/state.py) */
+#define ECU_N_THETA 12     /* adaptive parameters and slow integrators (ecu/state.py) */
 #define ECU_RATE_BUF_LEN 52 /* speed history ring: 0.05 s at 1000 Hz, +2 samples */
 
 /* slots of theta_q24 / theta_ext (ecu/state.py) */
 enum {
     ECU_AP21, ECU_AP22, ECU_LAM, ECU_TH1, ECU_TH2,
-    ECU_KX1, ECU_KX2, ECU_KR, ECU_KF1, ECU_KF2, ECU_PID_I
+    ECU_KX1, ECU_KX2, ECU_KR, ECU_KF1, ECU_KF2, ECU_PID_I, ECU_KB
 };
 
 /* modes (ecu/modes.py) */
@@ -79,7 +79,9 @@ enum {
     X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) X(g_th1_q28) \
     X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
     X(rate_half_window) X(rate_den) X(lambda_floor_on) X(lambda_floor_q24) X(dead_zone_on) \
-    X(dead_zone_q24) X(freeze_on) X(ref_am21_q24) X(ref_am22_q24) X(ref_bm2_q24) \
+    X(dead_zone_q24) X(freeze_on) X(p12_ratio_q24) X(pump_scaling_on) X(th_per_lam1_q28) \
+    X(th_per_lam2_q28) X(pump_v0_q24) X(lam_comm_v0_q16) X(g_b_q28) \
+    X(ref_am21_q24) X(ref_am22_q24) X(ref_bm2_q24) \
     X(refm11_q24) X(refm12_q24) X(refm21_q24) X(refm22_q24) X(refh1_q24) X(refh2_q24) \
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
     X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) X(idle_q24) X(demand_max_q24) \

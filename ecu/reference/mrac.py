@@ -1,4 +1,4 @@
-"""Float64 twin of ecu.mrac: eq. 5.4 (solved for u), eq. 5.15-5.16 (Euler), eq. 5.18-5.19."""
+"""Float64 twin of ecu.mrac: eq. 5.4 and K_b (solved for u), eq. 5.15-5.16 (Euler), 5.18-5.19."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ class FloatMrac:
     kr: float = 0.0
     kf1: float = 0.0
     kf2: float = 0.0
+    kb: float = 0.0
     xm1: float = 0.0
     xm2: float = 0.0
 
@@ -24,6 +25,8 @@ class FloatMrac:
         self.kx1, self.kx2 = p.init_kx
         self.kr = p.init_kr
         self.kf1, self.kf2 = p.init_kf
+        if p.pump_scaling_on:
+            self.kb = (p.trim_v - p.pump_dead_v) * (p.lambda_commissioned / p.init_lambda - 1.0)
         self.dt = 1.0 / p.rate_hz
         self.am21 = -(p.ref_wn**2)
         self.am22 = -2.0 * p.ref_zeta * p.ref_wn
@@ -33,7 +36,7 @@ class FloatMrac:
     def control(self, dn: float, dv: float, r: float) -> float:
         num = self.kx1 * dn + self.kx2 * dv + self.kr * r
         den = max(1.0 - self.kf1 * dn - self.kf2 * dn * dn, self.params.u_den_min)
-        return num / den
+        return num / den + self.kb
 
     def gain_update(self, est: FloatEstimator) -> None:
         p, dt, lam = self.params, self.dt, est.lam
@@ -42,6 +45,7 @@ class FloatMrac:
         self.kr -= p.gamma_r * (-self.bm2 + lam * self.kr) * dt
         self.kf1 -= p.gamma_f[0] * (est.th1 + lam * self.kf1) * dt
         self.kf2 -= p.gamma_f[1] * (est.th2 + lam * self.kf2) * dt
+        self.kb -= p.gamma_b * (est.bias + lam * self.kb) * dt
 
     def reference_step(self, r: float) -> None:
         m, h = self.m, self.h

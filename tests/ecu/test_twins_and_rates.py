@@ -16,7 +16,22 @@ from ecu.pid import pid_control
 from ecu.reference.estimator import FloatEstimator
 from ecu.reference.mrac import FloatMrac
 from ecu.reference.pid import FloatPid
-from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, N_THETA, PID_I, TH1, TH2, EcuState
+from ecu.state import (
+    AP21,
+    AP22,
+    KB,
+    KF1,
+    KF2,
+    KR,
+    KX1,
+    KX2,
+    LAM,
+    N_THETA,
+    PID_I,
+    TH1,
+    TH2,
+    EcuState,
+)
 from plant.fast_model import FastEngine
 
 Q = float(1 << 24)
@@ -75,8 +90,9 @@ def test_lambda_floor_dead_zone_and_freeze() -> None:
     assert list(s.theta_q24) == before
 
 
-def test_mrac_control_gain_update_and_reference_model_match_twins() -> None:
-    p = preset("sec5_2_mrac_fast")
+@pytest.mark.parametrize("name", ["sec5_2_mrac_fast", "default"])  # default: K_b, pump scaling
+def test_mrac_control_gain_update_and_reference_model_match_twins(name: str) -> None:
+    p = preset(name)
     fw, s = fresh_state(p)
     tw = FloatMrac(p)
     est = FloatEstimator(p)
@@ -95,8 +111,10 @@ def test_mrac_control_gain_update_and_reference_model_match_twins() -> None:
         tw.reference_step(r)
         dn, dv = rnd.uniform(-3, 3), rnd.uniform(-5, 5)
         assert abs(mrac_control(s, fw, q24(dn), q24(dv), q24(r)) / Q - tw.control(dn, dv, r)) < 1e-4
-    for i, v in ((KX1, tw.kx1), (KX2, tw.kx2), (KR, tw.kr), (KF1, tw.kf1), (KF2, tw.kf2)):
+    gains = ((KX1, tw.kx1), (KX2, tw.kx2), (KR, tw.kr), (KF1, tw.kf1), (KF2, tw.kf2), (KB, tw.kb))
+    for i, v in gains:
         assert abs(s.theta_q24[i] / Q - v) < 1e-4
+    assert (abs(tw.kb) > 0.1) == p.pump_scaling_on  # the bias gain moved with Lambda-hat
     assert abs(s.xm1_q24 / Q - tw.xm1) < 1e-5
 
 
