@@ -4,9 +4,11 @@ x = [dN, dN'] (deviations from trim, %N and %N/s), u = dV (V), f(x, u) = [dN dV,
 Row 1 of A_p and Theta_f is kinematic (dN/dt = dN') and known, so only row 2 is adapted; with a
 diagonal P the laws of eq. 4.31 for row 2 read, per step of length dt (forward Euler):
 
-    A_p-hat[2][i]  -= Gamma_A[i] P22 x_i     e2 dt
-    Lambda-hat     -= Gamma_L    P22 u       e2 dt
-    Theta_f-hat[2][i] -= Gamma_T[i] P22 f_i  e2 dt
+    A_p-hat[2][i]  -= Gamma_A[i] P22 x_i     e dt
+    Lambda-hat     -= Gamma_L    P22 u       e dt
+    Theta_f-hat[2][i] -= Gamma_T[i] P22 f_i  e dt
+
+with e = e2 for the document's P (see p12 below).
 
 The ECU measures N only: the speed rate is a central difference over +-m samples, so the
 estimator runs m + 1 ticks late on the interval [j, j+1], with x at its ends and the input u[j]
@@ -23,11 +25,12 @@ A_m; the document's diagonal P sees parameter errors only through e2, blind in s
 With pump_scaling_on the pump's effectiveness scales the whole fuel path. The commissioned
 fuel term is Lambda_c g(dN) dV with g(dN) = 1 + r1 dN + r2 dN^2, r = Theta_c / Lambda_c; a pump
 of another effectiveness delivers what the commissioned one would at Lambda-hat / Lambda_c
-times the absolute voltage, so the fuel terms of eq. 4.7 become g(dN) (Lambda-hat (u + V0) -
-Lambda_c V0): Lambda-hat u + Theta_f-hat f with Theta_f-hat = Lambda-hat r, plus the bias
-g(dN) (Lambda-hat - Lambda_c) V0 that moves the trim voltage with the pump. One parameter for
-what a worn or failed pump changes, with the regressor g(dN) (u + V0), rich in steady state too;
-Theta_f-hat is not adapted on its own then.
+times its voltage above the dead voltage V_d (V = V0 + u), so the fuel terms of eq. 4.7 become
+g(dN) (Lambda-hat (u + V0 - V_d) - Lambda_c (V0 - V_d)): Lambda-hat u + Theta_f-hat f with
+Theta_f-hat = Lambda-hat r, plus the bias g(dN) d0, d0 = (Lambda-hat - Lambda_c) (V0 - V_d),
+that moves the trim voltage with the pump. One parameter for what a worn or failed pump
+changes, with the regressor g(dN) (u + V0 - V_d), rich in steady state too; Theta_f-hat is not
+adapted on its own then.
 
 Robustness (each switchable): Lambda-hat floor (projection), dead zone on the driving error
 sized from the rate noise, and no adaptation when the caller says so (limiter owns the command,
