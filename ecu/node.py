@@ -132,7 +132,7 @@ class EcuNode:
                     return
                 self.timeout_s = None
                 self.tick = tick
-                if self._demand_due():
+                if self.ticked_demands and self._demand_due():
                     self.waiting = True
                 else:
                     self._run_tick(send)
@@ -202,9 +202,7 @@ class EcuNode:
     # -- tick and frames out -----------------------------------------------------------------
     def _apply_demand(self) -> None:
         """Hand the latest held Demand whose tick has come to the firmware (at once if
-        unticked); one still ahead stays held."""
-        if not self.demand_pending:
-            return
+        unticked); one still ahead stays held. Only while one is held (``demand_pending``)."""
         if self.ticked_demands:
             if _ahead(self._demand_raw[4], self.tick):
                 return  # DemandTick still ahead
@@ -226,7 +224,8 @@ class EcuNode:
     def _run_tick(self, send: SendFn) -> None:
         self.waiting = False
         i = self.i
-        self._apply_demand()
+        if self.demand_pending:
+            self._apply_demand()
         i.tick = self.tick
         if self.service is not None:
             self.service.poll(i)

@@ -15,6 +15,7 @@ DEFAULT_BITRATE = 500_000
 CRC15_POLY = 0x4599  # ISO 11898-1: x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1
 _UNSTUFFED_TAIL_BITS = 13
 _RECORD = 11  # bytes per frame in the batch buffer: ID (2), DLC (1), data (8)
+_BLOCK_FRAMES = 4096  # frames counted at once by the table method (its arrays stay in the cache)
 
 
 def frames_bits(ids: np.ndarray, dlc: int, data: np.ndarray) -> np.ndarray:
@@ -98,11 +99,22 @@ def _tables() -> dict[str, np.ndarray]:
 
 def frames_bits_bytewise(ids: np.ndarray, dlc: int, data: np.ndarray) -> np.ndarray:
     """As :func:`frames_bits` (same lengths), a byte at a time with tables instead of a bit at
-    a time: several times faster on large batches."""
+    a time: several times faster on large batches (taken in blocks that stay in the cache)."""
     if np.any(ids >= 0x800):
         raise ValueError("an ID does not fit 11 bits")
     if not 0 <= dlc <= 8:
         raise ValueError(f"DLC {dlc}: classical CAN carries at most 8 data bytes")
+    if len(ids) > _BLOCK_FRAMES:
+        return np.concatenate(
+            [
+                _bits_bytewise(ids[i : i + _BLOCK_FRAMES], dlc, data[i : i + _BLOCK_FRAMES])
+                for i in range(0, len(ids), _BLOCK_FRAMES)
+            ]
+        )
+    return _bits_bytewise(ids, dlc, data)
+
+
+def _bits_bytewise(ids: np.ndarray, dlc: int, data: np.ndarray) -> np.ndarray:
     t = _tables()
     n = len(ids)
     ids = ids.astype(np.int64)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from protocol.dbc import DBC_PATH, ContractError, load_database, message_attribute
 from protocol.e2e import COUNTER_MODULO, E2EChecker, crc8, data_id_crc_start
+from protocol.packers import PackFn, UnpackFn, mux_packer, mux_unpacker, packer, unpacker
 
 _WORD = struct.Struct("<Q")
 
@@ -128,13 +129,27 @@ class MessageCodec:
                         self.mux_signals[mux_id] = _layout(s)
             self.signals: tuple[SignalLayout, ...] = (self.mux_layout,)
             self.signal_names: tuple[str, ...] = (self.mux_layout.name, "value")
-            self._mux_fields = {
-                k: (self.mux_layout.field, v.field) for k, v in self.mux_signals.items()
-            }
         else:
             self.signals = tuple(_layout(s) for s in sorted(plain, key=lambda s: s.start))
             self.signal_names = tuple(s.name for s in self.signals)
         self._fields = tuple(s.field for s in self.signals)
+        # pack_raw(raws) -> int: raw values (signal_names order) into ``data`` with the next
+        # alive counter and the CRC; bit i of the result is set when value i was outside its
+        # DBC range and saturated. unpack_raw(data, out): a received frame's raw values into
+        # ``out``, in the same order. Both are written for this message (protocol.packers).
+        crc_start = self._crc_start if self.protected else None
+        self.pack_raw: PackFn
+        self.unpack_raw: UnpackFn
+        if self.multiplexed:
+            mux_fields = {k: (self.mux_layout.field, v.field) for k, v in self.mux_signals.items()}
+            by_index = {k: packer(self, f, crc_start) for k, f in mux_fields.items()}
+            self.pack_raw = mux_packer(self.name, by_index)
+            self.unpack_raw = mux_unpacker(
+                self.name, self.mux_layout.field, {k: f[1:] for k, f in mux_fields.items()}
+            )
+        else:
+            self.pack_raw = packer(self, self._fields, crc_start)
+            self.unpack_raw = unpacker(self._fields)
 
     def _layouts(self, first_raw: int) -> Sequence[SignalLayout]:
         if not self.multiplexed:
@@ -144,40 +159,8 @@ class MessageCodec:
             raise ValueError(f"{self.name}: no signal for multiplexer index {first_raw}")
         return (self.mux_layout, layout)
 
-    def _fields_for(self, first_raw: int) -> tuple[tuple[int, int, int, int, int], ...]:
-        if not self.multiplexed:
-            return self._fields
-        fields = self._mux_fields.get(first_raw)
-        if fields is None:
-            raise ValueError(f"{self.name}: no signal for multiplexer index {first_raw}")
-        return fields
-
-    def pack_raw(self, raws: Sequence[int]) -> int:
-        """Pack raw values into ``self.data`` with the next alive counter and the CRC.
-
-        Returns a bitmask with bit i set when value i was outside its DBC range and saturated.
-        """
-        fields = self._fields_for(raws[0])
-        if len(raws) != len(fields):
-            raise ValueError(f"{self.name}: expected {len(fields)} values, got {len(raws)}")
-        word = 0
-        saturated = 0
-        i = 0
-        for start, mask, _sign_bit, raw_min, raw_max in fields:
-            raw = raws[i]
-            if raw < raw_min:
-                raw = raw_min
-                saturated |= 1 << i
-            elif raw > raw_max:
-                raw = raw_max
-                saturated |= 1 << i
-            word |= (raw & mask) << start
-            i += 1
-        self._finish(word)
-        return saturated
-
     def pack(self, values: Sequence[float]) -> int:
-        """As :meth:`pack_raw` with physical values (scaled, offset and rounded as cantools).
+        """As ``pack_raw`` with physical values (scaled, offset and rounded as cantools).
 
         A value counts as out of range when it is more than half a step outside the DBC range.
         """
@@ -210,21 +193,6 @@ class MessageCodec:
         _WORD.pack_into(self.data, 0, word)
         if self.protected:
             self.data[0] = crc8(self._tail, self._crc_start)
-
-    def unpack_raw(self, data: bytes | bytearray | memoryview, out: list) -> None:
-        """Raw values of a received frame into ``out`` (same order as :meth:`pack_raw`)."""
-        word = _WORD.unpack_from(data, 0)[0]
-        fields = self._fields
-        if self.multiplexed:
-            start, mask = fields[0][0], fields[0][1]
-            fields = self._fields_for((word >> start) & mask)
-        i = 0
-        for start, mask, sign_bit, _raw_min, _raw_max in fields:
-            raw = (word >> start) & mask
-            if raw & sign_bit:
-                raw -= sign_bit << 1
-            out[i] = raw
-            i += 1
 
     def unpack(self, data: bytes | bytearray | memoryview, out: list) -> None:
         """Physical values of a received frame into ``out``."""

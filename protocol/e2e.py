@@ -12,6 +12,7 @@ behaves the same at any speed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from enum import IntEnum
 
 import crcmod
@@ -28,6 +29,15 @@ class E2EStatus(IntEnum):
     NONEWDATA = 4
 
 
+# the statuses the checker gives, bound once (cheaper than the enum's attributes per frame)
+_OK, _REPEATED, _WRONGSEQUENCE, _WRONGCRC = (
+    E2EStatus.OK,
+    E2EStatus.REPEATED,
+    E2EStatus.WRONGSEQUENCE,
+    E2EStatus.WRONGCRC,
+)
+
+
 def data_id_crc_start(data_id: int) -> int:
     """CRC register after the two data ID bytes (low byte first): the start for the payload."""
     if not 0 <= data_id <= 0xFFFF:
@@ -35,9 +45,9 @@ def data_id_crc_start(data_id: int) -> int:
     return _crc8(bytes((data_id & 0xFF, data_id >> 8)))
 
 
-def crc8(payload_after_crc: bytes | bytearray | memoryview, crc_start: int) -> int:
-    """CRC-8 of bytes 1..n of a frame, continuing from :func:`data_id_crc_start`."""
-    return _crc8(payload_after_crc, crc_start)
+# crc8(payload_after_crc, crc_start) -> int: CRC-8 of bytes 1..n of a frame, continuing from
+# data_id_crc_start (crcmod's function itself, with no wrapper of ours on the hot path)
+crc8: Callable[[bytes | bytearray | memoryview, int], int] = _crc8
 
 
 _TABLE = None  # CRC-8 table for crc8_rows, as a numpy array (numpy imported on first use)
@@ -96,23 +106,24 @@ class E2EChecker:
 
     def check(self, frame: bytes | bytearray | memoryview) -> E2EStatus:
         """Classify one received frame and remember its counter when it is accepted."""
-        if len(frame) < 2 or _crc8(memoryview(frame)[1:], self._crc_start) != frame[0]:
-            status = E2EStatus.WRONGCRC
+        if len(frame) < 2 or _crc8(frame[1:], self._crc_start) != frame[0]:
+            status = _WRONGCRC
         else:
             counter = frame[1] & 0x0F
+            last = self._last_counter
             if counter >= COUNTER_MODULO:
-                status = E2EStatus.WRONGCRC  # 15 is never sent: a corrupted frame
-            elif self._last_counter < 0:
-                status = E2EStatus.OK
+                status = _WRONGCRC  # 15 is never sent: a corrupted frame
+            elif last < 0:
+                status = _OK
             else:
-                delta = (counter - self._last_counter) % COUNTER_MODULO
+                delta = (counter - last) % COUNTER_MODULO
                 if delta == 0:
-                    status = E2EStatus.REPEATED
+                    status = _REPEATED
                 elif delta <= self.max_delta:
-                    status = E2EStatus.OK
+                    status = _OK
                 else:
-                    status = E2EStatus.WRONGSEQUENCE
-            if status != E2EStatus.REPEATED:
+                    status = _WRONGSEQUENCE
+            if status is not _REPEATED:
                 self._last_counter = counter
                 self._ticks_since = 0
         self.status = status

@@ -37,6 +37,7 @@ import can
 
 SendFn = Callable[[int, bytes | bytearray], None]
 ID_MASK = 0x1FFFFFFF  # every bit of a frame ID (standard or extended)
+STOP_POLL_S = 0.05  # lockstep: the longest a driver waits without looking at should_stop()
 Received = tuple[int, bytes] | can.Message  # a frame as a bus's receiver gives it
 
 
@@ -66,7 +67,8 @@ class DriverStats:
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
 
 
-def _unusable(msg: can.Message) -> str | None:
+def unusable(msg: can.Message) -> str | None:
+    """Why a message cannot reach a node (None: it can)."""
     if msg.is_error_frame:
         return "error frame"
     if msg.is_fd:
@@ -110,12 +112,26 @@ def bus_receiver(bus: can.BusABC) -> Callable[[float | None], Received]:
     return getattr(bus, "recv_frame", bus.recv)
 
 
+def bus_batch_receiver(bus: can.BusABC) -> Callable[[float | None], list[Received]]:
+    """``bus.recv_frames`` where the bus has it (every frame queued, at one wake-up), else
+    ``bus.recv`` as a list of at most one message."""
+    recv_frames = getattr(bus, "recv_frames", None)
+    if recv_frames is not None:
+        return recv_frames
+
+    def receive(timeout: float | None) -> list[Received]:
+        msg = bus.recv(timeout)
+        return [] if msg is None else [msg]
+
+    return receive
+
+
 def _deliver(node: Node, got: Received, send: SendFn, stats: DriverStats) -> None:
     """Hand a frame to the node, or count why it cannot be (``got`` is not None)."""
     if type(got) is tuple:
         frame_id, data = got
     else:
-        reason = _unusable(got)
+        reason = unusable(got)
         if reason is not None:
             stats.ignore(reason)
             return
@@ -137,14 +153,37 @@ def run_lockstep(
     receive = bus_receiver(bus)
     listen_for(node, bus)
     node.start(send)
+    on_frame = node.on_frame
     while not node.finished and not should_stop():
-        got = receive(getattr(node, "timeout_s", None) or guard_s)
-        if got is None:
+        got = _receive_within(receive, getattr(node, "timeout_s", None) or guard_s, should_stop)
+        if type(got) is tuple:  # the usual case, inline
+            stats.received += 1
+            on_frame(got[0], got[1], send)
+        elif got is None:
+            if should_stop():  # the wait was cut short: no timeout
+                break
             stats.timeouts += 1
             node.on_timeout(send)
         else:
             _deliver(node, got, send, stats)
     return stats
+
+
+def _receive_within(
+    receive: Callable[[float | None], Received], timeout: float, should_stop: Callable[[], bool]
+) -> Received | None:
+    """A frame within ``timeout`` seconds, or None. Waits of more than ``STOP_POLL_S`` go in
+    slices of that, with ``should_stop()`` between them: a stop request (a signal handler
+    setting a flag while the wait is in a system call, which Python then resumes) ends the
+    wait within one slice, not the guard time."""
+    if timeout <= STOP_POLL_S:
+        return receive(timeout)
+    deadline = time.monotonic() + timeout
+    while (got := receive(STOP_POLL_S)) is None and not should_stop():
+        left = deadline - time.monotonic()
+        if left <= STOP_POLL_S:
+            return receive(left) if left > 0 else None
+    return got
 
 
 def run_realtime(

@@ -7,13 +7,18 @@ interoperates with plain ``udp_multicast`` peers on the same group and port) but
 - sends with multicast TTL 0: a datagram never leaves the host;
 - loops multicast back to local sockets (IP_MULTICAST_LOOP = 1);
 - binds the socket to the multicast group address, not to the wildcard address, so nothing
-  listens on any unicast address of the machine;
+  listens on any unicast address of the machine; it sends from a second socket, connected to
+  the group (its route is looked up once, not per datagram), which joins no group and, being
+  connected, accepts datagrams only from the group address, which sends none;
 - does not hear its own frames (multicast loopback delivers them to the sender too): each bus
   marks what it sends with a channel token of its own and drops frames that carry it;
 - filters by frame ID in the kernel: :meth:`~can.BusABC.set_filters` attaches a socket filter
   (classic BPF, :func:`kernel_filter`) that drops datagrams whose ID matches no filter before
   they are queued, so a node is not woken for frames it does not want (python-can's software
   filter still checks every frame that passes);
+- has a frame path for the node drivers (:meth:`~LoopbackUdpMulticastBus.send_frame`,
+  :meth:`~LoopbackUdpMulticastBus.recv_frame`, :meth:`~LoopbackUdpMulticastBus.recv_frames`):
+  the same datagrams without python-can message objects or msgpack, waiting in the kernel.
 
 Only IPv4 administratively scoped groups (239.0.0.0/8) are accepted.
 """
@@ -23,6 +28,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import ipaddress
+import math
 import os
 import select
 import socket
@@ -40,6 +46,7 @@ ADMIN_SCOPE = ipaddress.ip_network("239.0.0.0/8")
 MAX_DATAGRAM = 4096
 SO_ATTACH_FILTER, SO_DETACH_FILTER = 26, 27  # <asm-generic/socket.h>
 _TIMESPEC = struct.Struct("@ll")
+_TIMEVAL = struct.Struct("@ll")  # SO_RCVTIMEO: seconds, microseconds
 _ANCILLARY_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
 
 # Where python-can's packing puts the frame ID: a msgpack map of 11 entries whose first keys are
@@ -54,6 +61,13 @@ _PREFIX_CHECKS = (  # (offset in the datagram, bytes there)
 _ID_TYPE = 35  # the ID's msgpack type byte, its value after it
 _MIN_DATAGRAM = _ID_TYPE + 3
 _UINT8, _UINT16 = 0xCC, 0xCD  # msgpack types; below 0x80 the type byte is the value itself
+# a classical data frame's datagram: _STAMP, the timestamp's 8 bytes, the middle (ID, flags,
+# channel, DLC, data header), the data and _TAIL (is_fd, bitrate_switch, error_state_indicator)
+_STAMP = b"\x8b\xa9timestamp\xcb"
+_TAIL = b"\xa5is_fd\xc2\xaebitrate_switch\xc2\xb5error_state_indicator\xc2"
+_STAMP_END = len(_STAMP) + 8
+_TAIL_START, _DATA_8 = -len(_TAIL), -len(_TAIL) - 8  # where the tail and 8 bytes of data start
+_KNOWN_MAX = 1024  # datagram middles cached per bus (senders times frame IDs)
 
 # classic BPF opcodes (<linux/filter.h>)
 _LD_W, _LD_H, _LD_B, _LD_LEN = 0x20, 0x28, 0x30, 0x80
@@ -81,6 +95,21 @@ class _LoopbackSocket:
             sock.close()
             raise can.CanInitializationError(
                 f"could not open loopback multicast {group}:{port}: {error}"
+            ) from error
+
+    @staticmethod
+    def open_sender(group: str, port: int) -> socket.socket:
+        """The socket the bus sends from, connected to the group (see the module docstring)."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            sock.connect((group, port))
+            return sock
+        except OSError as error:
+            sock.close()
+            raise can.CanInitializationError(
+                f"could not send to loopback multicast {group}:{port}: {error}"
             ) from error
 
 
@@ -141,11 +170,18 @@ class LoopbackUdpMulticastBus(can.BusABC):
                 f"group {channel} is not an administratively scoped IPv4 group (239.x.y.z)"
             )
         self._socket = _LoopbackSocket.open(channel, port)
-        self._destination = (channel, port)
+        try:
+            self._sender = _LoopbackSocket.open_sender(channel, port)
+        except can.CanInitializationError:
+            self._socket.close()
+            raise
         self._poll = select.epoll()
         self._poll.register(self._socket, select.EPOLLIN)
         self._send_timeout: float | None = None
+        self._recv_timeout: float | None = None  # the socket's SO_RCVTIMEO (None: for ever)
         self._accepted: dict[int, bool] = {}  # standard frame ID -> passes the filters
+        self._known: dict[bytes, int] = {}  # datagram middle -> frame ID, or -1: skipped
+        self._heads: dict[tuple[int, int], bytes] = {}  # (frame ID, length) -> datagram head
         self._token = f"udp-{os.urandom(6).hex()}"
         self._can_protocol = can.CanProtocol.CAN_20
         self.channel_info = f"udp loopback multicast {channel}:{port}"
@@ -168,33 +204,24 @@ class LoopbackUdpMulticastBus(can.BusABC):
             "bitrate_switch": msg.bitrate_switch,
             "error_state_indicator": msg.error_state_indicator,
         }
-        self._sendto(msgpack.packb(fields, use_bin_type=True), timeout)
+        self._send(msgpack.packb(fields, use_bin_type=True), timeout)
 
     def send_frame(self, frame_id: int, data: bytes | bytearray | memoryview) -> None:
         """Send a classical data frame with a standard ID: the datagram :meth:`send` sends for
         ``can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)``, made
-        without the message object (the node drivers' path, :mod:`protocol.node`)."""
-        fields = {
-            "timestamp": 0.0,
-            "arbitration_id": frame_id,
-            "is_extended_id": False,
-            "is_remote_frame": False,
-            "is_error_frame": False,
-            "channel": self._token,
-            "dlc": len(data),
-            "data": data,
-            "is_fd": False,
-            "bitrate_switch": False,
-            "error_state_indicator": False,
-        }
-        self._sendto(msgpack.packb(fields, use_bin_type=True), None)
+        without the message object from a head kept per ID and length (the node drivers'
+        path, :mod:`protocol.node`)."""
+        head = self._heads.get((frame_id, len(data)))
+        if head is None:
+            head = self._heads[frame_id, len(data)] = frame_head(self._token, frame_id, len(data))
+        self._send(head + data + _TAIL, None)
 
-    def _sendto(self, datagram: bytes, timeout: float | None) -> None:
+    def _send(self, datagram: bytes, timeout: float | None) -> None:
         if timeout != self._send_timeout:
             self._send_timeout = timeout
-            self._socket.settimeout(timeout)
+            self._sender.settimeout(timeout)
         try:
-            if self._socket.sendto(datagram, self._destination) < len(datagram):
+            if self._sender.send(datagram) < len(datagram):
                 raise TimeoutError
         except TimeoutError:
             raise can.CanTimeoutError from None
@@ -208,19 +235,80 @@ class LoopbackUdpMulticastBus(can.BusABC):
         other as the ``can.Message`` :meth:`recv` gives. Lighter than :meth:`recv` (no message
         object, no kernel timestamp): the node drivers' path, :mod:`protocol.node`."""
         deadline = None if timeout is None else time.monotonic() + timeout
-        while self._wait(timeout):
-            fields = self._fields(self._read(MAX_DATAGRAM)[0])
-            if fields is not None:
-                frame = _classical_standard(fields)
-                if frame is None:
-                    msg = self._message(fields, time.time())
-                    if self._matches_filters(msg):
-                        return msg
-                elif self._accepts(frame[0]):
-                    return frame
+        while (datagram := self._receive(timeout)) is not None:
+            frame = self._frame(datagram)
+            if frame is not None:
+                return frame
             if deadline is not None:
                 timeout = max(0.0, deadline - time.monotonic())
         return None
+
+    def _receive(self, timeout: float | None) -> bytes | None:
+        """The next datagram, or None after ``timeout`` seconds (None: wait for ever). The wait
+        is the kernel's (SO_RCVTIMEO): one system call per datagram."""
+        flags = 0
+        if timeout is not None and timeout <= 0.0:
+            flags = socket.MSG_DONTWAIT
+        elif timeout != self._recv_timeout:
+            micro = 0 if timeout is None else max(1, math.ceil(timeout * 1e6))  # 0: for ever
+            timeval = _TIMEVAL.pack(micro // 1_000_000, micro % 1_000_000)
+            self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, timeval)
+            self._recv_timeout = timeout
+        try:
+            return self._socket.recv(MAX_DATAGRAM, flags)
+        except BlockingIOError:  # the timeout passed
+            return None
+        except OSError as error:
+            raise can.CanOperationError(f"failed to receive from the socket: {error}") from error
+
+    def recv_frames(self, timeout: float | None) -> list[tuple[int, bytes] | can.Message]:
+        """Every frame queued that passes the filters, as :meth:`recv_frame` gives them, after
+        waiting up to ``timeout`` seconds for the first datagram (none came, or none passed:
+        an empty list). The recorder's path: one wake-up for all the frames queued."""
+        frames = []
+        poll, recv = self._poll.poll, self._socket.recv
+        try:
+            while poll(timeout):
+                frame = self._frame(recv(MAX_DATAGRAM))
+                if frame is not None:
+                    frames.append(frame)
+                timeout = 0.0
+        except OSError as error:
+            raise can.CanOperationError(f"failed to receive from the socket: {error}") from error
+        return frames
+
+    def _frame(self, datagram: bytes) -> tuple[int, bytes] | can.Message | None:
+        """What :meth:`recv_frame` gives for a datagram, None for those it skips (our own, CAN
+        FD, filtered out). An 8-byte frame laid out as :func:`frame_head` lays it out is known
+        by its middle (all but the timestamp and the data), cached with the verdict, and taken
+        apart without msgpack."""
+        verdict = self._known.get(datagram[_STAMP_END:_DATA_8])
+        if verdict is None or not datagram.startswith(_STAMP) or not datagram.endswith(_TAIL):
+            return self._decode(datagram)
+        return (verdict, datagram[_DATA_8:_TAIL_START]) if verdict >= 0 else None
+
+    def _decode(self, datagram: bytes) -> tuple[int, bytes] | can.Message | None:
+        fields = self._fields(datagram)
+        if fields is None:
+            return None
+        frame = _classical_standard(fields)
+        if frame is None:
+            msg = self._message(fields, time.time())
+            return msg if self._matches_filters(msg) else None
+        accepted = self._accepts(frame[0])
+        self._learn(datagram, fields.get("channel"), frame, accepted)
+        return frame if accepted else None
+
+    def _learn(
+        self, datagram: bytes, channel: object, frame: tuple[int, bytes], accepted: bool
+    ) -> None:
+        """Cache the verdict on an 8-byte frame whose datagram has :func:`frame_head`'s layout."""
+        frame_id, data = frame
+        if len(data) != 8 or type(channel) is not str or len(self._known) >= _KNOWN_MAX:
+            return
+        middle = frame_head(channel, frame_id, 8)[_STAMP_END:]
+        if datagram[_STAMP_END:] == middle + data + _TAIL:
+            self._known[middle] = frame_id if accepted else -1
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if not self._wait(timeout):
@@ -274,6 +362,7 @@ class LoopbackUdpMulticastBus(can.BusABC):
 
     def _apply_filters(self, filters: CanFilters | None) -> None:
         self._accepted = {}
+        self._known = {}
         program = kernel_filter(filters) if filters else None
         if program is None:
             try:
@@ -293,10 +382,36 @@ class LoopbackUdpMulticastBus(can.BusABC):
         super().shutdown()
         self._poll.close()
         self._socket.close()
+        self._sender.close()
 
     @property
     def socket(self) -> socket.socket:
         return self._socket
+
+    @property
+    def sender(self) -> socket.socket:
+        """The socket it sends from (connected to the group)."""
+        return self._sender
+
+
+def frame_head(channel: str, frame_id: int, length: int) -> bytes:
+    """The datagram of a classical data frame with a standard ID up to its data, as python-can
+    lays it out (``pack_message``) with a zero timestamp: the datagram is head + data + tail."""
+    fields = {
+        "timestamp": 0.0,
+        "arbitration_id": frame_id,
+        "is_extended_id": False,
+        "is_remote_frame": False,
+        "is_error_frame": False,
+        "channel": channel,
+        "dlc": length,
+        "data": bytes(length),
+        "is_fd": False,
+        "bitrate_switch": False,
+        "error_state_indicator": False,
+    }
+    packed = msgpack.packb(fields, use_bin_type=True)
+    return packed[: len(packed) - length - len(_TAIL)]
 
 
 def _classical_standard(fields: dict) -> tuple[int, bytes] | None:

@@ -1,8 +1,10 @@
-"""`sil bench sil`: real-time factor of a whole SIL run, in lockstep over the bus and in process."""
+"""`sil bench sil`: real-time factor of a whole SIL run, in lockstep over the bus and in process,
+with the Python firmware and with its C port as the ECU (keys of the C runs end in ``_c_ecu``)."""
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import tempfile
 from pathlib import Path
 
@@ -11,6 +13,8 @@ from sil.runner import RunOptions
 from sil.runner import run as run_scenario
 
 SCENARIO = "thesis-5.3-mrac-aero"  # 300 s, aero-thermal plant, 1 ms steps, ECU at 100 Hz
+ECU_IMPLS = (("python", ""), ("c", "_c_ecu"))  # (`--ecu-impl`, suffix of its keys)
+MODES = (("lockstep", "realtime_factor"), ("inproc", "inproc_realtime_factor"))
 
 
 def run(quick: bool = False) -> dict:
@@ -18,16 +22,26 @@ def run(quick: bool = False) -> dict:
     if quick:
         s = dataclasses.replace(s, duration_s=30.0)
     figures: dict = {"scenario": s.name, "sim_time_s": s.duration_s}
+    figures["load_average_1min_before"] = round(os.getloadavg()[0], 2)  # others' load, mostly
     with tempfile.TemporaryDirectory() as tmp:
-        for mode in ("lockstep", "inproc"):
-            summary = run_scenario(
-                RunOptions(s, Path(tmp) / mode, mode=mode, plots=False, progress=False)
-            )
-            key = "realtime_factor" if mode == "lockstep" else "inproc_realtime_factor"
-            figures[key] = round(summary["realtime_factor"], 2)
-            figures[f"{mode}_wall_s"] = round(summary["wall_time_s"], 2)
-            figures[f"{mode}_missed_ticks"] = summary["missed_ticks"]
-            if mode == "lockstep":
-                figures["bus"] = summary["bus"]
-                figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)
+        for impl, suffix in ECU_IMPLS:
+            for mode, key in MODES:
+                summary = run_scenario(
+                    RunOptions(
+                        s,
+                        Path(tmp) / f"{mode}-{impl}",
+                        mode=mode,
+                        plots=False,
+                        progress=False,
+                        ecu_impl=impl,
+                    )
+                )
+                figures[key + suffix] = round(summary["realtime_factor"], 2)
+                figures[f"{mode}_wall_s{suffix}"] = round(summary["wall_time_s"], 2)
+                figures[f"{mode}_missed_ticks{suffix}"] = summary["missed_ticks"]
+                if summary["status"] != "completed":
+                    figures[f"{mode}_aborted{suffix}"] = summary["abort_reason"]
+                if mode == "lockstep" and not suffix:
+                    figures["bus"] = summary["bus"]
+                    figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)
     return figures

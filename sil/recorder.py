@@ -47,9 +47,9 @@ _SKIP = ("_CRC", "_Counter")
 SENSORS, ACTUATOR = 0x100, 0x110
 PLANT_IDS = frozenset((0x100, 0x101, 0x300, 0x301))
 ECU_IDS = frozenset((0x110, 0x200, 0x210))
-CHUNK_ROWS = 512  # trace rows (ticks) per bulk write
+CHUNK_ROWS = 2048  # trace rows (ticks) per bulk write (20 s simulated at 100 Hz)
 WALL_CLOCK_CHUNK_ROWS = 100  # in real time: on disk at least every 100 ECU periods
-_CHUNK_FRAMES = 8192  # frames heard per bulk write when no rows come
+_CHUNK_FRAMES = 32768  # frames heard per bulk write when no rows come
 _CELL = 16  # "%15.9g," per trace cell (%.9g takes at most 15); the padding is taken out again
 _PREFIX_TIME, _PREFIX_TICK = 21, 11  # "%20.6f," and "%10d,"
 _STATUS_NAMES = [s.name for s in E2EStatus]
@@ -148,8 +148,10 @@ class Recorder:
         # the chunk being gathered: frames heard (bit count), frames written in log order with
         # their timestamps as (base, count) blocks (frame i of a block at base + i * 10 us),
         # and rows as (tick, frames written before the row)
-        self._heard: list[Frame] = []
-        self._out: list[Frame] = []
+        self._heard_ids: list[int] = []
+        self._heard_data: list[bytes] = []
+        self._out_ids: list[int] = []
+        self._out_data: list[bytes] = []
         self._out_base: list[float] = []
         self._out_count: list[int] = []
         self._out_heard: list[int] = []  # per block: frames heard when it was written
@@ -199,11 +201,12 @@ class Recorder:
         """A frame heard on the bus, or sent by the command node (see the module docstring)."""
         data = bytes(data)
         self.frames += 1
-        frame = (frame_id, data)
-        heard = self._heard
-        heard.append(frame)
+        heard = self._heard_ids
+        heard.append(frame_id)
+        self._heard_data.append(data)
         if len(heard) >= _CHUNK_FRAMES:
             self._write_chunk()
+        frame = (frame_id, data)
         if self.wall_clock:
             self._write(wall_s if wall_s is not None else 0.0, frame_id, data)
             if frame_id == ACTUATOR:
@@ -223,8 +226,8 @@ class Recorder:
                 self._plant_pending = []
                 if slot.ecu is not None:
                     self._complete.add(k)
-            # a tick completed by its sensor frame waits for the next frame: the command node's
-            # answers to that sensor frame come first and belong to the tick
+            # a tick completed by its sensor frame waits for the next plant or ECU frame: the
+            # command node's answers to that sensor frame come first and belong to the tick
             elif self._complete:
                 self._flush_ready()
         elif frame_id in ECU_IDS:
@@ -247,13 +250,13 @@ class Recorder:
         elif self.latest_sensor_tick < 0:  # before tick 0: the first demands
             self._write(0.0, frame_id, data)
         else:  # the command node's frames (and foreign ones) go with the newest sensor tick
+            # (no flush here: it may send several on one sensor frame, so a tick completed by its
+            # sensor frame is written on the next plant or ECU frame, or at close)
             k = self.latest_sensor_tick
             slot = self._ticks.get(k)
             if slot is None:
                 slot = self._ticks[k] = _Tick()
             slot.command.append(frame)
-            if self._complete:
-                self._flush_ready()
 
     @property
     def e2e(self) -> dict[str, Counter[str]]:
@@ -280,15 +283,14 @@ class Recorder:
             self._write_tick(slot if slot is not None else _Tick())
 
     def _write_tick(self, slot: _Tick) -> None:
-        out = self._out
-        first = len(out)
-        if slot.plant:
-            out += slot.plant
-        if slot.command:
-            out += slot.command
-        if slot.ecu:
-            out += slot.ecu
-        n = len(out) - first
+        ids, datas = self._out_ids, self._out_data
+        first = len(ids)
+        for frames in (slot.plant, slot.command, slot.ecu):
+            if frames:  # (taken apart now, while they are in the cache)
+                for frame_id, data in frames:
+                    ids.append(frame_id)
+                    datas.append(data)
+        n = len(ids) - first
         if n:
             self._out_base.append(self.tick * self.period_s)
             self._out_count.append(n)
@@ -299,14 +301,15 @@ class Recorder:
             self.tick += 1
 
     def _write(self, timestamp_s: float, frame_id: int, data: bytes) -> None:
-        self._out.append((frame_id, data))
+        self._out_ids.append(frame_id)
+        self._out_data.append(data)
         self._out_base.append(timestamp_s)
         self._out_count.append(1)
         self._out_heard.append(self.frames)
 
     def _end_row(self) -> None:
         self._row_ticks.append(self.tick)
-        self._row_pos.append(self._out_done + len(self._out))
+        self._row_pos.append(self._out_done + len(self._out_ids))
         self.rows += 1
         self.tick += 1
         if len(self._row_ticks) >= self._chunk_rows:
@@ -359,15 +362,16 @@ class Recorder:
     # -- bulk ------------------------------------------------------------------------------------
     def _check_heard(self) -> None:
         """E2E and tick-sequence checks and bit counts of the frames heard, in arrival order."""
-        heard, self._heard = self._heard, []
+        heard_ids, self._heard_ids = self._heard_ids, []
+        heard, self._heard_data = self._heard_data, []
         if not heard:
             return
         first = self.frames - len(heard)  # arrival number of heard[0]
-        ids, payload, lengths = self._frames_array(heard)
+        ids, payload, lengths = self._frames_array(heard_ids, heard)
         if (lengths == 8).all():
             self.bits.add_many(ids, payload, lengths)
         else:
-            for frame_id, data in heard:
+            for frame_id, data in zip(heard_ids, heard, strict=True):
                 self.bits.add(frame_id, data)
         good = np.zeros(len(ids), bool)  # known ID, right length, E2E not WRONGCRC
         for frame_id, (length, _) in self._known.items():
@@ -410,7 +414,7 @@ class Recorder:
         seen.sort()
         self._e2e_seen += [(name, s) for _, name, s in seen]
         for i in sorted(bad):  # logged, never decoded into the trace
-            self._bad_events.append((first + i, heard[i][1]))
+            self._bad_events.append((first + i, heard[i]))
         for frame_id, tracker in ((SENSORS, self._sensor_ticks), (ACTUATOR, self._actuator_ticks)):
             rows = np.flatnonzero(good & (ids == frame_id))
             if len(rows):
@@ -424,8 +428,10 @@ class Recorder:
                     for tick in ticks.tolist():
                         tracker.observe(tick)
 
-    def _not_decoded(self, frames: list[Frame], count: list[int], heard: list[int]) -> list[int]:
-        """Frames logged with a bad CRC (by index in ``frames``): never decoded into the trace.
+    def _not_decoded(
+        self, frame_ids: list[int], datas: list[bytes], count: list[int], heard: list[int]
+    ) -> list[int]:
+        """Frames logged with a bad CRC (by index in the chunk): never decoded into the trace.
 
         Replays, in the order they happened, a bad frame heard (its bytes go into the bad set)
         and a frame logged (bytes found in the set are taken out, and the frame not decoded).
@@ -441,8 +447,8 @@ class Recorder:
                 e += 1
             if bad:
                 for j in range(i, i + n):
-                    frame_id, data = frames[j]
-                    known = self._known.get(frame_id)
+                    data = datas[j]
+                    known = self._known.get(frame_ids[j])
                     if known is not None and len(data) == known[0] and data in bad:
                         bad.discard(data)
                         out.append(j)
@@ -451,9 +457,10 @@ class Recorder:
         return out
 
     @staticmethod
-    def _frames_array(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        ids, datas = zip(*frames, strict=True)
-        n = len(frames)
+    def _frames_array(
+        ids: list[int], datas: list[bytes]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = len(datas)
         blob = b"".join(datas)
         if len(blob) == 8 * n and max(map(len, datas)) == 8:
             payload = np.frombuffer(blob, np.uint8).reshape(n, 8)
@@ -490,20 +497,21 @@ class Recorder:
 
     def _write_chunk_now(self) -> None:
         self._check_heard()
-        frames, self._out = self._out, []
+        frame_ids, self._out_ids = self._out_ids, []
+        datas, self._out_data = self._out_data, []
         base, self._out_base = self._out_base, []
         count, self._out_count = self._out_count, []
         heard, self._out_heard = self._out_heard, []
         row_ticks, self._row_ticks = self._row_ticks, []
         row_pos, self._row_pos = self._row_pos, []
         done = self._out_done
-        self._out_done += len(frames)
-        n = len(frames)
+        n = len(datas)
+        self._out_done += n
         if n:
-            ids, payload, lengths = self._frames_array(frames)
+            ids, payload, lengths = self._frames_array(frame_ids, datas)
             if lengths.max() > 8:  # not classical CAN: one by one
                 ts = self._timestamps(base, count)
-                for (frame_id, data), t in zip(frames, ts.tolist(), strict=True):
+                for frame_id, data, t in zip(frame_ids, datas, ts.tolist(), strict=True):
                     self.log.write(t, frame_id, data)
             else:
                 self.log.write_many(self._timestamps(base, count), ids, payload, lengths)
@@ -511,7 +519,11 @@ class Recorder:
             ids = np.zeros(0, np.int64)
             payload = np.zeros((0, 8), np.uint8)
             lengths = np.zeros(0, np.int64)
-        no_decode = self._not_decoded(frames, count, heard) if self._bad or self._bad_events else []
+        no_decode = (
+            self._not_decoded(frame_ids, datas, count, heard)
+            if self._bad or self._bad_events
+            else []
+        )
         self._write_rows(ids, payload, lengths, no_decode, row_ticks, row_pos, done)
         self.log.flush()
         self._trace_file.flush()

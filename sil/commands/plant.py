@@ -6,9 +6,12 @@ import argparse
 import signal
 import sys
 import threading
+import time
+from pathlib import Path
 
 NAME = "plant"
 HELP = "run the simulated engine (aero-thermal or fast model) as a CAN node"
+START_POLL_S = 0.002  # --start-file: how often to look for it
 
 
 def _fault(text: str):  # noqa: ANN202 - argparse type
@@ -69,6 +72,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--battery-v", type=float, default=22.2, help="battery voltage, V")
     parser.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     parser.add_argument(
+        "--start-file",
+        type=Path,
+        metavar="PATH",
+        help="get ready, then wait until this file exists before joining the bus and sending "
+        "tick 0 (a launcher starts the plant and the ECU at once and creates it when the ECU "
+        "listens)",
+    )
+    parser.add_argument(
         "--fault",
         type=_fault,
         action="append",
@@ -99,7 +110,7 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
 
 
 def run(args: argparse.Namespace) -> int:
-    from protocol.bus import BusSpecError, default_spec, open_bus
+    from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
     from protocol.node import run_lockstep, run_realtime
 
     try:
@@ -107,19 +118,26 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"sil plant: error: {exc}", file=sys.stderr)
         return 2
-    spec = args.bus
-    if spec is None:
-        parsed, why = default_spec()
-        spec = str(parsed)
+    if args.bus is None:
+        spec, why = default_spec()
         print(why, file=sys.stderr)
+    else:
+        try:
+            spec = parse_spec(args.bus)
+        except BusSpecError as exc:
+            print(f"sil plant: error: {exc}", file=sys.stderr)
+            return 2
+    stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    if args.start_file is not None:
+        while not args.start_file.exists() and not stop.is_set():
+            time.sleep(START_POLL_S)
     try:
         bus = open_bus(spec)
     except BusSpecError as exc:
         print(f"sil plant: error: {exc}", file=sys.stderr)
         return 2
-    stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         if args.realtime:
             stats = run_realtime(node, bus, node.plant.config.ecu_period_s, should_stop=stop.is_set)

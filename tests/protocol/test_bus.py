@@ -61,6 +61,10 @@ def test_udp_socket_never_leaves_the_host():
         assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP) == 1
         # bound to the group, not to a unicast or wildcard address: nothing listens on the LAN
         assert sock.getsockname() == (spec.channel, spec.port)
+        # it sends from a socket connected to the group, which joins nothing and hears nothing
+        sender = bus.sender
+        assert sender.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+        assert sender.getpeername() == (spec.channel, spec.port)
 
 
 def test_udp_round_trip_between_two_endpoints_and_isolation():

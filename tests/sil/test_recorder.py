@@ -120,10 +120,13 @@ def test_frames_arriving_out_of_order_are_logged_in_canonical_order(tmp_path):
     for name, sequence in (("a", in_order), ("b", shuffled)):
         (tmp_path / name).mkdir()
         rec = Recorder(tmp_path / name, Codec(), period_s=0.01)
-        demand = Codec()["Demand"]
+        demand, fault = Codec()["Demand"], Codec()["FaultInject"]
         for frame_id, data in sequence:
             rec.record(frame_id, data)
             if frame_id == 0x100:  # the command node answers each sensor frame at once
+                if data[2] == 1:  # a fault injection first, then the demand: two frames
+                    fault.pack([1, 6, 0.5])
+                    rec.record(fault.frame_id, fault.data)
                 demand.pack([1, 0, 90.0, 0.0, data[2] + 5])
                 rec.record(demand.frame_id, demand.data)
         rec.close()
@@ -131,6 +134,8 @@ def test_frames_arriving_out_of_order_are_logged_in_canonical_order(tmp_path):
         logs.append((tmp_path / name / "can.log").read_text())
     assert logs[0] == logs[1]
     assert logs[0].count("vcan0 080#") == 3  # every demand kept, each in its tick
+    lines = logs[0].splitlines()
+    assert [line.split()[2][:3] for line in lines[4:8]] == ["100", "310", "080", "200"]
 
 
 def _messy_stream(seed: int) -> list[tuple[int, bytes]]:
