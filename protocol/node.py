@@ -66,6 +66,27 @@ class DriverStats:
     def ignore(self, reason: str) -> None:
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
 
+    def summary(self) -> dict:
+        """The figures as a JSON-ready dict; in real time with the periods' lateness (ms)."""
+        out: dict = {
+            "frames_received": self.received,
+            "frames_sent": self.sent,
+            "frames_ignored": dict(self.ignored),
+            "guard_timeouts": self.timeouts,
+        }
+        if self.periods:
+            late = sorted(self.jitter_s)
+            out |= {
+                "periods": self.periods,
+                "overruns": self.overruns,
+                "jitter_ms": {
+                    "p50": 1e3 * late[len(late) // 2],
+                    "p99": 1e3 * late[min(len(late) - 1, (99 * len(late)) // 100)],
+                    "max": 1e3 * late[-1],
+                },
+            }
+        return out
+
 
 def unusable(msg: can.Message) -> str | None:
     """Why a message cannot reach a node (None: it can)."""

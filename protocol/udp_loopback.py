@@ -68,6 +68,7 @@ _TAIL = b"\xa5is_fd\xc2\xaebitrate_switch\xc2\xb5error_state_indicator\xc2"
 _STAMP_END = len(_STAMP) + 8
 _TAIL_START, _DATA_8 = -len(_TAIL), -len(_TAIL) - 8  # where the tail and 8 bytes of data start
 _KNOWN_MAX = 1024  # datagram middles cached per bus (senders times frame IDs)
+PRECISE_WAIT_S = 0.02  # shorter receive timeouts wait in epoll, not in SO_RCVTIMEO
 
 # classic BPF opcodes (<linux/filter.h>)
 _LD_W, _LD_H, _LD_B, _LD_LEN = 0x20, 0x28, 0x30, 0x80
@@ -244,10 +245,14 @@ class LoopbackUdpMulticastBus(can.BusABC):
         return None
 
     def _receive(self, timeout: float | None) -> bytes | None:
-        """The next datagram, or None after ``timeout`` seconds (None: wait for ever). The wait
-        is the kernel's (SO_RCVTIMEO): one system call per datagram."""
+        """The next datagram, or None after ``timeout`` seconds (None: wait for ever). A long
+        wait is the kernel's (SO_RCVTIMEO): one system call per datagram. SO_RCVTIMEO counts in
+        scheduler ticks (it ends up to 4-10 ms late), so a wait shorter than ``PRECISE_WAIT_S``
+        (a real-time node waiting for its next period) is an epoll wait, to the millisecond."""
         flags = 0
-        if timeout is not None and timeout <= 0.0:
+        if timeout is not None and timeout < PRECISE_WAIT_S:
+            if timeout > 0.0 and not self._wait(timeout):
+                return None
             flags = socket.MSG_DONTWAIT
         elif timeout != self._recv_timeout:
             micro = 0 if timeout is None else max(1, math.ceil(timeout * 1e6))  # 0: for ever

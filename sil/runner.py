@@ -280,9 +280,10 @@ def _run_on_bus(
     guard = BRIDGED_GUARD_S if s.bus_faults and opts.mode == "lockstep" else NODE_GUARD_S
     ticks = len(command.commands)
     mode = ["--mode", opts.mode]
-    ready, go = opts.out_dir / ".ecu-ready", opts.out_dir / ".plant-start"
-    ready.unlink(missing_ok=True)
-    go.unlink(missing_ok=True)
+    ready = {node: opts.out_dir / f".{node}-ready" for node in ("ecu", "plant")}
+    go = opts.out_dir / ".plant-start"
+    for path in (*ready.values(), go, *(_stats_file(opts.out_dir, n) for n in ("ecu", "plant"))):
+        path.unlink(missing_ok=True)
     ecu_args = [
         "ecu",
         "--bus",
@@ -291,12 +292,14 @@ def _run_on_bus(
         "--preset",
         s.controller.preset or "default",
         "--ready-file",
-        str(ready),
+        str(ready["ecu"]),
         "--guard",
         str(guard),
         "--json",
         "--impl",
         opts.ecu_impl,
+        "--stats-file",
+        str(_stats_file(opts.out_dir, "ecu")),
     ]
     if opts.commission is not None:
         ecu_args += ["--commission", str(opts.commission)]
@@ -331,8 +334,12 @@ def _run_on_bus(
         str(seed),
         "--guard-s",
         str(guard),
+        "--ready-file",
+        str(ready["plant"]),
         "--start-file",
         str(go),
+        "--stats-file",
+        str(_stats_file(opts.out_dir, "plant")),
     ]
     if opts.mode == "realtime":
         plant_args.append("--realtime")
@@ -346,16 +353,20 @@ def _run_on_bus(
             ecu_side = stack.enter_context(open_bus(ecu_spec))
             bridge = stack.enter_context(Bridge(plant_side, ecu_side, injector, ticks=clock))
             state.bridge_errors = bridge.errors
-        # both start at once; the plant gets ready, then waits for `go` to send tick 0
+        # both start at once; once both are ready (the ECU listening, the plant built and
+        # waiting for `go`), the demands begin and the plant sends tick 0: in real time too,
+        # the ECU is armed only when the engine's frames are coming
         state.children["ecu"] = _spawn("ecu", ecu_args, opts.out_dir)
         state.children["plant"] = _spawn("plant", plant_args, opts.out_dir)
         deadline = time.monotonic() + 60.0
-        while not ready.exists():
-            if state.children["ecu"].poll() is not None or time.monotonic() > deadline:
-                state.status = "aborted"
-                state.abort_reason = "ECU process did not come up (see ecu.log)"
-                return
-            time.sleep(0.02)
+        for node, path in ready.items():
+            while not path.exists():
+                if state.children[node].poll() is not None or time.monotonic() > deadline:
+                    state.status = "aborted"
+                    state.abort_reason = f"{node} process did not come up (see {node}.log)"
+                    return
+                time.sleep(0.02)
+        _drain(bus)
         send = bus_sender(bus, DriverStats())
         command.start(send)
         go.touch()
@@ -368,6 +379,33 @@ def _run_on_bus(
             realtime=opts.mode == "realtime",
             period=1.0 / s.ecu_rate_hz,
         )
+
+
+def _drain(bus: can.BusABC) -> None:
+    """Drop the frames queued before the run starts: an ECU on its own clock (real time, or
+    past its guard time while the plant builds) talks before there is an engine."""
+    receive = bus_batch_receiver(bus)
+    while receive(0.0):
+        pass
+
+
+def _stats_file(out_dir: Path, node: str) -> Path:
+    """Where a node process leaves its run summary (taken into summary.json, then removed)."""
+    return out_dir / f".{node}-stats.json"
+
+
+def _node_stats(out_dir: Path) -> dict[str, dict]:
+    """The node processes' own summaries: frames, timeouts; in real time jitter and overruns."""
+    stats = {}
+    for node in ("ecu", "plant"):
+        path = _stats_file(out_dir, node)
+        try:
+            stats[node] = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue  # a node that died mid-run leaves none
+        finally:
+            path.unlink(missing_ok=True)
+    return stats
 
 
 def _ecu_side(opts: RunOptions, spec: BusSpec) -> BusSpec:
@@ -465,6 +503,7 @@ def _finish(
         "bus_faults_injected": state.bus_fault_events,
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
         "e2e": {m: dict(c) for m, c in recorder.e2e.items() if set(c) - {"OK"}},
+        **({"nodes": nodes} if (nodes := _node_stats(opts.out_dir)) else {}),
         "unknown_ids": {f"0x{k:X}": v for k, v in recorder.unknown_ids.items()},
     }
     if state.status == "completed" and recorder.tick < len(command.commands):
@@ -484,6 +523,6 @@ def _finish(
             p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind)
         ]
     (opts.out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    (opts.out_dir / ".ecu-ready").unlink(missing_ok=True)
-    (opts.out_dir / ".plant-start").unlink(missing_ok=True)
+    for name in (".ecu-ready", ".plant-ready", ".plant-start"):
+        (opts.out_dir / name).unlink(missing_ok=True)
     return summary

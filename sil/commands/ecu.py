@@ -79,6 +79,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="emulated flash image holding the stored parameter set (created when missing)",
     )
+    parser.add_argument(
+        "--stats-file",
+        type=Path,
+        metavar="PATH",
+        help="write the run summary (frames, timeouts; in real time the periods' jitter and "
+        "overruns) as JSON to this file at the end (for launchers)",
+    )
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
 
 
@@ -169,14 +176,13 @@ def run(args: argparse.Namespace) -> int:
         "mode": o.mode,
         "fault_word": o.fault_word,
         "sat_events": o.sat_events,
-        "frames_received": stats.received,
-        "frames_sent": stats.sent,
-        "guard_timeouts": stats.timeouts,
+        **stats.summary(),
         "ticks_without_due_demand": node.demand_waits,
-        "overruns": stats.overruns,
     }
     if node.service is not None:
         summary["service"] = node.service.summary()
+    if args.stats_file is not None:
+        args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

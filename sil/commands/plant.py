@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
 import threading
@@ -72,12 +73,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--battery-v", type=float, default=22.2, help="battery voltage, V")
     parser.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     parser.add_argument(
+        "--ready-file",
+        type=Path,
+        metavar="PATH",
+        help="create this file once the node is built (with --start-file: when it waits for it)",
+    )
+    parser.add_argument(
         "--start-file",
         type=Path,
         metavar="PATH",
         help="get ready, then wait until this file exists before joining the bus and sending "
         "tick 0 (a launcher starts the plant and the ECU at once and creates it when the ECU "
         "listens)",
+    )
+    parser.add_argument(
+        "--stats-file",
+        type=Path,
+        metavar="PATH",
+        help="write the run summary (frames, timeouts; in real time the periods' jitter and "
+        "overruns) as JSON to this file at the end (for launchers)",
     )
     parser.add_argument(
         "--fault",
@@ -130,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    if args.ready_file is not None:
+        args.ready_file.write_text("ready\n")
     if args.start_file is not None:
         while not args.start_file.exists() and not stop.is_set():
             time.sleep(START_POLL_S)
@@ -154,4 +170,12 @@ def run(args: argparse.Namespace) -> int:
         f"rejected {node.actuator_rejected}, faults applied {node.faults_applied} / rejected "
         f"{node.faults_rejected}; frames received {stats.received}"
     )
+    if args.stats_file is not None:
+        summary = {
+            "ticks": node.tick,
+            "watchdog_trips": node.watchdog_trips,
+            "actuator_rejected": node.actuator_rejected,
+            **stats.summary(),
+        }
+        args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
     return 0

@@ -138,6 +138,8 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
         assert result.returncode == 0, result.stderr + (out / "ecu.log").read_text()
         summary = json.loads((out / "summary.json").read_text())
         assert summary["missed_ticks"] == 0 and summary["bus"] == spec
+        ecu = summary["nodes"]["ecu"]  # the node's own figures; no periods in lockstep
+        assert ecu["frames_received"] > 0 and ecu["guard_timeouts"] == 0 and "periods" not in ecu
         logs.append((out / "can.log").read_bytes())
         assert _no_nodes_left(spec)
     assert _first_difference(logs[0], logs[1]) is None
@@ -150,6 +152,26 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
         == 0
     )
     assert _first_difference((out / "can.log").read_bytes(), logs[0]) is None
+
+
+def test_real_time_run_is_paced_by_the_wall_clock_and_reports_jitter(tmp_path):
+    out = tmp_path / "rt"
+    result = _sil(
+        "run", str(_scenario(tmp_path)), "--mode", "realtime", "--bus", _udp_spec(),
+        "--out", str(out), "--no-plots",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["mode"] == "realtime"
+    assert summary["realtime_factor"] < 1.1  # paced: never faster than the wall clock
+    for node in ("ecu", "plant"):
+        stats = summary["nodes"][node]
+        # the plant runs the 3 s at 100 Hz; the ECU from its own start, before the plant's
+        assert 250 <= summary["nodes"]["plant"]["periods"] <= 320 <= stats["periods"] + 70, stats
+        assert stats["overruns"] >= 0 and stats["frames_received"] > 0
+        jitter = stats["jitter_ms"]
+        assert 0.0 <= jitter["p50"] <= jitter["p99"] <= jitter["max"]
+    assert not list(out.glob(".*-stats.json"))  # taken into the summary
 
 
 def _start_run(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path]:
