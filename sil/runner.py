@@ -68,6 +68,7 @@ GRACE_S = NODE_GUARD_S + 2.0  # recording continues this long after a node died
 # node reads it at most this often while frames come; they queue in between, so that one read
 # takes a tick's frames and no sender has to wake this process for each of them
 LOCKSTEP_READ_S = 100e-6
+START_TIMEOUT_S = 300.0  # a node process must be ready by then (numba loads slowly in a VM)
 BRIDGED_GUARD_S = 0.25  # lockstep through the fault bridge: a lost frame costs this much wall time
 
 
@@ -358,7 +359,7 @@ def _run_on_bus(
         # the ECU is armed only when the engine's frames are coming
         state.children["ecu"] = _spawn("ecu", ecu_args, opts.out_dir)
         state.children["plant"] = _spawn("plant", plant_args, opts.out_dir)
-        deadline = time.monotonic() + 60.0
+        deadline = time.monotonic() + START_TIMEOUT_S
         for node, path in ready.items():
             while not path.exists():
                 if state.children[node].poll() is not None or time.monotonic() > deadline:
