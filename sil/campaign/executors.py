@@ -111,8 +111,10 @@ def _cell(v: object) -> object:
 
 
 def _worker_init() -> None:
-    """Workers die with the campaign (Linux), and leave Ctrl-C to it."""
+    """Workers die with the campaign (Linux), leave Ctrl-C to it, and end quietly when it stops
+    them (not with the campaign's own SIGTERM handler, inherited through fork)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if sys.platform == "linux":
         _die_with_parent()
 

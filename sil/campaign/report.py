@@ -56,7 +56,14 @@ def tracking(rows: list[dict]) -> dict[str, dict]:
         if r["status"] == "completed":
             groups[r.get(CONTROLLER) or "base"].append(r)
     for name, rs in sorted(groups.items()):
-        varied = np.array([_float(r["tracking_rms_pct"]) for r in rs if r["sample"] != "-1"])
+        engines = [r for r in rs if r["sample"] != "-1"]
+        varied = np.array([_float(r["tracking_rms_pct"]) for r in engines])
+        # engines on which the EGT limiter owned the fuel at some time: held below the demand
+        limited = np.array(
+            [_float(r.get("egt_limit_time_s", "")) > 0.0 for r in engines], dtype=bool
+        )
+        free = varied[~limited & np.isfinite(varied)]
+        limited &= np.isfinite(varied)
         varied = varied[np.isfinite(varied)]
         nominal = [_float(r["tracking_rms_pct"]) for r in rs if r["sample"] == "-1"]
         offset = np.array([abs(_float(r.get("tracking_mean_pct", ""))) for r in rs])
@@ -65,6 +72,8 @@ def tracking(rows: list[dict]) -> dict[str, dict]:
             "nominal": nominal[0] if nominal else math.nan,
             **{f"p{q}": _pct(varied, q) for q in (5, 50, 95)},
             "max": float(varied.max()) if varied.size else math.nan,
+            "limited": int(limited.sum()),
+            "p95_free": _pct(free, 95),
             "offset": float(np.nanmedian(offset)) if np.isfinite(offset).any() else math.nan,
             "values": varied,
         }
@@ -227,6 +236,15 @@ def _targets(track: dict) -> list[str]:
     out.append(f"- MRAC 95th percentile {_fmt(mrac['p95'])} %N is {_fmt(ratio, '.2f')}x the "
                f"nominal engine's {_fmt(mrac['nominal'])} %N: target (within 2x) "
                f"{'met' if ok else 'NOT met'}.")  # fmt: skip
+    if mrac["limited"]:
+        n, held = mrac["runs"], mrac["limited"]
+        free = mrac["p95_free"] / mrac["nominal"] if mrac["nominal"] else math.nan
+        out.append(
+            f"  On {held} of the {n} engines the EGT limiter owned the fuel at some time, holding"
+            " the engine below the demand (the protection, not the tracking, sets their error);"
+            f" over the other {n - held} the 95th percentile is {_fmt(mrac['p95_free'])} %N,"
+            f" {_fmt(free, '.2f')}x the nominal's."
+        )
     if pid is not None and pid["runs"]:
         better = mrac["p50"] < pid["p50"]
         out.append(f"- MRAC median {_fmt(mrac['p50'])} %N against PID median {_fmt(pid['p50'])} "

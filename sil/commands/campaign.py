@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import sys
 from pathlib import Path
@@ -42,6 +43,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", action="store_true", help="print the outcome as JSON")
+
+
+def _finite(x: float) -> float | None:
+    """A figure for JSON: NaN (no runs to time) becomes null."""
+    return x if math.isfinite(x) else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,12 +89,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil campaign: interrupted; run it again to resume ({out / 'results.csv'})",
               file=sys.stderr)  # fmt: skip
         return 130
+    ran = outcome.completed + outcome.failed
+    rate = f" ({outcome.runs_per_min:.1f} runs/min)" if ran else ""
     speed = {
         "executor": f"{args.executor}, {args.ecu_impl} ECU",
-        "this invocation": f"{outcome.completed + outcome.failed} runs in {outcome.wall_s:.1f} s "
-        f"({outcome.runs_per_min:.1f} runs/min), {outcome.skipped} done before",
+        "this invocation": f"{ran} runs in {outcome.wall_s:.1f} s{rate}, "
+        f"{outcome.skipped} done before",
     }
-    summary = {**outcome.__dict__, "runs_per_min": outcome.runs_per_min, "out": str(out)}
+    summary = {**outcome.__dict__, "runs_per_min": _finite(outcome.runs_per_min), "out": str(out)}
     if not args.no_report:
         summary["report"] = str(report.write(out, campaign.name, speed))
     if args.json:
