@@ -23,7 +23,7 @@ from ecu import modes as M
 from ecu.estimator import estimator_step
 from ecu.fast_model import observer_step
 from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, sub_sat, take_sat_events
-from ecu.limiters import OWNER_SPEED, reset_loops, select_voltage
+from ecu.limiters import OWNER_SPEED, egt_lead_step, reset_loops, select_voltage
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import (
     CTRL_MRAC,
@@ -167,6 +167,7 @@ class Ecu:
             if s.speed_seen:
                 faults |= F.speed_checks(s, p, i.speed_rpm, s.speed_rpm, s.v_applied_q24)
             s.speed_rpm = i.speed_rpm
+            egt_lead_step(s, p, i.egt_dk)
             s.egt_dk = i.egt_dk
             faults |= F.egt_open_check(s, p, i.egt_dk)
         else:
@@ -298,7 +299,7 @@ class Ecu:
             else:
                 u = sat32(s.open_loop_q24 - p.trim_v_q24)
             reference_model_step(s, p, r)
-            e_dk = clamp(p.egt_limit_dk - s.egt_dk, -1000, 1000)
+            e_dk = clamp(p.egt_limit_dk - (s.egt_lead_q16 >> 16), -1000, 1000)
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, rate
             )

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
-from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q24, Q28
+from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q16, Q24, Q28
 
 N_MAX_RPM = 112_500  # 100 %N
 RATE_MIN_HZ = 50
@@ -118,6 +118,10 @@ class EcuParams:
     egt_kp: float = 0.01  # V per K
     egt_ki: float = 0.02  # V per K s
     egt_engage_k: float = 100.0  # the EGT loop joins the min-select within this of its limit
+    # the EGT loop sees the gas, not the probe: lead (T_tc s + 1)/(T_f s + 1) against the
+    # thermocouple's lag, T_tc its commissioned time constant (0 with T_f 0: the raw reading)
+    egt_lead_tau_s: float = 0.5
+    egt_lead_filter_s: float = 0.1  # T_f: gain on probe noise (T_tc + dt)/(T_f + dt), 4.6
     egt_max_k: float = 1330.0  # shutdown above this ...
     egt_max_time_s: float = 1.0  # ... for this long
     accel_max_pct_s: float = 20.0
@@ -339,6 +343,14 @@ def validate(p: EcuParams) -> None:
         p.egt_open_high_k,
         f"below the EGT signal's full scale {EGT_FULL_SCALE_K} K, where an open circuit reads",
     )
+    for name in ("egt_lead_tau_s", "egt_lead_filter_s"):
+        _check(0.0 <= getattr(p, name) <= 5.0, name, getattr(p, name), "must be in [0, 5] s")
+    _check(
+        p.egt_lead_tau_s <= 20.0 * p.egt_lead_filter_s,
+        "egt_lead_filter_s",
+        p.egt_lead_filter_s,
+        "at least egt_lead_tau_s / 20 (the lead's gain on sensor noise stays under 20)",
+    )
     _check(p.accel_max_pct_s > 0.0, "accel_max_pct_s", p.accel_max_pct_s, "must be > 0")
     _check(p.decel_max_pct_s > 0.0, "decel_max_pct_s", p.decel_max_pct_s, "must be > 0")
     for name in ("egt_engage_k", "rate_engage_pct_s", "n_limit_engage_pct"):
@@ -398,7 +410,7 @@ class FirmwareParams:
         "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
         "idle_q24", "demand_max_q24",
         "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
-        "egt_kp_q24", "egt_ki_dt_q24", "egt_max_dk",
+        "egt_kp_q24", "egt_ki_dt_q24", "egt_lead_cf_q16", "egt_lead_ctc_q16", "egt_max_dk",
         "egt_max_ticks", "accel_max_q24", "decel_max_q24", "rate_kp_q24", "rate_ki_dt_q24",
         "n_limit_q24", "n_limit_kp_q24", "n_limit_ki_dt_q24", "overspeed_rpm", "overspeed_ticks",
         "flameout_rpm", "flameout_ticks", "v_min_q24", "v_max_q24", "v_slew_q24",
@@ -530,6 +542,8 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         n_limit_engage_q24=_q(p.n_limit_engage_pct, Q24, "n_limit_engage_pct"),
         egt_kp_q24=_q(p.egt_kp, Q24, "egt_kp"),
         egt_ki_dt_q24=_q(p.egt_ki * dt, Q24, "egt_ki"),
+        egt_lead_cf_q16=_q(dt / (p.egt_lead_filter_s + dt), Q16, "egt_lead_filter_s"),
+        egt_lead_ctc_q16=_q(p.egt_lead_tau_s / (p.egt_lead_filter_s + dt), Q16, "egt_lead_tau_s"),
         egt_max_dk=round(p.egt_max_k * 10.0),
         egt_max_ticks=ticks(p.egt_max_time_s),
         accel_max_q24=_q(p.accel_max_pct_s, Q24, "accel_max_pct_s"),

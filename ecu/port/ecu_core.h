@@ -86,7 +86,8 @@ enum {
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
     X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) X(idle_q24) X(demand_max_q24) \
     X(limiters_on) X(egt_limit_dk) X(egt_engage_q24) X(rate_engage_q24) \
-    X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_max_dk) X(egt_max_ticks) \
+    X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_lead_cf_q16) X(egt_lead_ctc_q16) \
+    X(egt_max_dk) X(egt_max_ticks) \
     X(accel_max_q24) X(decel_max_q24) X(rate_kp_q24) X(rate_ki_dt_q24) X(n_limit_q24) \
     X(n_limit_kp_q24) X(n_limit_ki_dt_q24) X(overspeed_rpm) X(overspeed_ticks) \
     X(flameout_rpm) X(flameout_ticks) X(v_min_q24) X(v_max_q24) X(v_slew_q24) \
@@ -103,7 +104,7 @@ enum {
     A(theta_q24, ECU_N_THETA) A(theta_ext, ECU_N_THETA) \
     A(n_hist_rpm, ECU_RATE_BUF_LEN) A(u_hist_q24, ECU_RATE_BUF_LEN) X(hist_idx) X(hist_fill) \
     X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) X(xm1_q24) X(xm2_q24) \
-    X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) \
+    X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q16) \
     X(v_applied_q24) X(owner) X(v_saturated) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \

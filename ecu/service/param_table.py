@@ -91,6 +91,8 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("n_limit_pct", "%N", Q24, 90.0, 108.0, False),
     _s("overspeed_pct", "%N", Q24, 95.0, 110.0, False),
     _s("egt_max_k", "K", Q16, 900.0, 1500.0, False),
+    _s("egt_lead_tau_s", "s", Q16, 0.0, 5.0, False),  # what the EGT limiter sees
+    _s("egt_lead_filter_s", "s", Q16, 0.0, 5.0, False),
     _s("v_min", "V", Q24, 0.0, 10.0, False),
     _s("v_max", "V", Q24, 5.0, 30.0, False),
     _s("v_slew_v_s", "V/s", Q24, 1.0, 100.0, False),

@@ -1,0 +1,109 @@
+"""The EGT limiter's lead on the thermocouple: the fixed-point filter against its float64 twin,
+exact in steady state and off when asked, and the gas temperature it recovers through a probe
+with the commissioned time constant; in closed loop the gas overshoots the limit less."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ecu.limiters import egt_lead_step
+from ecu.params import EcuParams, compile_params
+from ecu.state import EcuState
+
+DT = 0.01
+
+
+def probe(gas_k: np.ndarray, tau_s: float, seed: int = 0, noise_k: float = 1.0) -> np.ndarray:
+    """Thermocouple readings [0.1 K]: the gas through an exact discrete first-order lag, noise,
+    rounded to the signal's 0.1 K."""
+    a = 1.0 - math.exp(-DT / tau_s)
+    y, out = gas_k[0], np.empty_like(gas_k)
+    for k, g in enumerate(gas_k):
+        y += a * (g - y)
+        out[k] = y
+    out += np.random.default_rng(seed).normal(0.0, noise_k, out.size)
+    return np.round(out * 10.0).astype(np.int64)
+
+
+def lead_fixed(p: EcuParams, readings_dk: np.ndarray) -> np.ndarray:
+    fp, s = compile_params(p), EcuState()
+    out = np.empty(readings_dk.size)
+    for k, x in enumerate(readings_dk.tolist()):
+        egt_lead_step(s, fp, x)
+        s.egt_dk = x
+        out[k] = s.egt_lead_q16 / 65536.0 / 10.0  # K
+    return out
+
+
+def lead_float(p: EcuParams, readings_dk: np.ndarray) -> np.ndarray:
+    """Twin: (T_tc s + 1)/(T_f s + 1) by backward Euler in float64."""
+    x = readings_dk / 10.0
+    c_f = DT / (p.egt_lead_filter_s + DT)
+    c_tc = p.egt_lead_tau_s / (p.egt_lead_filter_s + DT)
+    y = np.empty_like(x)
+    y[0] = x[0]
+    for k in range(1, x.size):
+        y[k] = y[k - 1] + c_f * (x[k] - y[k - 1]) + c_tc * (x[k] - x[k - 1])
+    return y
+
+
+def gas_profile() -> np.ndarray:
+    t = np.arange(0.0, 6.0, DT)
+    gas = np.full(t.size, 1100.0)
+    gas[t >= 1.0] = 1300.0  # a step
+    ramp = (t >= 3.0) & (t < 4.0)
+    gas[ramp] = 1300.0 - 150.0 * (t[ramp] - 3.0)  # a ramp down
+    gas[t >= 4.0] = 1150.0
+    return gas
+
+
+def test_fixed_point_lead_matches_its_float64_twin() -> None:
+    p = EcuParams()
+    readings = probe(gas_profile(), p.egt_lead_tau_s, seed=1)
+    fixed, twin = lead_fixed(p, readings), lead_float(p, readings)
+    assert np.max(np.abs(fixed - twin)) < 0.05  # K, over 600 noisy ticks
+
+
+def test_lead_recovers_the_gas_temperature_through_the_probe_lag() -> None:
+    p = EcuParams()
+    gas = gas_profile()
+    readings = probe(gas, p.egt_lead_tau_s, noise_k=0.0)
+    y, raw = lead_fixed(p, readings), readings / 10.0
+    # what is left is the lead's own filter: the gas through 1/(T_f s + 1)
+    seen = lead_float(replace(p, egt_lead_tau_s=0.0), np.round(gas * 10.0))
+    after = int(round((1.0 + 0.3) / DT))  # 0.3 s after the 200 K step
+    assert gas[after] - raw[after] > 80.0  # the probe is still far behind ...
+    assert abs(y[after] - seen[after]) < 2.0  # ... the lead is where its filter lets it be
+    assert np.max(np.abs(y - seen)) < 0.05 * 200.0  # everywhere, within 5 % of the step
+    ramp = int(round(3.8 / DT))
+    assert abs(y[ramp] - gas[ramp]) < 20.0 < abs(raw[ramp] - gas[ramp])  # a ramp: lag removed
+    noisy = lead_fixed(p, probe(gas, p.egt_lead_tau_s, seed=2))
+    quiet = slice(int(5.0 / DT), None)  # steady: the lead's gain on 1 K of white probe noise
+    assert 1.0 < np.std(noisy[quiet]) < 6.0
+
+
+def test_steady_reading_is_exact_and_the_lead_can_be_switched_off() -> None:
+    flat = np.full(200, 11_234, dtype=np.int64)
+    assert np.all(lead_fixed(EcuParams(), flat) * 10.0 == 11_234.0)
+    off = replace(EcuParams(), egt_lead_tau_s=0.0, egt_lead_filter_s=0.0)
+    readings = probe(gas_profile(), 0.5, seed=3)
+    assert np.array_equal(lead_fixed(off, readings) * 10.0, readings.astype(float))
+
+
+def test_the_gas_overshoots_the_egt_limit_less_with_the_lead(make_rig: Any) -> None:
+    def peak_gas(p: EcuParams) -> float:
+        rig = make_rig(params=p, hot_k=150.0)  # 150 K hotter: the limit is met near 90 %N
+        rig.step(300)
+        peak = 0.0
+        for _ in range(800):
+            rig.step(1, demand_cpct=9500)
+            peak = max(peak, rig.egt_steady())
+        return peak
+
+    with_lead = peak_gas(EcuParams())
+    without = peak_gas(replace(EcuParams(), egt_lead_tau_s=0.0, egt_lead_filter_s=0.0))
+    assert without - 1280.0 > 2.0 * (with_lead - 1280.0) > 0.0
