@@ -299,7 +299,7 @@ class Ecu:
             else:
                 u = sat32(s.open_loop_q24 - p.trim_v_q24)
             reference_model_step(s, p, r)
-            e_dk = clamp(p.egt_limit_dk - (s.egt_lead_q16 >> 16), -1000, 1000)
+            e_dk = clamp(p.egt_limit_dk - (s.egt_lead_q12 >> 12), -1000, 1000)
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, rate
             )

@@ -27,15 +27,16 @@ OWNER_DECEL = 4
 def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
     """The gas temperature from the thermocouple's reading: the lead (T_tc s + 1)/(T_f s + 1)
     by backward Euler,  y[k] = y[k-1] + c_f (x[k] - y[k-1]) + c_tc (x[k] - x[k-1]),  with
-    c_f = dt/(T_f + dt) and c_tc = T_tc/(T_f + dt); y in 0.1 K Q16, exact in steady state.
-    Called with each valid reading before s.egt_dk (x[k-1]) takes it."""
-    x_q16 = egt_dk << 16
-    y = s.egt_lead_q16
+    c_f = dt/(T_f + dt) and c_tc = T_tc/(T_f + dt) in Q16; y in 0.1 K Q19.12, which holds the
+    lead's largest output (gain up to 20 on a full-scale step) without saturating; exact in
+    steady state. Called with each valid reading before s.egt_dk (x[k-1]) takes it."""
+    x_q12 = egt_dk << 12
+    y = s.egt_lead_q12
     if y == 0:  # the first reading: no history to lead on
-        s.egt_lead_q16 = sat32(x_q16)
+        s.egt_lead_q12 = sat32(x_q12)
         return
-    y += (p.egt_lead_cf_q16 * (x_q16 - y)) >> 16
-    s.egt_lead_q16 = sat32(y + p.egt_lead_ctc_q16 * (egt_dk - s.egt_dk))
+    y += (p.egt_lead_cf_q16 * (x_q12 - y)) >> 16
+    s.egt_lead_q12 = sat32(y + ((p.egt_lead_ctc_q16 * (egt_dk - s.egt_dk)) >> 4))
 
 
 def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:

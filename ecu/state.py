@@ -42,8 +42,8 @@ class EcuState:
         "xm1_q24", "xm2_q24",
         # limit loops: previous errors (velocity form) and the applied pump voltage
         "egt_e_prev_q24", "acc_e_prev_q24", "dec_e_prev_q24", "nlim_e_prev_q24",
-        # the EGT the limiter sees (lead on the thermocouple, 0.1 K in Q16; 0: no reading yet)
-        "egt_lead_q16",
+        # the EGT the limiter sees (lead on the thermocouple, 0.1 K in Q12; 0: no reading yet)
+        "egt_lead_q12",
         "v_applied_q24", "owner", "v_saturated",
         # last valid inputs held on frame loss
         "speed_rpm", "egt_dk", "supply_mv", "pump_ma", "demand_q24", "open_loop_q24",

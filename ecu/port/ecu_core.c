@@ -348,19 +348,20 @@ static void pid_track(ecu_t *e, int32_t err, int32_t dv, int32_t u_applied)
 enum { OWNER_SPEED, OWNER_EGT, OWNER_ACCEL, OWNER_NLIMIT, OWNER_DECEL };
 
 /* the gas temperature from the thermocouple's reading (ecu/limiters.py egt_lead_step): the lead
- * (T_tc s + 1)/(T_f s + 1) by backward Euler, y in 0.1 K Q16; called before s->egt_dk takes x */
+ * (T_tc s + 1)/(T_f s + 1) by backward Euler, y in 0.1 K Q12; called before s->egt_dk takes x */
 static void egt_lead_step(ecu_t *e, int32_t egt_dk)
 {
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
-    int64_t x_q16 = (int64_t)egt_dk * 65536;
-    int64_t y = s->egt_lead_q16;
+    int64_t x_q12 = (int64_t)egt_dk * 4096;
+    int64_t y = s->egt_lead_q12;
     if (y == 0) { /* the first reading: no history to lead on */
-        s->egt_lead_q16 = sat32(e, x_q16);
+        s->egt_lead_q12 = sat32(e, x_q12);
         return;
     }
-    y += ((int64_t)p->egt_lead_cf_q16 * (x_q16 - y)) >> 16;
-    s->egt_lead_q16 = sat32(e, y + (int64_t)p->egt_lead_ctc_q16 * ((int64_t)egt_dk - s->egt_dk));
+    y += ((int64_t)p->egt_lead_cf_q16 * (x_q12 - y)) >> 16;
+    s->egt_lead_q12 =
+        sat32(e, y + (((int64_t)p->egt_lead_ctc_q16 * ((int64_t)egt_dk - s->egt_dk)) >> 4));
 }
 
 static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_prev, int32_t kp_q24,
@@ -704,7 +705,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
         }
         reference_model_step(e, r);
-        e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - (s->egt_lead_q16 >> 16), -1000, 1000);
+        e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - (s->egt_lead_q12 >> 12), -1000, 1000);
         v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
                            div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, rate);
         u_applied = sat32(e, (int64_t)v - p->trim_v_q24);

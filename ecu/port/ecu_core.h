@@ -104,7 +104,7 @@ enum {
     A(theta_q24, ECU_N_THETA) A(theta_ext, ECU_N_THETA) \
     A(n_hist_rpm, ECU_RATE_BUF_LEN) A(u_hist_q24, ECU_RATE_BUF_LEN) X(hist_idx) X(hist_fill) \
     X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) X(xm1_q24) X(xm2_q24) \
-    X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q16) \
+    X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q12) \
     X(v_applied_q24) X(owner) X(v_saturated) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \

@@ -35,7 +35,7 @@ def lead_fixed(p: EcuParams, readings_dk: np.ndarray) -> np.ndarray:
     for k, x in enumerate(readings_dk.tolist()):
         egt_lead_step(s, fp, x)
         s.egt_dk = x
-        out[k] = s.egt_lead_q16 / 65536.0 / 10.0  # K
+        out[k] = s.egt_lead_q12 / 4096.0 / 10.0  # K
     return out
 
 
@@ -107,3 +107,16 @@ def test_the_gas_overshoots_the_egt_limit_less_with_the_lead(make_rig: Any) -> N
     with_lead = peak_gas(EcuParams())
     without = peak_gas(replace(EcuParams(), egt_lead_tau_s=0.0, egt_lead_filter_s=0.0))
     assert without - 1280.0 > 2.0 * (with_lead - 1280.0) > 0.0
+
+
+def test_an_open_thermocouple_does_not_saturate_the_lead() -> None:
+    """A full-scale jump (an open circuit reads 16383) and back, at the largest lead allowed:
+    the lead's output stays within its Q12 word, so no store saturates."""
+    from ecu.fixedpoint import take_sat_events
+
+    p = replace(EcuParams(), egt_lead_tau_s=5.0, egt_lead_filter_s=0.25)  # gain 20
+    readings = np.array([1000] * 10 + [16_383] * 5 + [0] * 5 + [11_000] * 10, dtype=np.int64)
+    take_sat_events()
+    y = lead_fixed(p, readings)
+    assert take_sat_events() == 0
+    assert y.max() > 1638.3 * 15 and y.min() < -1638.3 * 3  # the lead did swing that far
