@@ -83,16 +83,16 @@ class CommandNode:
         tick_before = recorder.tick
         self._wall_s = wall_s
         recorder.record(frame_id, data, wall_s)
+        if frame_id == SENSORS and not self.realtime:
+            target = recorder.latest_sensor_tick + self.lead
+            if target % self.every == 0 and target <= self.last_tick:
+                self._play(target, send)
+            recorder.commands_sent()
         if recorder.tick != tick_before:  # the ECU answered a tick
             if self.progress is not None:
                 self.progress(recorder.tick)
             if recorder.tick > self.last_tick:
                 self.finished = True
-                return
-        if frame_id == SENSORS and not self.realtime:
-            target = recorder.latest_sensor_tick + self.lead
-            if target % self.every == 0 and target <= self.last_tick:
-                self._play(target, send)
 
     def on_timeout(self, send: SendFn) -> None:
         pass

@@ -226,8 +226,8 @@ class Recorder:
                 self._plant_pending = []
                 if slot.ecu is not None:
                     self._complete.add(k)
-            # a tick completed by its sensor frame waits for the next plant or ECU frame: the
-            # command node's answers to that sensor frame come first and belong to the tick
+            # a tick completed by its sensor frame waits for the command node's answers to that
+            # frame, which belong to the tick (see commands_sent), or the next plant or ECU frame
             elif self._complete:
                 self._flush_ready()
         elif frame_id in ECU_IDS:
@@ -267,6 +267,13 @@ class Recorder:
         for name, status in self._e2e_seen:
             out.setdefault(name, Counter())[_STATUS_NAMES[status]] = counts[name][status]
         return out
+
+    def commands_sent(self) -> None:
+        """The command node has sent (and recorded) its frames on the latest sensor frame: a tick
+        that sensor frame completed is written now. Waiting for the next plant or ECU frame
+        instead would let the next tick's first frame in before the run's last tick ends it."""
+        if self._complete:
+            self._flush_ready()
 
     # -- ticks out -------------------------------------------------------------------------------
     def _flush_ready(self) -> None:
