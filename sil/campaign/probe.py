@@ -1,7 +1,7 @@
 """A lean recorder for campaign runs: no files, one row per tick of what the metrics need.
 
-It stands in for :class:`sil.recorder.Recorder` towards the command node (``record``, ``tick``,
-``latest_sensor_tick``) and keeps, sample-and-hold as the trace does, the true speed of
+It stands in for :class:`sil.recorder.Recorder` towards the command node (``record``,
+``commands_sent``, ``tick``, ``latest_sensor_tick``) and keeps, sample-and-hold as the trace does, the true speed of
 PlantTruthB, the ECU's reference speed, fault word and loop owner of EcuStatus and the pump
 voltage and mode of EcuActuator; the plant's true speed and EGT are read from the plant in
 process (``truth``), so invariants hold on the engine, not on what its sensors claim.
@@ -55,6 +55,10 @@ class Probe:
         handler = self._ids.get(frame_id)
         if handler is not None:
             handler(data)
+
+    def commands_sent(self) -> None:
+        """Nothing waits: in process the frames come in order and a row is taken per actuator
+        frame."""
 
     def _on_truth_b(self, data: bytes | bytearray) -> None:
         self._truth_b.unpack_raw(data, self._raw)
