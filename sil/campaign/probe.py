@@ -1,10 +1,11 @@
 """A lean recorder for campaign runs: no files, one row per tick of what the metrics need.
 
 It stands in for :class:`sil.recorder.Recorder` towards the command node (``record``,
-``commands_sent``, ``tick``, ``latest_sensor_tick``) and keeps, sample-and-hold as the trace does, the true speed of
-PlantTruthB, the ECU's reference speed, fault word and loop owner of EcuStatus and the pump
-voltage and mode of EcuActuator; the plant's true speed and EGT are read from the plant in
-process (``truth``), so invariants hold on the engine, not on what its sensors claim.
+``commands_sent``, ``tick``, ``latest_sensor_tick``) and keeps, sample-and-hold as the trace
+does, the true speed of PlantTruthB, the ECU's reference speed, fault word and loop owner of
+EcuStatus and the pump voltage and mode of EcuActuator; the plant's true speed and EGT are read
+from the plant in process (``truth``), so invariants hold on the engine, not on what its sensors
+claim.
 """
 
 from __future__ import annotations
