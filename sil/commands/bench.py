@@ -17,7 +17,7 @@ TARGETS = {
     "replay": "tools.replay_bench",
     "sil": "sil.bench",
     "service": "sil.console.bench",
-    "port": "ecu.port.bench",
+    "port": "sil.port_bench",
 }
 
 

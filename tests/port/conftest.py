@@ -9,15 +9,16 @@ import pytest
 
 from ecu import golden
 from ecu.port import toolchain
+from sil import golden as sources
 
 
 @pytest.fixture(scope="session")
 def vectors(tmp_path_factory) -> dict[str, tuple[Path, golden.Golden]]:
-    """Every golden vector of ecu.golden.SOURCES, recorded now: name -> (file, vectors)."""
+    """Every golden vector of sil.golden.SOURCES, recorded now: name -> (file, vectors)."""
     out = tmp_path_factory.mktemp("golden")
     found = {}
-    for name in golden.SOURCES:
-        g = golden.record(name)
+    for name in sources.SOURCES:
+        g = sources.record(name)
         path = out / f"{name}.gv"
         golden.write(g, path)
         found[name] = (path, g)

@@ -3,8 +3,9 @@ vectors under qemu-system-arm (mps2-an386, semihosting), and its figures meet th
 
 import pytest
 
-from ecu import golden
-from ecu.port import bench, build, qemu
+from ecu.port import build, qemu
+from sil import golden as sources
+from sil import port_bench as bench
 
 
 @pytest.fixture(scope="module")
@@ -12,7 +13,7 @@ def elf(toolchains):
     return build.arm_replayer()
 
 
-@pytest.mark.parametrize("name", list(golden.SOURCES))
+@pytest.mark.parametrize("name", list(sources.SOURCES))
 def test_cortex_m4_matches_every_tick(elf, vectors, name):
     path, g = vectors[name]
     done = qemu.run(elf, path, timeout=120)

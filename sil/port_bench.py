@@ -27,6 +27,7 @@ from pathlib import Path
 from ecu import golden
 from ecu.port import build, qemu
 from ecu.port.core import CEcu
+from sil import golden as golden_sources
 
 SCENARIO = "thesis-5.3-mrac-aero"
 VECTOR = "mrac-aero"
@@ -243,7 +244,7 @@ def sil_figures(quick: bool) -> dict:
 def run(quick: bool = False) -> dict:
     figures: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
-        g = golden.record(VECTOR)
+        g = golden_sources.record(VECTOR)
         vectors = Path(tmp) / f"{VECTOR}.gv"
         golden.write(g, vectors)
         figures["vector"] = f"{VECTOR} ({g.ticks} ticks)"
