@@ -1,5 +1,8 @@
 """`sil bench sil`: real-time factor of a whole SIL run, in lockstep over the bus and in process,
-with the Python firmware and with its C port as the ECU (keys of the C runs end in ``_c_ecu``)."""
+with the Python firmware and with its C port as the ECU (keys of the C runs end in ``_c_ecu``).
+
+Each of the four runs is repeated (alternated, so that a busy spell of a shared machine hits all
+alike) and the best is reported, with every run's figure under ``..._runs``."""
 
 from __future__ import annotations
 
@@ -15,6 +18,7 @@ from sil.runner import run as run_scenario
 SCENARIO = "thesis-5.3-mrac-aero"  # 300 s, aero-thermal plant, 1 ms steps, ECU at 100 Hz
 ECU_IMPLS = (("python", ""), ("c", "_c_ecu"))  # (`--ecu-impl`, suffix of its keys)
 MODES = (("lockstep", "realtime_factor"), ("inproc", "inproc_realtime_factor"))
+REPEATS = 3  # (1 with --quick)
 
 
 def run(quick: bool = False) -> dict:
@@ -23,25 +27,34 @@ def run(quick: bool = False) -> dict:
         s = dataclasses.replace(s, duration_s=30.0)
     figures: dict = {"scenario": s.name, "sim_time_s": s.duration_s}
     figures["load_average_1min_before"] = round(os.getloadavg()[0], 2)  # others' load, mostly
+    runs: dict[str, list[float]] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for impl, suffix in ECU_IMPLS:
-            for mode, key in MODES:
-                summary = run_scenario(
-                    RunOptions(
-                        s,
-                        Path(tmp) / f"{mode}-{impl}",
-                        mode=mode,
-                        plots=False,
-                        progress=False,
-                        ecu_impl=impl,
+        for _ in range(1 if quick else REPEATS):
+            for impl, suffix in ECU_IMPLS:
+                for mode, key in MODES:
+                    summary = run_scenario(
+                        RunOptions(
+                            s,
+                            Path(tmp) / f"{mode}-{impl}",
+                            mode=mode,
+                            plots=False,
+                            progress=False,
+                            ecu_impl=impl,
+                        )
                     )
-                )
-                figures[key + suffix] = round(summary["realtime_factor"], 2)
-                figures[f"{mode}_wall_s{suffix}"] = round(summary["wall_time_s"], 2)
-                figures[f"{mode}_missed_ticks{suffix}"] = summary["missed_ticks"]
-                if summary["status"] != "completed":
-                    figures[f"{mode}_aborted{suffix}"] = summary["abort_reason"]
-                if mode == "lockstep" and not suffix:
-                    figures["bus"] = summary["bus"]
-                    figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)
+                    factor = round(summary["realtime_factor"], 2)
+                    runs.setdefault(key + suffix, []).append(factor)
+                    if factor < max(runs[key + suffix]):
+                        continue  # the figures below are the best run's
+                    figures[key + suffix] = factor
+                    figures[f"{mode}_wall_s{suffix}"] = round(summary["wall_time_s"], 2)
+                    figures[f"{mode}_missed_ticks{suffix}"] = summary["missed_ticks"]
+                    figures.pop(f"{mode}_aborted{suffix}", None)
+                    if summary["status"] != "completed":
+                        figures[f"{mode}_aborted{suffix}"] = summary["abort_reason"]
+                    if mode == "lockstep" and not suffix:
+                        figures["bus"] = summary["bus"]
+                        figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)
+    for key, factors in runs.items():
+        figures[f"{key}_runs"] = factors
     return figures

@@ -3,7 +3,8 @@
 It follows the lockstep rules of :mod:`protocol.lockstep`: on PlantSensors(k) it sends the Demand
 for tick k + L (L = one demand period) and, before it, any FaultInject due at that tick, so both
 are on the bus before the ECU can answer tick k + L. It hears every frame and hands it, with the
-frames it sends itself, to the :class:`~sil.recorder.Recorder`. It is finished once the ECU has
+frames it sends itself, to the :class:`~sil.recorder.Recorder` (or, in process, to the
+:class:`~sil.recorder_process.RecorderProcess`). It is finished once the ECU has
 answered the last tick.
 """
 
@@ -17,6 +18,7 @@ from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, demand_lead_ticks, every_ticks
 from protocol.node import SendFn
 from sil.recorder import SENSORS, Recorder
+from sil.recorder_process import RecorderProcess
 from sil.scenario import Fault, fault_targets
 
 
@@ -24,7 +26,7 @@ class CommandNode:
     def __init__(
         self,
         codec: Codec,
-        recorder: Recorder,
+        recorder: Recorder | RecorderProcess,
         commands: np.ndarray,
         *,
         ecu_rate_hz: float,

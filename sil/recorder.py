@@ -348,6 +348,18 @@ class Recorder:
             for t in (self.sensor_ticks, self.actuator_ticks)
         )
 
+    def totals(self) -> dict:
+        """The run's figures: ticks written, frames heard, bits (all of them after close),
+        ticks missed, E2E verdicts per message and frames of unknown IDs per ID."""
+        return {
+            "tick": self.tick,
+            "frames": self.frames,
+            "bits": self.bits.flush(),
+            "missed_ticks": self.missed_ticks,
+            "e2e": {m: dict(c) for m, c in self.e2e.items()},
+            "unknown_ids": dict(self.unknown_ids),
+        }
+
     def close(self) -> None:
         """Write whatever is still pending, in tick order, and close the files."""
         if self._trace_file.closed:

@@ -17,7 +17,6 @@ summary aborted with the reason.
 
 from __future__ import annotations
 
-import ctypes
 import gc
 import json
 import math
@@ -53,7 +52,9 @@ from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
 from sil.command_node import CommandNode
+from sil.parent_death import die_with_parent
 from sil.recorder import Recorder
+from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.scenario import HEALTH, Scenario
 
 # fault bits listed in the summary: all but the two that only describe the present tick
@@ -146,11 +147,6 @@ def ecu_params(s: Scenario, trim_v: float) -> EcuParams:
     return preset(s.controller.preset or "default", **ecu_overrides(s, trim_v))
 
 
-def _die_with_parent() -> None:  # runs in the child between fork and exec
-    libc = ctypes.CDLL("libc.so.6", use_errno=True)
-    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-
-
 def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
     log = (out_dir / f"{name}.log").open("w")
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -160,7 +156,7 @@ def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
         stderr=subprocess.STDOUT,
         stdin=subprocess.DEVNULL,
         env=env,
-        preexec_fn=_die_with_parent if sys.platform == "linux" else None,
+        preexec_fn=die_with_parent if sys.platform == "linux" else None,  # (before exec)
     )
 
 
@@ -217,9 +213,13 @@ def run(opts: RunOptions) -> dict:
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     period = 1.0 / s.ecu_rate_hz
     codec = Codec()
-    recorder = Recorder(
-        opts.out_dir, codec, period, commands=commands, wall_clock=opts.mode == "realtime"
-    )
+    recorder: Recorder | RecorderProcess
+    if opts.mode == "inproc" and not s.bus_faults:  # the recorder on a core of its own
+        recorder = RecorderProcess(opts.out_dir, period, commands=commands)
+    else:
+        recorder = Recorder(
+            opts.out_dir, codec, period, commands=commands, wall_clock=opts.mode == "realtime"
+        )
     progress = _Progress(len(commands), opts.progress, s.name)
     command = CommandNode(
         codec,
@@ -252,10 +252,16 @@ def run(opts: RunOptions) -> dict:
             _run_on_bus(opts, s, seed, params, command, recorder, state)
     except KeyboardInterrupt:
         state.status, state.abort_reason = "aborted", "interrupted (Ctrl-C)"
+    except RecorderFailed as exc:
+        state.status, state.abort_reason = "aborted", str(exc)
     finally:
         _stop(state.children)
         progress.close()
-        recorder.close()
+        try:
+            recorder.close()
+        except RecorderFailed as exc:
+            state.status = "aborted"
+            state.abort_reason = state.abort_reason or str(exc)
         gc.unfreeze()
     wall = time.perf_counter() - t0
     return _finish(opts, s, seed, recorder, command, state, wall)
@@ -478,13 +484,19 @@ def _finish(
     opts: RunOptions,
     s: Scenario,
     seed: int,
-    recorder: Recorder,
+    recorder: Recorder | RecorderProcess,
     command: CommandNode,
     state: RunState,
     wall: float,
 ) -> dict:
-    sim_time = recorder.tick / s.ecu_rate_hz
-    trace = metrics.load_trace(opts.out_dir / "trace.csv")
+    totals = recorder.totals()
+    sim_time = totals["tick"] / s.ecu_rate_hz
+    trace = None
+    try:
+        trace = metrics.load_trace(opts.out_dir / "trace.csv")
+    except (OSError, ValueError) as exc:  # a recorder that died mid-run: the rest is reported
+        state.status = "aborted"
+        state.abort_reason = state.abort_reason or f"trace.csv cannot be read: {exc}"
     summary = {
         "scenario": s.name,
         "status": state.status,
@@ -496,18 +508,18 @@ def _finish(
         "sim_time_s": sim_time,
         "wall_time_s": wall,
         "realtime_factor": sim_time / wall if wall > 0 else math.nan,
-        "frames": recorder.frames,
-        "bus_load_pct": bus_load_pct(recorder.bits.flush(), sim_time),
-        "missed_ticks": recorder.missed_ticks,
-        **metrics.summarize(trace, 1.0 / s.ecu_rate_hz, REPORTED_FAULTS),
+        "frames": totals["frames"],
+        "bus_load_pct": bus_load_pct(totals["bits"], sim_time),
+        "missed_ticks": totals["missed_ticks"],
+        **(metrics.summarize(trace, 1.0 / s.ecu_rate_hz, REPORTED_FAULTS) if trace else {}),
         "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
         "bus_faults_injected": state.bus_fault_events,
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
-        "e2e": {m: dict(c) for m, c in recorder.e2e.items() if set(c) - {"OK"}},
+        "e2e": {m: c for m, c in totals["e2e"].items() if set(c) - {"OK"}},
         **({"nodes": nodes} if (nodes := _node_stats(opts.out_dir)) else {}),
-        "unknown_ids": {f"0x{k:X}": v for k, v in recorder.unknown_ids.items()},
+        "unknown_ids": {f"0x{k:X}": v for k, v in totals["unknown_ids"].items()},
     }
-    if state.status == "completed" and recorder.tick < len(command.commands):
+    if state.status == "completed" and totals["tick"] < len(command.commands):
         summary["status"] = "aborted"
         summary["abort_reason"] = summary["abort_reason"] or "the run ended early"
     for name in ("ecu", "plant"):
@@ -516,7 +528,7 @@ def _finish(
             summary[f"{name}_log"] = log.name
     for fmt in opts.log_formats:
         convert(opts.out_dir / "can.log", fmt)
-    if opts.plots:
+    if opts.plots and trace:
         from sil import plots  # matplotlib: only when plotting (campaign runs do not)
 
         title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sil.campaign.spec import Campaign, Case, Invariants
-from sil.runner import _die_with_parent
+from sil.parent_death import die_with_parent
 
 FIGURES = (
     "ticks", "wall_s", "tracking_rms_pct", "tracking_mean_pct", "max_n_pct", "max_egt_K",
@@ -116,7 +116,7 @@ def _worker_init() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if sys.platform == "linux":
-        _die_with_parent()
+        die_with_parent()
 
 
 def _local(tasks: list[Task], workers: int) -> Iterator[dict]:

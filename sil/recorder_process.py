@@ -1,0 +1,213 @@
+"""The recorder in a process of its own, for in-process runs.
+
+In ``--mode inproc`` the plant, the ECU and the command node take turns on one core, and the
+recorder's work (sorting frames into ticks, E2E checks, formatting can.log and trace.csv) is a
+quarter to a third of the run. :class:`RecorderProcess` stands where the
+:class:`~sil.recorder.Recorder` stands for the command node: it takes the frames, and the command
+node's ``commands_sent``, in order and sends them in batches to a child process, which hands them
+in the same order to a Recorder there. The files are therefore the ones the Recorder writes in
+process, byte for byte, and the recorder's work runs on another core.
+
+While the run goes, the command node reads back the newest sensor tick (taken from the frames
+here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since in process,
+with no bus between the nodes, no frame is lost or reordered (runs with bus faults keep the
+Recorder in process). The figures of the run (:meth:`totals`) are the child's, at close.
+
+The child reads its settings and then the batches from its stdin (a feeder thread writes them,
+so the run goes on while the child starts) and sends its figures back on its stdout. It ignores
+Ctrl-C (the run stops and closes it, so that it writes everything); should the run die, it
+writes what it was given and ends. If it fails, the next batch raises :class:`RecorderFailed`;
+what it was given until then is on disk.
+"""
+
+from __future__ import annotations
+
+import pickle
+import queue
+import signal
+import subprocess
+import sys
+import threading
+from array import array
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+from protocol.codec import Codec
+from sil.parent_death import die_with_parent
+from sil.recorder import ACTUATOR, SENSORS, Recorder, TickUnwrapper
+
+BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
+_COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
+CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
+
+
+class RecorderFailed(RuntimeError):
+    """The recorder process is gone (what it had been given is on disk)."""
+
+
+class RecorderProcess:
+    def __init__(
+        self,
+        out_dir: Path,
+        period_s: float,
+        *,
+        commands: np.ndarray | None = None,
+        channel: str = "vcan0",
+    ) -> None:
+        self._child = subprocess.Popen(
+            [sys.executable, "-m", "sil.recorder_process"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            preexec_fn=die_with_parent,
+        )
+        # a feeder thread writes the batches, so that the run goes on while the child starts
+        self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._outbox.put((out_dir, period_s, commands, channel))
+        self._feeder = threading.Thread(target=self._feed, name="sil-recorder-feed", daemon=True)
+        self._broken = False
+        self._feeder.start()
+        self.tick = 0  # ticks answered (EcuActuator frames)
+        self.latest_sensor_tick = -1
+        self.frames = 0
+        self._sensor_wrap = TickUnwrapper()
+        self._ids = array("i")
+        self._lengths = bytearray()
+        self._data = bytearray()
+        self._totals: dict | None = None
+
+    def _feed(self) -> None:
+        pipe = self._child.stdin
+        assert pipe is not None
+        try:
+            while True:
+                message = self._outbox.get()
+                pickle.dump(message, pipe, protocol=pickle.HIGHEST_PROTOCOL)
+                pipe.flush()
+                if message is None:
+                    break
+        except OSError:  # (BrokenPipeError: the child is gone)
+            self._broken = True
+        finally:
+            try:
+                pipe.close()
+            except OSError:  # (what was left in the buffer has nowhere to go)
+                pass
+
+    def record(self, frame_id: int, data: bytes | bytearray, wall_s: float | None = None) -> None:
+        # in this order, so that a Ctrl-C between two of these lines leaves no half frame: the
+        # child takes a frame by its ID, and data without one is never read
+        self._data += data
+        self._lengths.append(len(data))
+        self._ids.append(frame_id)
+        self.frames += 1
+        if frame_id == SENSORS:
+            k = self._sensor_wrap.full(data[2] | data[3] << 8)
+            if k > self.latest_sensor_tick:
+                self.latest_sensor_tick = k
+        elif frame_id == ACTUATOR:
+            self.tick += 1
+        if len(self._ids) >= BATCH_FRAMES:
+            self._send_batch()
+
+    def commands_sent(self) -> None:
+        self._ids.append(_COMMANDS_SENT)
+
+    def _send_batch(self) -> None:
+        if self._broken or self._child.poll() is not None:
+            raise RecorderFailed(self._failure())
+        self._outbox.put((self._ids.tobytes(), bytes(self._lengths), bytes(self._data)))
+        self._ids, self._lengths, self._data = array("i"), bytearray(), bytearray()
+
+    def _failure(self) -> str:
+        try:
+            code = self._child.wait(5.0)
+        except subprocess.TimeoutExpired:
+            return "the recorder process stopped taking frames"
+        return f"the recorder process exited with code {code}"
+
+    def close(self) -> None:
+        """Send what is left, let the child write it and close its files; take its figures."""
+        if self._totals is not None:
+            return
+        self._totals = {  # what is known here, should the child not answer
+            "tick": self.tick,
+            "frames": self.frames,
+            "bits": 0,
+            "missed_ticks": 0,
+            "e2e": {},
+            "unknown_ids": {},
+        }
+        try:
+            if self._ids:
+                self._send_batch()
+            self._outbox.put(None)
+            self._feeder.join(CLOSE_TIMEOUT_S)
+            if self._feeder.is_alive():  # the child took nothing for a minute
+                self._child.kill()
+                raise RecorderFailed("the recorder process stopped taking frames")
+            stdout = self._child.stdout
+            assert stdout is not None
+            try:
+                self._totals = pickle.load(stdout)
+            except (EOFError, pickle.UnpicklingError):
+                raise RecorderFailed(self._failure()) from None
+        finally:
+            if self._child.stdout is not None:
+                self._child.stdout.close()
+            # its files are closed; its interpreter's teardown (0.1-0.3 s) is not waited for
+            threading.Thread(target=self._reap, name="sil-recorder-reap", daemon=True).start()
+
+    def _reap(self) -> None:
+        try:
+            self._child.wait(CLOSE_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            self._child.kill()
+            self._child.wait()
+
+    def totals(self) -> dict:
+        """The child Recorder's :meth:`~sil.recorder.Recorder.totals` (after close)."""
+        if self._totals is None:
+            raise RuntimeError("RecorderProcess.totals() before close()")
+        return self._totals
+
+
+def _exit(signum: int, _frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
+    """The child: the Recorder's settings, then batches until None; its totals back at the end."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent ends the run and closes us
+    signal.signal(signal.SIGTERM, _exit)  # the parent died: write what came, then go
+    out_dir, period_s, commands, channel = pickle.load(inbox)
+    recorder = Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
+    try:
+        while (batch := _next(inbox)) is not None:
+            ids, lengths, data = batch
+            record, commands_sent = recorder.record, recorder.commands_sent
+            at = 0
+            length = iter(lengths)
+            for frame_id in array("i", ids):
+                if frame_id == _COMMANDS_SENT:
+                    commands_sent()
+                    continue
+                end = at + next(length)
+                record(frame_id, data[at:end])
+                at = end
+    finally:
+        recorder.close()
+    pickle.dump(recorder.totals(), outbox)
+    outbox.flush()
+
+
+def _next(inbox: BinaryIO) -> tuple | None:
+    try:
+        return pickle.load(inbox)
+    except EOFError:  # the parent is gone: what came is written
+        return None
+
+
+if __name__ == "__main__":
+    serve(sys.stdin.buffer, sys.stdout.buffer)

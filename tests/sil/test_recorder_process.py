@@ -1,0 +1,147 @@
+"""The recorder in a process of its own (in-process runs): the same files as the recorder in
+process, every frame kept on Ctrl-C, and a dead recorder process ends the run cleanly."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from protocol.codec import Codec
+from sil import runner, scenario
+from sil.recorder import Recorder
+from sil.recorder_process import BATCH_FRAMES, RecorderFailed, RecorderProcess
+from sil.runner import RunOptions
+
+SCENARIO = """
+description = "MRAC staircase with a pump failure, for the recorder process tests"
+duration_s = {duration}
+[plant]
+model = "aero"
+[controller]
+kind = "mrac"
+preset = "sec5_3_mrac_aero"
+[command]
+base = 0
+[[command.component]]
+kind = "staircase"
+levels = [90, 93, 87]
+step_s = 2
+[[fault]]
+time_s = 3.0
+target = "PUMP_EFFECTIVENESS"
+value = 0.5
+"""
+
+
+def _scenario(tmp_path: Path, duration: float) -> Path:
+    path = tmp_path / "recorder.toml"
+    path.write_text(SCENARIO.format(duration=duration))
+    return path
+
+
+class _InProcess(Recorder):
+    """The Recorder where the runner would start the recorder process."""
+
+    def __init__(self, out_dir, period_s, *, commands=None, channel="vcan0"):  # noqa: ANN001
+        super().__init__(out_dir, Codec(), period_s, commands=commands, channel=channel)
+
+
+def _recorder_processes() -> list[int]:
+    found = subprocess.run(["pgrep", "-f", "sil.recorder_process"], capture_output=True, text=True)
+    return [int(pid) for pid in found.stdout.split()]
+
+
+def test_the_files_are_those_of_the_recorder_in_process(tmp_path, monkeypatch):
+    s = scenario.load(_scenario(tmp_path, 8.0))
+    offloaded = runner.run(RunOptions(s, tmp_path / "process", mode="inproc", plots=False))
+    monkeypatch.setattr(runner, "RecorderProcess", _InProcess)
+    local = runner.run(RunOptions(s, tmp_path / "local", mode="inproc", plots=False))
+    for name in ("can.log", "trace.csv"):
+        a = (tmp_path / "process" / name).read_bytes()
+        assert a == (tmp_path / "local" / name).read_bytes(), name
+    for summary in (offloaded, local):
+        for key in ("wall_time_s", "realtime_factor"):
+            summary.pop(key)
+    assert offloaded == local
+    assert offloaded["status"] == "completed" and offloaded["frames"] > 3000
+    assert offloaded["faults_injected"] and offloaded["missed_ticks"] == 0
+    frames = list(can.CanutilsLogReader(str(tmp_path / "process" / "can.log")))
+    assert len(frames) == offloaded["frames"]
+
+
+@pytest.mark.slow
+def test_ctrl_c_keeps_every_frame_recorded(tmp_path):
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "run", str(_scenario(tmp_path, 300.0))]
+        + ["--mode", "inproc", "--out", str(out), "--no-plots"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    trace = out / "trace.csv"
+    while not (trace.exists() and trace.stat().st_size > 400_000):  # a chunk or two is written
+        assert time.monotonic() < deadline and proc.poll() is None, proc.stderr
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "aborted" and "interrupted" in summary["abort_reason"]
+    assert 20.0 < summary["sim_time_s"] < 300.0
+    # every frame the nodes exchanged up to the interrupt is in the log, no tick left out
+    frames = list(can.CanutilsLogReader(str(out / "can.log")))
+    assert len(frames) == summary["frames"]
+    db = Codec().database
+    ticks = [
+        db.decode_message(0x100, f.data)["SensorTick"] for f in frames if f.arbitration_id == 0x100
+    ]
+    assert ticks == list(range(len(ticks))) and len(ticks) > 2000
+    time.sleep(0.5)  # (the recorder process is not waited for once its files are closed)
+    assert _recorder_processes() == []
+
+
+def test_a_dead_recorder_process_is_reported_and_what_it_wrote_stays(tmp_path):
+    codec = Codec()
+    sensors = codec["PlantSensors"]
+    recorder = RecorderProcess(tmp_path, 0.01)
+    sensors.pack_raw([0, 100_000, 10_000])
+    recorder.record(sensors.frame_id, sensors.data)
+    deadline = time.monotonic() + 30
+    while not (tmp_path / "trace.csv").exists():  # the child's recorder is up
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    os.kill(recorder._child.pid, signal.SIGKILL)
+    with pytest.raises(RecorderFailed, match="exited with code -9"):
+        for k in range(2 * BATCH_FRAMES):
+            sensors.pack_raw([k % 65536, 100_000, 10_000])
+            recorder.record(sensors.frame_id, sensors.data)
+            time.sleep(0.0 if k % 64 else 0.001)
+    with pytest.raises(RecorderFailed):
+        recorder.close()
+    assert recorder.totals()["frames"] >= BATCH_FRAMES  # the figures known here
+    assert (tmp_path / "can.log").exists()
+
+
+def test_a_run_whose_recorder_process_dies_is_aborted_with_the_reason(tmp_path, monkeypatch):
+    s = scenario.load(_scenario(tmp_path, 60.0))
+
+    class Dying(RecorderProcess):
+        def record(self, frame_id, data, wall_s=None):  # noqa: ANN001
+            if self.frames == 10_000:
+                os.kill(self._child.pid, signal.SIGKILL)
+                self._child.wait()
+            super().record(frame_id, data, wall_s)
+
+    monkeypatch.setattr(runner, "RecorderProcess", Dying)
+    summary = runner.run(RunOptions(s, tmp_path / "run", mode="inproc", plots=False))
+    assert summary["status"] == "aborted"
+    assert summary["abort_reason"] == "the recorder process exited with code -9"
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["status"] == "aborted"
