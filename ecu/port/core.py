@@ -9,7 +9,9 @@ so a field added on one side only is refused at load time with its name.
 from __future__ import annotations
 
 import ctypes
+import operator
 import re
+import struct
 from functools import cache
 
 from ecu.firmware import EcuInputs, EcuOutputs
@@ -116,7 +118,10 @@ class CEcu:
         self._ecu = lib.ecu_t()
         self._in = lib.inputs_t()
         self._tick = lib.lib.ecu_tick
-        self._input_names = EcuInputs.__slots__
+        self._refs = (ctypes.byref(self._ecu), ctypes.byref(self._in))
+        # the inputs in one C-level step: read in the record's field order, stored as int32
+        self._read_inputs = operator.attrgetter(*(name for name, _ in lib.inputs_t._fields_))
+        self._store_inputs = struct.Struct(f"={len(lib.inputs_t._fields_)}i").pack_into
         self.s = self._ecu.s
         self.out = self._ecu.o
         self.reset()
@@ -142,10 +147,8 @@ class CEcu:
         library().lib.ecu_init(ctypes.byref(self._ecu), ctypes.byref(self._params))
 
     def tick(self, i: EcuInputs):  # noqa: ANN201 (an outputs_t with EcuOutputs' fields)
-        c_in = self._in
-        for name in self._input_names:
-            setattr(c_in, name, getattr(i, name))
-        self._tick(ctypes.byref(self._ecu), ctypes.byref(c_in))
+        self._store_inputs(self._in, 0, *self._read_inputs(i))  # (struct.error beyond int32)
+        self._tick(*self._refs)
         return self.out
 
     def digest(self) -> int:
