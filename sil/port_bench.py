@@ -228,7 +228,7 @@ def sil_figures(quick: bool) -> dict:
     }
     # cumulative share of the per-tick entry points (nested calls counted in their caller)
     entries = {
-        "recorder": ("sil/recorder.py", "record"),
+        "recorder_feed": ("sil/recorder_process.py", "record"),  # (the recorder: another process)
         "plant_step": ("plant/node.py", "on_frame"),
         "ecu_node": ("ecu/node.py", "_run_tick"),
         "c_tick_via_ctypes": ("ecu/port/core.py", "tick"),

@@ -60,7 +60,7 @@ class RecorderProcess:
             [sys.executable, "-m", "sil.recorder_process"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            preexec_fn=die_with_parent,
+            preexec_fn=die_with_parent if sys.platform == "linux" else None,  # (before exec)
         )
         # a feeder thread writes the batches, so that the run goes on while the child starts
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
@@ -182,7 +182,11 @@ def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent ends the run and closes us
     signal.signal(signal.SIGTERM, _exit)  # the parent died: write what came, then go
     out_dir, period_s, commands, channel = pickle.load(inbox)
-    recorder = Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
+    try:
+        recorder = Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
+    except OSError as exc:
+        print(f"sil recorder: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     try:
         while (batch := _next(inbox)) is not None:
             ids, lengths, data = batch

@@ -145,3 +145,15 @@ def test_a_run_whose_recorder_process_dies_is_aborted_with_the_reason(tmp_path, 
     assert summary["status"] == "aborted"
     assert summary["abort_reason"] == "the recorder process exited with code -9"
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["status"] == "aborted"
+
+
+def test_a_recorder_that_cannot_write_names_the_file_and_the_run_is_aborted(tmp_path, capfd):
+    s = scenario.load(_scenario(tmp_path, 20.0))
+    out = tmp_path / "run"
+    (out / "can.log").mkdir(parents=True)  # where the log should go
+    summary = runner.run(RunOptions(s, out, mode="inproc", plots=False))
+    assert summary["status"] == "aborted"
+    assert summary["abort_reason"] == "the recorder process exited with code 2"
+    assert f"sil recorder: error: [Errno 21] Is a directory: '{out / 'can.log'}'" in (
+        capfd.readouterr().err
+    )
