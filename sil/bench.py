@@ -52,6 +52,12 @@ def run(quick: bool = False) -> dict:
                     figures.pop(f"{mode}_aborted{suffix}", None)
                     if summary["status"] != "completed":
                         figures[f"{mode}_aborted{suffix}"] = summary["abort_reason"]
+                    if "startup_s" in summary:  # lockstep without the node processes' start
+                        loop_s = summary["wall_time_s"] - summary["startup_s"]
+                        figures[f"lockstep_startup_s{suffix}"] = round(summary["startup_s"], 2)
+                        figures[f"lockstep_loop_realtime_factor{suffix}"] = round(
+                            summary["sim_time_s"] / loop_s, 2
+                        )
                     if mode == "lockstep" and not suffix:
                         figures["bus"] = summary["bus"]
                         figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)

@@ -98,6 +98,8 @@ class RunState:
     ecu_bus: str | None = None  # the ECU's side of the fault bridge
     bridge_errors: list[str] = field(default_factory=list)  # frames the bridge could not send
     bus_fault_events: list[dict] = field(default_factory=list)
+    started: float | None = None  # perf_counter when the run began
+    nodes_up: float | None = None  # perf_counter when the node processes were up, at tick 0
 
 
 def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfig:
@@ -235,7 +237,7 @@ def run(opts: RunOptions) -> dict:
     # What exists now (numba, the codec, the nodes...) lives through the run: frozen, it is
     # skipped by the collector's full passes, each of which would stall the run for 0.1 s.
     gc.freeze()
-    t0 = time.perf_counter()
+    t0 = state.started = time.perf_counter()
     try:
         if opts.mode == "inproc":
             # started in this order, as on a bus: demands first, the plant's tick 0 last
@@ -377,6 +379,7 @@ def _run_on_bus(
         send = bus_sender(bus, DriverStats())
         command.start(send)
         go.touch()
+        state.nodes_up = time.perf_counter()
         _listen(
             bus,
             command,
@@ -508,6 +511,8 @@ def _finish(
         "sim_time_s": sim_time,
         "wall_time_s": wall,
         "realtime_factor": sim_time / wall if wall > 0 else math.nan,
+        # on a bus: what of wall_time_s went to starting the node processes (before tick 0)
+        **({"startup_s": state.nodes_up - state.started} if state.nodes_up else {}),
         "frames": totals["frames"],
         "bus_load_pct": bus_load_pct(totals["bits"], sim_time),
         "missed_ticks": totals["missed_ticks"],

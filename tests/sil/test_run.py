@@ -138,6 +138,7 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
         assert result.returncode == 0, result.stderr + (out / "ecu.log").read_text()
         summary = json.loads((out / "summary.json").read_text())
         assert summary["missed_ticks"] == 0 and summary["bus"] == spec
+        assert 0.1 < summary["startup_s"] < summary["wall_time_s"]  # the node processes' start
         ecu = summary["nodes"]["ecu"]  # the node's own figures; no periods in lockstep
         assert ecu["frames_received"] > 0 and ecu["guard_timeouts"] == 0 and "periods" not in ecu
         logs.append((out / "can.log").read_bytes())
