@@ -214,6 +214,12 @@ def run(opts: RunOptions) -> dict:
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     period = 1.0 / s.ecu_rate_hz
+    # in process, the ECU and plant nodes are built before the clock starts, as the plant is
+    built = (
+        [EcuNode(ecu=make_ecu(opts.ecu_impl, compile_params(params))), PlantNode(plant)]
+        if opts.mode == "inproc"
+        else []
+    )
     codec = Codec()
     recorder: Recorder | RecorderProcess
     if opts.mode == "inproc" and not s.bus_faults:  # the recorder on a core of its own
@@ -240,9 +246,7 @@ def run(opts: RunOptions) -> dict:
     t0 = state.started = time.perf_counter()
     try:
         if opts.mode == "inproc":
-            # started in this order, as on a bus: demands first, the plant's tick 0 last
-            ecu = make_ecu(opts.ecu_impl, compile_params(params))
-            nodes = [command, EcuNode(ecu=ecu), PlantNode(plant)]
+            nodes = [command, *built]  # started in this order: the plant's tick 0 last
             if s.bus_faults:
                 injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, codec)
                 FaultyInProcessBus(*nodes, injector).run(done=lambda: command.finished)
