@@ -498,6 +498,7 @@ def _finish(
 ) -> dict:
     totals = recorder.totals()
     sim_time = totals["tick"] / s.ecu_rate_hz
+    period = 1.0 / s.ecu_rate_hz
     trace = None
     try:
         trace = metrics.load_trace(opts.out_dir / "trace.csv")
@@ -520,7 +521,7 @@ def _finish(
         "frames": totals["frames"],
         "bus_load_pct": bus_load_pct(totals["bits"], sim_time),
         "missed_ticks": totals["missed_ticks"],
-        **(metrics.summarize(trace, 1.0 / s.ecu_rate_hz, REPORTED_FAULTS) if trace else {}),
+        **(metrics.summarize(trace, period, REPORTED_FAULTS) if trace is not None else {}),
         "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
         "bus_faults_injected": state.bus_fault_events,
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
@@ -537,7 +538,7 @@ def _finish(
             summary[f"{name}_log"] = log.name
     for fmt in opts.log_formats:
         convert(opts.out_dir / "can.log", fmt)
-    if opts.plots and trace:
+    if opts.plots and trace is not None:
         from sil import plots  # matplotlib: only when plotting (campaign runs do not)
 
         title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
