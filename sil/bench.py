@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -28,8 +29,10 @@ def run(quick: bool = False) -> dict:
     figures: dict = {"scenario": s.name, "sim_time_s": s.duration_s}
     figures["load_average_1min_before"] = round(os.getloadavg()[0], 2)  # others' load, mostly
     runs: dict[str, list[float]] = {}
+    repeats = 1 if quick else REPEATS
+    total = repeats * len(ECU_IMPLS) * len(MODES)
     with tempfile.TemporaryDirectory() as tmp:
-        for _ in range(1 if quick else REPEATS):
+        for _ in range(repeats):
             for impl, suffix in ECU_IMPLS:
                 for mode, key in MODES:
                     summary = run_scenario(
@@ -44,6 +47,8 @@ def run(quick: bool = False) -> dict:
                     )
                     factor = round(summary["realtime_factor"], 2)
                     runs.setdefault(key + suffix, []).append(factor)
+                    done = sum(map(len, runs.values()))
+                    print(f"run {done}/{total}: {mode}, {impl} ECU: {factor}x", file=sys.stderr)
                     if factor < max(runs[key + suffix]):
                         continue  # the figures below are the best run's
                     figures[key + suffix] = factor

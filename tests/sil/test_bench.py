@@ -1,0 +1,24 @@
+"""`sil bench sil`: the four runs' figures, the best of the runs, the loop without the start-up."""
+
+from sil import bench
+
+
+def test_sil_bench_reports_every_run_and_the_loop_without_start_up():
+    figures = bench.run(quick=True)
+    for key in (
+        "realtime_factor",
+        "inproc_realtime_factor",
+        "realtime_factor_c_ecu",
+        "inproc_realtime_factor_c_ecu",
+    ):
+        runs = figures[f"{key}_runs"]
+        assert len(runs) == 1 and figures[key] == max(runs) > 0
+    for suffix in ("", "_c_ecu"):
+        assert figures[f"lockstep_missed_ticks{suffix}"] == 0
+        startup = figures[f"lockstep_startup_s{suffix}"]
+        assert 0 < startup < figures[f"lockstep_wall_s{suffix}"]
+        # from tick 0 the same simulated time took the wall time less the start-up
+        loop = figures["sim_time_s"] / (figures[f"lockstep_wall_s{suffix}"] - startup)
+        assert abs(figures[f"lockstep_loop_realtime_factor{suffix}"] - loop) < 0.02 * loop
+        assert "lockstep_aborted" + suffix not in figures
+    assert 0 < figures["bus_load_pct"] < 15
