@@ -729,3 +729,23 @@ class TickUnwrapper:
             delta -= TICK_MODULO
         self.last += delta
         return self.last
+
+
+class InOrderTicks:
+    """The ticks as the command node reads them from a recorder that sees every frame in order,
+    none lost (in process): the newest sensor tick, and one tick answered per EcuActuator.
+    The base of the stand-ins for the :class:`Recorder` in process (the campaign's probe, the
+    recorder process's feed)."""
+
+    def __init__(self) -> None:
+        self.tick = 0  # ticks answered
+        self.latest_sensor_tick = -1
+        self._sensor_wrap = TickUnwrapper()
+
+    def track(self, frame_id: int, data: bytes | bytearray) -> None:
+        if frame_id == SENSORS:
+            k = self._sensor_wrap.full(data[2] | data[3] << 8)
+            if k > self.latest_sensor_tick:
+                self.latest_sensor_tick = k
+        elif frame_id == ACTUATOR:
+            self.tick += 1

@@ -36,7 +36,7 @@ import numpy as np
 
 from protocol.codec import Codec
 from sil.parent_death import die_with_parent
-from sil.recorder import ACTUATOR, SENSORS, Recorder, TickUnwrapper
+from sil.recorder import InOrderTicks, Recorder
 
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
@@ -47,7 +47,7 @@ class RecorderFailed(RuntimeError):
     """The recorder process is gone (what it had been given is on disk)."""
 
 
-class RecorderProcess:
+class RecorderProcess(InOrderTicks):
     def __init__(
         self,
         out_dir: Path,
@@ -68,10 +68,8 @@ class RecorderProcess:
         self._feeder = threading.Thread(target=self._feed, name="sil-recorder-feed", daemon=True)
         self._broken = False
         self._feeder.start()
-        self.tick = 0  # ticks answered (EcuActuator frames)
-        self.latest_sensor_tick = -1
+        super().__init__()
         self.frames = 0
-        self._sensor_wrap = TickUnwrapper()
         self._ids = array("i")
         self._lengths = bytearray()
         self._data = bytearray()
@@ -102,12 +100,7 @@ class RecorderProcess:
         self._lengths.append(len(data))
         self._ids.append(frame_id)
         self.frames += 1
-        if frame_id == SENSORS:
-            k = self._sensor_wrap.full(data[2] | data[3] << 8)
-            if k > self.latest_sensor_tick:
-                self.latest_sensor_tick = k
-        elif frame_id == ACTUATOR:
-            self.tick += 1
+        self.track(frame_id, data)
         if len(self._ids) >= BATCH_FRAMES:
             self._send_batch()
 

@@ -98,7 +98,7 @@ class RunState:
     ecu_bus: str | None = None  # the ECU's side of the fault bridge
     bridge_errors: list[str] = field(default_factory=list)  # frames the bridge could not send
     bus_fault_events: list[dict] = field(default_factory=list)
-    started: float | None = None  # perf_counter when the run began
+    started: float = 0.0  # perf_counter when the run began
     nodes_up: float | None = None  # perf_counter when the node processes were up, at tick 0
 
 
@@ -243,7 +243,7 @@ def run(opts: RunOptions) -> dict:
     # What exists now (numba, the codec, the nodes...) lives through the run: frozen, it is
     # skipped by the collector's full passes, each of which would stall the run for 0.1 s.
     gc.freeze()
-    t0 = state.started = time.perf_counter()
+    state.started = time.perf_counter()
     try:
         if opts.mode == "inproc":
             nodes = [command, *built]  # started in this order: the plant's tick 0 last
@@ -269,7 +269,7 @@ def run(opts: RunOptions) -> dict:
             state.status = "aborted"
             state.abort_reason = state.abort_reason or str(exc)
         gc.unfreeze()
-    wall = time.perf_counter() - t0
+    wall = time.perf_counter() - state.started
     return _finish(opts, s, seed, recorder, command, state, wall)
 
 

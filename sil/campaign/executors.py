@@ -115,8 +115,7 @@ def _worker_init() -> None:
     them (not with the campaign's own SIGTERM handler, inherited through fork)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if sys.platform == "linux":
-        die_with_parent()
+    die_with_parent()
 
 
 def _local(tasks: list[Task], workers: int) -> Iterator[dict]:

@@ -14,12 +14,12 @@ import math
 from collections.abc import Callable
 
 from protocol.codec import Codec
-from sil.recorder import ACTUATOR, N_MAX_RPM, SENSORS, TickUnwrapper
+from sil.recorder import ACTUATOR, N_MAX_RPM, InOrderTicks
 
 Truth = Callable[[], tuple[float, float]]  # (true speed %N, true EGT K) now
 
 
-class Probe:
+class Probe(InOrderTicks):
     def __init__(self, codec: Codec, truth: Truth) -> None:
         self.truth = truth
         self._truth_b = codec["PlantTruthB"]
@@ -31,9 +31,7 @@ class Probe:
             ACTUATOR: self._on_actuator,
         }
         self._raw = [0] * 8
-        self.tick = 0  # rows written
-        self.latest_sensor_tick = -1
-        self._sensor_wrap = TickUnwrapper()
+        super().__init__()  # a row per tick answered
         # sample-and-hold values
         self._speed = self._ref = math.nan
         self._fault_word = self._owner = 0
@@ -48,11 +46,7 @@ class Probe:
         self.pump_v: list[float] = []
 
     def record(self, frame_id: int, data: bytes | bytearray, wall_s: float | None = None) -> None:
-        if frame_id == SENSORS:
-            k = self._sensor_wrap.full(data[2] | data[3] << 8)
-            if k > self.latest_sensor_tick:
-                self.latest_sensor_tick = k
-            return
+        self.track(frame_id, data)
         handler = self._ids.get(frame_id)
         if handler is not None:
             handler(data)
@@ -84,4 +78,3 @@ class Probe:
         self.owner.append(self._owner)
         self.mode.append(raw[1])
         self.pump_v.append(raw[4] * 0.001)
-        self.tick += 1
