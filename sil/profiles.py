@@ -118,7 +118,11 @@ class Profile:
         return total
 
 
+def tick_count(duration_s: float, rate_hz: float) -> int:
+    """The last tick of a run of ``duration_s`` at ``rate_hz`` (its ticks are 0 .. this)."""
+    return int(round(duration_s * rate_hz))
+
+
 def sample(profile: Profile, duration_s: float, rate_hz: float) -> np.ndarray:
-    """The profile at every ECU tick k = 0 .. duration*rate (time k / rate)."""
-    ticks = int(round(duration_s * rate_hz))
-    return profile(np.arange(ticks + 1) / rate_hz)
+    """The profile at every ECU tick k = 0 .. tick_count (time k / rate)."""
+    return profile(np.arange(tick_count(duration_s, rate_hz) + 1) / rate_hz)

@@ -205,21 +205,48 @@ def run(opts: RunOptions) -> dict:
         (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
     if opts.mode != "inproc" and s.plant.varied:
         raise ValueError(f"{s.name}: engine variation needs --mode inproc")
+    state = RunState()
+    try:
+        return _run(opts, s, seed, state)
+    except BaseException:
+        _stop(state.children)
+        for name in state.children:  # refused in set-up: a process stopped before it said a word
+            log = opts.out_dir / f"{name}.log"
+            if log.exists() and log.stat().st_size == 0:
+                log.unlink()
+        raise
+
+
+def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
+    """The run, with ``state.children`` stopped by the caller whatever happens."""
+    spec = ecu_spec = None
+    if opts.mode != "inproc":  # the plant process first: its start-up (1-1.5 s) overlaps the set-up
+        spec = _bus_spec(opts)
+        ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
+        state.bus = str(spec)
+        state.ecu_bus = str(ecu_spec) if s.bus_faults else None
+        for path in _handshake_files(opts.out_dir):
+            path.unlink(missing_ok=True)
+        ticks = profiles.tick_count(s.duration_s, s.ecu_rate_hz) + 1  # 0 .. last: len(commands)
+        state.children["plant"] = _spawn(
+            "plant", _plant_args(opts, s, seed, spec, ticks), opts.out_dir
+        )
     plant = build_plant(s, seed)
     params = ecu_params(s, ecu_trim_voltage(s, plant))
     if opts.commission is not None:
         params = commissioning.apply(params, commissioning.load(opts.commission))
     compile_params(params)  # refuse bad overrides before anything starts
+    if ecu_spec is not None:  # and the ECU process as soon as its parameters are known
+        state.children["ecu"] = _spawn("ecu", _ecu_args(opts, s, params, ecu_spec), opts.out_dir)
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     period = 1.0 / s.ecu_rate_hz
     # in process, the ECU and plant nodes are built before the clock starts, as the plant is
-    built = (
-        [EcuNode(ecu=make_ecu(opts.ecu_impl, compile_params(params))), PlantNode(plant)]
-        if opts.mode == "inproc"
-        else []
-    )
+    built = []
+    if opts.mode == "inproc":
+        built = [EcuNode(ecu=make_ecu(opts.ecu_impl, compile_params(params))), PlantNode(plant)]
+    del plant  # (on a bus the plant runs in its own process)
     codec = Codec()
     recorder: Recorder | RecorderProcess
     if opts.mode == "inproc" and not s.bus_faults:  # the recorder on a core of its own
@@ -239,7 +266,6 @@ def run(opts: RunOptions) -> dict:
         progress=progress,
         realtime=opts.mode == "realtime",
     )
-    state = RunState()
     # What exists now (numba, the codec, the nodes...) lives through the run: frozen, it is
     # skipped by the collector's full passes, each of which would stall the run for 0.1 s.
     gc.freeze()
@@ -254,8 +280,8 @@ def run(opts: RunOptions) -> dict:
             else:
                 InProcessBus(nodes).run(done=lambda: command.finished)
         else:
-            del plant  # the plant runs in its own process
-            _run_on_bus(opts, s, seed, params, command, recorder, state)
+            assert spec is not None and ecu_spec is not None
+            _run_on_bus(opts, s, seed, (spec, ecu_spec), command, recorder, state)
     except KeyboardInterrupt:
         state.status, state.abort_reason = "aborted", "interrupted (Ctrl-C)"
     except RecorderFailed as exc:
@@ -273,59 +299,27 @@ def run(opts: RunOptions) -> dict:
     return _finish(opts, s, seed, recorder, command, state, wall)
 
 
-def _run_on_bus(
-    opts: RunOptions,
-    s: Scenario,
-    seed: int,
-    params: EcuParams,
-    command: CommandNode,
-    recorder: Recorder,
-    state: RunState,
-) -> None:
-    spec: BusSpec
+def _bus_spec(opts: RunOptions) -> BusSpec:
     if opts.bus:
-        spec = parse_spec(opts.bus)
-    else:
-        spec, why = default_spec()
-        print(why, file=sys.stderr)
-    state.bus = str(spec)
-    ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
-    guard = BRIDGED_GUARD_S if s.bus_faults and opts.mode == "lockstep" else NODE_GUARD_S
-    ticks = len(command.commands)
-    mode = ["--mode", opts.mode]
-    ready = {node: opts.out_dir / f".{node}-ready" for node in ("ecu", "plant")}
-    go = opts.out_dir / ".plant-start"
-    for path in (*ready.values(), go, *(_stats_file(opts.out_dir, n) for n in ("ecu", "plant"))):
-        path.unlink(missing_ok=True)
-    ecu_args = [
-        "ecu",
-        "--bus",
-        str(ecu_spec),
-        *mode,
-        "--preset",
-        s.controller.preset or "default",
-        "--ready-file",
-        str(ready["ecu"]),
-        "--guard",
-        str(guard),
-        "--json",
-        "--impl",
-        opts.ecu_impl,
-        "--stats-file",
-        str(_stats_file(opts.out_dir, "ecu")),
-    ]
-    if opts.commission is not None:
-        ecu_args += ["--commission", str(opts.commission)]
-    for name, value in ecu_overrides(s, params.trim_v).items():
-        if name == "controller":
-            ecu_args += ["--controller", str(value)]
-        elif name == "rate_hz":
-            ecu_args += ["--rate", str(value)]
-        else:
-            ecu_args += ["--param", f"{name}={value!r}"]
-    ecu_args += opts.ecu_extra_args
+        return parse_spec(opts.bus)
+    spec, why = default_spec()
+    print(why, file=sys.stderr)
+    return spec
+
+
+def _handshake_files(out_dir: Path) -> tuple[Path, ...]:
+    """The node processes' ready files, the plant's start file and their stats files."""
+    names = (".ecu-ready", ".plant-ready", ".plant-start", ".ecu-stats.json", ".plant-stats.json")
+    return tuple(out_dir / name for name in names)
+
+
+def _guard_s(opts: RunOptions, s: Scenario) -> float:
+    return BRIDGED_GUARD_S if s.bus_faults and opts.mode == "lockstep" else NODE_GUARD_S
+
+
+def _plant_args(opts: RunOptions, s: Scenario, seed: int, spec: BusSpec, ticks: int) -> list[str]:
     p = s.plant
-    plant_args = [
+    args = [
         "plant",
         "--bus",
         str(spec),
@@ -346,19 +340,64 @@ def _run_on_bus(
         "--seed",
         str(seed),
         "--guard-s",
-        str(guard),
+        str(_guard_s(opts, s)),
         "--ready-file",
-        str(ready["plant"]),
+        str(opts.out_dir / ".plant-ready"),
         "--start-file",
-        str(go),
+        str(opts.out_dir / ".plant-start"),
         "--stats-file",
         str(_stats_file(opts.out_dir, "plant")),
     ]
     if opts.mode == "realtime":
-        plant_args.append("--realtime")
+        args.append("--realtime")
+    return args
+
+
+def _ecu_args(opts: RunOptions, s: Scenario, params: EcuParams, ecu_spec: BusSpec) -> list[str]:
+    args = [
+        "ecu",
+        "--bus",
+        str(ecu_spec),
+        "--mode",
+        opts.mode,
+        "--preset",
+        s.controller.preset or "default",
+        "--ready-file",
+        str(opts.out_dir / ".ecu-ready"),
+        "--guard",
+        str(_guard_s(opts, s)),
+        "--json",
+        "--impl",
+        opts.ecu_impl,
+        "--stats-file",
+        str(_stats_file(opts.out_dir, "ecu")),
+    ]
+    if opts.commission is not None:
+        args += ["--commission", str(opts.commission)]
+    for name, value in ecu_overrides(s, params.trim_v).items():
+        if name == "controller":
+            args += ["--controller", str(value)]
+        elif name == "rate_hz":
+            args += ["--rate", str(value)]
+        else:
+            args += ["--param", f"{name}={value!r}"]
+    return args + list(opts.ecu_extra_args)
+
+
+def _run_on_bus(
+    opts: RunOptions,
+    s: Scenario,
+    seed: int,
+    specs: tuple[BusSpec, BusSpec],
+    command: CommandNode,
+    recorder: Recorder,
+    state: RunState,
+) -> None:
+    """The node processes are starting (see ``_run``): wait until both are ready, then play.
+    ``specs``: the run's bus and the ECU's (the same bus unless there are bus faults)."""
+    spec, ecu_spec = specs
     with open_bus(spec) as bus, ExitStack() as stack:
         if s.bus_faults:
-            state.ecu_bus = str(ecu_spec)
             injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, command.codec)
             state.bus_fault_events = injector.events
             clock = WallTicks(s.ecu_rate_hz) if opts.mode == "realtime" else SensorTicks()
@@ -366,12 +405,11 @@ def _run_on_bus(
             ecu_side = stack.enter_context(open_bus(ecu_spec))
             bridge = stack.enter_context(Bridge(plant_side, ecu_side, injector, ticks=clock))
             state.bridge_errors = bridge.errors
-        # both start at once; once both are ready (the ECU listening, the plant built and
-        # waiting for `go`), the demands begin and the plant sends tick 0: in real time too,
+        # once both are ready (the ECU listening, the plant built and waiting for its start
+        # file), the demands begin and the plant sends tick 0: in real time too,
         # the ECU is armed only when the engine's frames are coming
-        state.children["ecu"] = _spawn("ecu", ecu_args, opts.out_dir)
-        state.children["plant"] = _spawn("plant", plant_args, opts.out_dir)
         deadline = time.monotonic() + START_TIMEOUT_S
+        ready = {node: opts.out_dir / f".{node}-ready" for node in ("ecu", "plant")}
         for node, path in ready.items():
             while not path.exists():
                 if state.children[node].poll() is not None or time.monotonic() > deadline:
@@ -382,7 +420,7 @@ def _run_on_bus(
         _drain(bus)
         send = bus_sender(bus, DriverStats())
         command.start(send)
-        go.touch()
+        (opts.out_dir / ".plant-start").touch()
         state.nodes_up = time.perf_counter()
         _listen(
             bus,
