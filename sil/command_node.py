@@ -3,9 +3,9 @@
 It follows the lockstep rules of :mod:`protocol.lockstep`: on PlantSensors(k) it sends the Demand
 for tick k + L (L = one demand period) and, before it, any FaultInject due at that tick, so both
 are on the bus before the ECU can answer tick k + L. It hears every frame and hands it, with the
-frames it sends itself, to the :class:`~sil.recorder.Recorder` (or, in process, to the
-:class:`~sil.recorder_process.RecorderProcess`). It is finished once the ECU has
-answered the last tick.
+frames it sends itself, to the :class:`~sil.recorder.Recorder` (or, in process and in lockstep,
+to the :class:`~sil.recorder_process.RecorderProcess`). It is finished once the ECU has answered
+the last tick.
 """
 
 from __future__ import annotations

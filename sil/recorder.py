@@ -732,10 +732,9 @@ class TickUnwrapper:
 
 
 class InOrderTicks:
-    """The ticks as the command node reads them from a recorder that sees every frame in order,
-    none lost (in process): the newest sensor tick, and one tick answered per EcuActuator.
-    The base of the stand-ins for the :class:`Recorder` in process (the campaign's probe, the
-    recorder process's feed)."""
+    """The ticks as the command node reads them from a recorder that sees every frame, none
+    lost: the newest sensor tick, and one tick answered per EcuActuator. The base of the
+    stand-ins for the :class:`Recorder` (the campaign's probe, the recorder process's feed)."""
 
     def __init__(self) -> None:
         self.tick = 0  # ticks answered

@@ -1,27 +1,32 @@
-"""The recorder in a process of its own, for in-process runs.
+"""The recorder in a process of its own, for in-process and lockstep runs.
 
 In ``--mode inproc`` the plant, the ECU and the command node take turns on one core, and the
 recorder's work (sorting frames into ticks, E2E checks, formatting can.log and trace.csv) is a
-quarter to a third of the run. :class:`RecorderProcess` stands where the
-:class:`~sil.recorder.Recorder` stands for the command node: it takes the frames, and the command
-node's ``commands_sent``, in order and sends them in batches to a child process, which hands them
-in the same order to a Recorder there. The files are therefore the ones the Recorder writes in
-process, byte for byte, and the recorder's work runs on another core.
+quarter to a third of the run; in lockstep the plant and the ECU processes take turns, and the
+recorder's work in the run's process competed with them for the two cores. :class:`RecorderProcess`
+stands where the :class:`~sil.recorder.Recorder` stands for the command node: it takes the frames,
+and the command node's ``commands_sent``, in order and sends them in batches to a child process,
+which hands them in the same order to a Recorder there. The files are therefore the ones the
+Recorder writes in the run's process, byte for byte. The child runs at a lower priority (niceness
++10): it is on no node's critical path, so a node that wakes up never waits for it.
 
 While the run goes, the command node reads back the newest sensor tick (taken from the frames
-here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since in process,
-with no bus between the nodes, no frame is lost or reordered (runs with bus faults keep the
-Recorder in process). The figures of the run (:meth:`totals`) are the child's, at close.
+here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since no frame is
+lost between the nodes (in process there is no bus; on the loopback bus a sender's frames come in
+its order; runs with bus faults and real-time runs keep the Recorder in the run's process). The
+figures of the run (:meth:`totals`) are the child's, at close.
 
-The child reads its settings and then the batches from its stdin (a feeder thread writes them,
-so the run goes on while the child starts) and sends its figures back on its stdout. It ignores
-Ctrl-C (the run stops and closes it, so that it writes everything); should the run die, it
-writes what it was given and ends. If it fails, the next batch raises :class:`RecorderFailed`;
-what it was given until then is on disk.
+The child is started before the run is set up, so that it imports while the run does; it reads
+its settings (:meth:`RecorderProcess.open`) and then the batches from its stdin (a feeder thread
+writes them, so the run goes on while the child starts) and sends its figures back on its
+stdout. It ignores Ctrl-C (the run stops and closes it, so that it writes everything); should the
+run die, it writes what it was given and ends. If it fails, the next batch raises
+:class:`RecorderFailed`; what it was given until then is on disk.
 """
 
 from __future__ import annotations
 
+import os
 import pickle
 import queue
 import signal
@@ -41,6 +46,7 @@ from sil.recorder import InOrderTicks, Recorder
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
+NICE = 10  # the child's niceness: it is on no node's critical path, so the nodes go first
 
 
 class RecorderFailed(RuntimeError):
@@ -48,23 +54,18 @@ class RecorderFailed(RuntimeError):
 
 
 class RecorderProcess(InOrderTicks):
-    def __init__(
-        self,
-        out_dir: Path,
-        period_s: float,
-        *,
-        commands: np.ndarray | None = None,
-        channel: str = "vcan0",
-    ) -> None:
+    """Made before the run is set up (the child then imports while it is), told where to write
+    by :meth:`open`; :meth:`discard` if the run never starts."""
+
+    def __init__(self) -> None:
         self._child = subprocess.Popen(
             [sys.executable, "-m", "sil.recorder_process"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            preexec_fn=die_with_parent if sys.platform == "linux" else None,  # (before exec)
+            preexec_fn=_child_setup if os.name == "posix" else None,  # (before exec)
         )
         # a feeder thread writes the batches, so that the run goes on while the child starts
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
-        self._outbox.put((out_dir, period_s, commands, channel))
         self._feeder = threading.Thread(target=self._feed, name="sil-recorder-feed", daemon=True)
         self._broken = False
         self._feeder.start()
@@ -74,6 +75,25 @@ class RecorderProcess(InOrderTicks):
         self._lengths = bytearray()
         self._data = bytearray()
         self._totals: dict | None = None
+
+    def open(
+        self,
+        out_dir: Path,
+        period_s: float,
+        *,
+        commands: np.ndarray | None = None,
+        channel: str = "vcan0",
+    ) -> RecorderProcess:
+        """The child's Recorder settings (see :class:`~sil.recorder.Recorder`): from now on it
+        takes frames."""
+        self._outbox.put((out_dir, period_s, commands, channel))
+        return self
+
+    def discard(self) -> None:
+        """The run ended before it began: the child goes without writing anything."""
+        self._outbox.put(None)
+        self._feeder.join(CLOSE_TIMEOUT_S)
+        self._reap()
 
     def _feed(self) -> None:
         pipe = self._child.stdin
@@ -166,6 +186,12 @@ class RecorderProcess(InOrderTicks):
         return self._totals
 
 
+def _child_setup() -> None:
+    """In the child before exec: it dies with the run and yields the cores to the nodes."""
+    die_with_parent()
+    os.nice(NICE)
+
+
 def _exit(signum: int, _frame: object) -> None:
     raise SystemExit(128 + signum)
 
@@ -174,7 +200,10 @@ def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
     """The child: the Recorder's settings, then batches until None; its totals back at the end."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent ends the run and closes us
     signal.signal(signal.SIGTERM, _exit)  # the parent died: write what came, then go
-    out_dir, period_s, commands, channel = pickle.load(inbox)
+    settings = _next(inbox)
+    if settings is None:  # discarded: the run never began
+        return
+    out_dir, period_s, commands, channel = settings
     try:
         recorder = Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
     except OSError as exc:

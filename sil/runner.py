@@ -98,6 +98,7 @@ class RunState:
     ecu_bus: str | None = None  # the ECU's side of the fault bridge
     bridge_errors: list[str] = field(default_factory=list)  # frames the bridge could not send
     bus_fault_events: list[dict] = field(default_factory=list)
+    recorder: RecorderProcess | None = None  # the recorder's process, made before the set-up
     started: float = 0.0  # perf_counter when the run began
     nodes_up: float | None = None  # perf_counter when the node processes were up, at tick 0
 
@@ -210,6 +211,8 @@ def run(opts: RunOptions) -> dict:
         return _run(opts, s, seed, state)
     except BaseException:
         _stop(state.children)
+        if state.recorder is not None:
+            state.recorder.discard()
         for name in state.children:  # refused in set-up: a process stopped before it said a word
             log = opts.out_dir / f"{name}.log"
             if log.exists() and log.stat().st_size == 0:
@@ -220,6 +223,8 @@ def run(opts: RunOptions) -> dict:
 def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     """The run, with ``state.children`` stopped by the caller whatever happens."""
     spec = ecu_spec = None
+    if opts.mode != "realtime" and not s.bus_faults:  # the recorder on a core of its own (it
+        state.recorder = RecorderProcess()  # imports while the run is set up)
     if opts.mode != "inproc":  # the plant process first: its start-up (1-1.5 s) overlaps the set-up
         spec = _bus_spec(opts)
         ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
@@ -249,8 +254,9 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     del plant  # (on a bus the plant runs in its own process)
     codec = Codec()
     recorder: Recorder | RecorderProcess
-    if opts.mode == "inproc" and not s.bus_faults:  # the recorder on a core of its own
-        recorder = RecorderProcess(opts.out_dir, period, commands=commands)
+    if state.recorder is not None:
+        recorder = state.recorder.open(opts.out_dir, period, commands=commands)
+        state.recorder = None  # from here on the run closes it
     else:
         recorder = Recorder(
             opts.out_dir, codec, period, commands=commands, wall_clock=opts.mode == "realtime"
@@ -281,7 +287,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
                 InProcessBus(nodes).run(done=lambda: command.finished)
         else:
             assert spec is not None and ecu_spec is not None
-            _run_on_bus(opts, s, seed, (spec, ecu_spec), command, recorder, state)
+            _run_on_bus(opts, s, seed, (spec, ecu_spec), command, state)
     except KeyboardInterrupt:
         state.status, state.abort_reason = "aborted", "interrupted (Ctrl-C)"
     except RecorderFailed as exc:
@@ -390,7 +396,6 @@ def _run_on_bus(
     seed: int,
     specs: tuple[BusSpec, BusSpec],
     command: CommandNode,
-    recorder: Recorder,
     state: RunState,
 ) -> None:
     """The node processes are starting (see ``_run``): wait until both are ready, then play.
@@ -425,7 +430,6 @@ def _run_on_bus(
         _listen(
             bus,
             command,
-            recorder,
             state,
             send,
             realtime=opts.mode == "realtime",
@@ -479,7 +483,6 @@ def _ecu_side(opts: RunOptions, spec: BusSpec) -> BusSpec:
 def _listen(
     bus: can.BusABC,
     command: CommandNode,
-    recorder: Recorder,
     state: RunState,
     send,
     *,

@@ -15,7 +15,7 @@ import pytest
 from protocol.codec import Codec
 from sil import runner, scenario
 from sil.recorder import Recorder
-from sil.recorder_process import BATCH_FRAMES, RecorderFailed, RecorderProcess
+from sil.recorder_process import BATCH_FRAMES, NICE, RecorderFailed, RecorderProcess
 from sil.runner import RunOptions
 
 SCENARIO = """
@@ -45,11 +45,14 @@ def _scenario(tmp_path: Path, duration: float) -> Path:
     return path
 
 
-class _InProcess(Recorder):
+class _InProcess:
     """The Recorder where the runner would start the recorder process."""
 
-    def __init__(self, out_dir, period_s, *, commands=None, channel="vcan0"):  # noqa: ANN001
-        super().__init__(out_dir, Codec(), period_s, commands=commands, channel=channel)
+    def open(self, out_dir, period_s, *, commands=None, channel="vcan0"):  # noqa: ANN001
+        return Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
+
+    def discard(self) -> None:
+        pass
 
 
 def _recorder_processes() -> list[int]:
@@ -57,17 +60,18 @@ def _recorder_processes() -> list[int]:
     return [int(pid) for pid in found.stdout.split()]
 
 
-def test_the_files_are_those_of_the_recorder_in_process(tmp_path, monkeypatch):
+@pytest.mark.parametrize("mode", ["inproc", "lockstep"])
+def test_the_files_are_those_of_the_recorder_in_process(tmp_path, monkeypatch, mode):
     s = scenario.load(_scenario(tmp_path, 8.0))
-    offloaded = runner.run(RunOptions(s, tmp_path / "process", mode="inproc", plots=False))
+    offloaded = runner.run(RunOptions(s, tmp_path / "process", mode=mode, plots=False))
     monkeypatch.setattr(runner, "RecorderProcess", _InProcess)
-    local = runner.run(RunOptions(s, tmp_path / "local", mode="inproc", plots=False))
+    local = runner.run(RunOptions(s, tmp_path / "local", mode=mode, plots=False))
     for name in ("can.log", "trace.csv"):
         a = (tmp_path / "process" / name).read_bytes()
         assert a == (tmp_path / "local" / name).read_bytes(), name
     for summary in (offloaded, local):
-        for key in ("wall_time_s", "realtime_factor"):
-            summary.pop(key)
+        for key in ("wall_time_s", "realtime_factor", "startup_s", "bus", "ecu_log", "plant_log"):
+            summary.pop(key, None)
     assert offloaded == local
     assert offloaded["status"] == "completed" and offloaded["frames"] > 3000
     assert offloaded["faults_injected"] and offloaded["missed_ticks"] == 0
@@ -111,7 +115,7 @@ def test_ctrl_c_keeps_every_frame_recorded(tmp_path):
 def test_a_dead_recorder_process_is_reported_and_what_it_wrote_stays(tmp_path):
     codec = Codec()
     sensors = codec["PlantSensors"]
-    recorder = RecorderProcess(tmp_path, 0.01)
+    recorder = RecorderProcess().open(tmp_path, 0.01)
     sensors.pack_raw([0, 100_000, 10_000])
     recorder.record(sensors.frame_id, sensors.data)
     deadline = time.monotonic() + 30
@@ -145,6 +149,24 @@ def test_a_run_whose_recorder_process_dies_is_aborted_with_the_reason(tmp_path, 
     assert summary["status"] == "aborted"
     assert summary["abort_reason"] == "the recorder process exited with code -9"
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["status"] == "aborted"
+
+
+def test_a_discarded_recorder_process_writes_nothing_and_goes(tmp_path):
+    recorder = RecorderProcess()
+    pid = recorder._child.pid
+    recorder.discard()
+    assert recorder._child.returncode == 0
+    assert pid not in _recorder_processes()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_recorder_process_yields_the_cores_to_the_nodes(tmp_path):
+    recorder = RecorderProcess()
+    try:
+        niceness = int(Path(f"/proc/{recorder._child.pid}/stat").read_text().split()[18])
+        assert niceness == os.getpriority(os.PRIO_PROCESS, 0) + NICE
+    finally:
+        recorder.discard()
 
 
 def test_a_recorder_that_cannot_write_names_the_file_and_the_run_is_aborted(tmp_path, capfd):
