@@ -7,8 +7,10 @@ recorder's work in the run's process competed with them for the two cores. :clas
 stands where the :class:`~sil.recorder.Recorder` stands for the command node: it takes the frames,
 and the command node's ``commands_sent``, in order and sends them in batches to a child process,
 which hands them in the same order to a Recorder there. The files are therefore the ones the
-Recorder writes in the run's process, byte for byte. The child runs at a lower priority (niceness
-+10): it is on no node's critical path, so a node that wakes up never waits for it.
+Recorder writes in the run's process, byte for byte. The child is on no node's critical path, so
+it runs on the cores' idle time (Linux SCHED_IDLE; elsewhere at niceness +10), and a node that
+wakes up never waits for it; at close it is lifted to an ordinary (niceness +10) priority, so
+that on a busy machine it cannot starve while it writes the rest.
 
 While the run goes, the command node reads back the newest sensor tick (taken from the frames
 here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since no frame is
@@ -46,7 +48,8 @@ from sil.recorder import InOrderTicks, Recorder
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
-NICE = 10  # the child's niceness: it is on no node's critical path, so the nodes go first
+NICE = 10  # the child's niceness (and, on Linux, SCHED_IDLE while the run goes): it is on no
+# node's critical path, so a node that wakes up never waits for it
 
 
 class RecorderFailed(RuntimeError):
@@ -152,6 +155,7 @@ class RecorderProcess(InOrderTicks):
             "e2e": {},
             "unknown_ids": {},
         }
+        _lift(self._child.pid)
         try:
             if self._ids:
                 self._send_batch()
@@ -190,6 +194,18 @@ def _child_setup() -> None:
     """In the child before exec: it dies with the run and yields the cores to the nodes."""
     die_with_parent()
     os.nice(NICE)
+    if hasattr(os, "SCHED_IDLE"):  # (Linux) only the cores' idle time, while the run goes
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+def _lift(pid: int) -> None:
+    """Out of SCHED_IDLE (the nodes are done): on a busy machine the child would wait for idle
+    cores to write the rest, and could starve."""
+    if hasattr(os, "SCHED_OTHER"):
+        try:
+            os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:  # (gone already)
+            pass
 
 
 def _exit(signum: int, _frame: object) -> None:
