@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import sys
 
 NAME = "bench"
 HELP = "measure speed and memory figures (codec, plant, ecu, ...)"
@@ -28,7 +29,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    figures = importlib.import_module(TARGETS[args.target]).run(quick=args.quick)
+    try:
+        figures = importlib.import_module(TARGETS[args.target]).run(quick=args.quick)
+    except RuntimeError as exc:  # a bench's own failure (a run without its summary...)
+        print(f"sil bench {args.target}: error: {exc}", file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps(figures, indent=2))
     else:

@@ -1,5 +1,7 @@
 """`sil bench sil`: the four runs' figures, the best of the runs, the loop without the start-up."""
 
+import pytest
+
 from sil import bench
 
 
@@ -22,3 +24,8 @@ def test_sil_bench_reports_every_run_and_the_loop_without_start_up():
         assert abs(figures[f"lockstep_loop_realtime_factor{suffix}"] - loop) < 0.02 * loop
         assert "lockstep_aborted" + suffix not in figures
     assert 0 < figures["bus_load_pct"] < 15
+
+
+def test_a_run_without_its_summary_is_an_error_that_names_it(tmp_path):
+    with pytest.raises(bench.BenchError, match="sil run no-such-scenario --mode inproc"):
+        bench._sil_run("no-such-scenario", tmp_path / "out", "inproc", "python")
