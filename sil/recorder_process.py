@@ -8,9 +8,8 @@ stands where the :class:`~sil.recorder.Recorder` stands for the command node: it
 and the command node's ``commands_sent``, in order and sends them in batches to a child process,
 which hands them in the same order to a Recorder there. The files are therefore the ones the
 Recorder writes in the run's process, byte for byte. The child is on no node's critical path, so
-it runs on the cores' idle time (Linux SCHED_IDLE; elsewhere at niceness +10), and a node that
-wakes up never waits for it; at close it is lifted to an ordinary (niceness +10) priority, so
-that on a busy machine it cannot starve while it writes the rest.
+it runs at the lowest priority (niceness 19): a node that wakes up takes the core from it at
+once, and it still gets a share of a busy machine, so it never starves.
 
 While the run goes, the command node reads back the newest sensor tick (taken from the frames
 here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since no frame is
@@ -48,8 +47,9 @@ from sil.recorder import InOrderTicks, Recorder
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
-NICE = 10  # the child's niceness (and, on Linux, SCHED_IDLE while the run goes): it is on no
-# node's critical path, so a node that wakes up never waits for it
+NICE = 19  # the child's niceness: it is on no node's critical path, so a node that wakes up
+# never waits for it (SCHED_IDLE did no better, and an unprivileged process could not leave it to
+# write its last chunks on a busy machine)
 
 
 class RecorderFailed(RuntimeError):
@@ -96,6 +96,8 @@ class RecorderProcess(InOrderTicks):
         """The run ended before it began: the child goes without writing anything."""
         self._outbox.put(None)
         self._feeder.join(CLOSE_TIMEOUT_S)
+        if self._child.stdout is not None:
+            self._child.stdout.close()
         self._reap()
 
     def _feed(self) -> None:
@@ -155,7 +157,6 @@ class RecorderProcess(InOrderTicks):
             "e2e": {},
             "unknown_ids": {},
         }
-        _lift(self._child.pid)
         try:
             if self._ids:
                 self._send_batch()
@@ -194,18 +195,6 @@ def _child_setup() -> None:
     """In the child before exec: it dies with the run and yields the cores to the nodes."""
     die_with_parent()
     os.nice(NICE)
-    if hasattr(os, "SCHED_IDLE"):  # (Linux) only the cores' idle time, while the run goes
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-
-
-def _lift(pid: int) -> None:
-    """Out of SCHED_IDLE (the nodes are done): on a busy machine the child would wait for idle
-    cores to write the rest, and could starve."""
-    if hasattr(os, "SCHED_OTHER"):
-        try:
-            os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
-        except OSError:  # (gone already)
-            pass
 
 
 def _exit(signum: int, _frame: object) -> None:

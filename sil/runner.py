@@ -223,9 +223,11 @@ def run(opts: RunOptions) -> dict:
 def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     """The run, with ``state.children`` stopped by the caller whatever happens."""
     spec = ecu_spec = None
-    if opts.mode != "realtime" and not s.bus_faults:  # the recorder on a core of its own (it
-        state.recorder = RecorderProcess()  # imports while the run is set up)
-    if opts.mode != "inproc":  # the plant process first: its start-up (1-1.5 s) overlaps the set-up
+    # the processes first, so that their start-up overlaps the set-up: the recorder's (it imports
+    # meanwhile), the plant's (1-1.5 s), and below the ECU's once its parameters are checked
+    if opts.mode != "realtime" and not s.bus_faults:
+        state.recorder = RecorderProcess()
+    if opts.mode != "inproc":
         spec = _bus_spec(opts)
         ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
         state.bus = str(spec)
@@ -241,7 +243,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     if opts.commission is not None:
         params = commissioning.apply(params, commissioning.load(opts.commission))
     compile_params(params)  # refuse bad overrides before anything starts
-    if ecu_spec is not None:  # and the ECU process as soon as its parameters are known
+    if ecu_spec is not None:
         state.children["ecu"] = _spawn("ecu", _ecu_args(opts, s, params, ecu_spec), opts.out_dir)
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
@@ -313,10 +315,24 @@ def _bus_spec(opts: RunOptions) -> BusSpec:
     return spec
 
 
+def _ready_file(out_dir: Path, node: str) -> Path:
+    """Where a node process says it is ready (``--ready-file``)."""
+    return out_dir / f".{node}-ready"
+
+
+def _start_file(out_dir: Path) -> Path:
+    """The plant's go (``sil plant --start-file``): tick 0 goes out once it exists."""
+    return out_dir / ".plant-start"
+
+
 def _handshake_files(out_dir: Path) -> tuple[Path, ...]:
     """The node processes' ready files, the plant's start file and their stats files."""
-    names = (".ecu-ready", ".plant-ready", ".plant-start", ".ecu-stats.json", ".plant-stats.json")
-    return tuple(out_dir / name for name in names)
+    nodes = ("ecu", "plant")
+    return (
+        *(_ready_file(out_dir, n) for n in nodes),
+        _start_file(out_dir),
+        *(_stats_file(out_dir, n) for n in nodes),
+    )
 
 
 def _guard_s(opts: RunOptions, s: Scenario) -> float:
@@ -348,9 +364,9 @@ def _plant_args(opts: RunOptions, s: Scenario, seed: int, spec: BusSpec, ticks: 
         "--guard-s",
         str(_guard_s(opts, s)),
         "--ready-file",
-        str(opts.out_dir / ".plant-ready"),
+        str(_ready_file(opts.out_dir, "plant")),
         "--start-file",
-        str(opts.out_dir / ".plant-start"),
+        str(_start_file(opts.out_dir)),
         "--stats-file",
         str(_stats_file(opts.out_dir, "plant")),
     ]
@@ -369,7 +385,7 @@ def _ecu_args(opts: RunOptions, s: Scenario, params: EcuParams, ecu_spec: BusSpe
         "--preset",
         s.controller.preset or "default",
         "--ready-file",
-        str(opts.out_dir / ".ecu-ready"),
+        str(_ready_file(opts.out_dir, "ecu")),
         "--guard",
         str(_guard_s(opts, s)),
         "--json",
@@ -414,8 +430,8 @@ def _run_on_bus(
         # file), the demands begin and the plant sends tick 0: in real time too,
         # the ECU is armed only when the engine's frames are coming
         deadline = time.monotonic() + START_TIMEOUT_S
-        ready = {node: opts.out_dir / f".{node}-ready" for node in ("ecu", "plant")}
-        for node, path in ready.items():
+        for node in ("ecu", "plant"):
+            path = _ready_file(opts.out_dir, node)
             while not path.exists():
                 if state.children[node].poll() is not None or time.monotonic() > deadline:
                     state.status = "aborted"
@@ -425,7 +441,7 @@ def _run_on_bus(
         _drain(bus)
         send = bus_sender(bus, DriverStats())
         command.start(send)
-        (opts.out_dir / ".plant-start").touch()
+        _start_file(opts.out_dir).touch()
         state.nodes_up = time.perf_counter()
         _listen(
             bus,
@@ -587,6 +603,6 @@ def _finish(
             p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind)
         ]
     (opts.out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    for name in (".ecu-ready", ".plant-ready", ".plant-start"):
-        (opts.out_dir / name).unlink(missing_ok=True)
+    for path in _handshake_files(opts.out_dir):
+        path.unlink(missing_ok=True)
     return summary

@@ -13,7 +13,7 @@ import can
 import pytest
 
 from protocol.codec import Codec
-from sil import recorder_process, runner, scenario
+from sil import runner, scenario
 from sil.recorder import Recorder
 from sil.recorder_process import BATCH_FRAMES, NICE, RecorderFailed, RecorderProcess
 from sil.runner import RunOptions
@@ -161,20 +161,13 @@ def test_a_discarded_recorder_process_writes_nothing_and_goes(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_the_recorder_process_takes_the_idle_time_while_the_run_goes(tmp_path):
-    recorder = RecorderProcess().open(tmp_path, 0.01)
-    pid = recorder._child.pid
-    niceness = int(Path(f"/proc/{pid}/stat").read_text().split()[18])
-    assert niceness == os.getpriority(os.PRIO_PROCESS, 0) + NICE
-    assert os.sched_getscheduler(pid) == os.SCHED_IDLE
-    lifted = []
-    real_lift = recorder_process._lift
-    recorder_process._lift = lambda p: (real_lift(p), lifted.append(os.sched_getscheduler(p)))
+def test_the_recorder_process_yields_the_cores_to_the_nodes():
+    recorder = RecorderProcess()
     try:
-        recorder.close()  # lifted before it writes the rest
+        niceness = int(Path(f"/proc/{recorder._child.pid}/stat").read_text().split()[18])
+        assert niceness == min(19, os.getpriority(os.PRIO_PROCESS, 0) + NICE)
     finally:
-        recorder_process._lift = real_lift
-    assert lifted == [os.SCHED_OTHER]
+        recorder.discard()
 
 
 def test_a_recorder_that_cannot_write_names_the_file_and_the_run_is_aborted(tmp_path, capfd):
