@@ -5,7 +5,9 @@ Each run is the ``sil run`` command in a process of its own, as a user runs it (
 as it is then: the node processes start while it is done, see :mod:`sil.runner`), and its figures
 are the ones it writes in summary.json. Each of the four runs is repeated (alternated, so that a
 busy spell of a shared machine hits all alike) and the best is reported, with every run's figure
-under ``..._runs``."""
+under ``..._runs``. The machine's pace before and after (``..._before``, ``..._after``): the
+Python firmware's tick and the plant's ECU period, each in a loop of its own, which the
+real-time factors scale with (a shared machine's pace drifts by a third from minute to minute)."""
 
 from __future__ import annotations
 
@@ -56,9 +58,20 @@ def _sil_run(name: str, out: Path, mode: str, impl: str) -> dict:
         ) from None
 
 
+def _pace(when: str) -> dict:
+    """The firmware's tick and the plant's ECU period now, each alone (a second in all)."""
+    from ecu import bench as ecu_bench
+    from sil.port_bench import plant_bound
+
+    tick = ecu_bench.run(quick=True)["us_per_tick"]
+    plant = plant_bound(scenario.load(SCENARIO))["plant_cpu_us_per_ecu_tick"]
+    return {f"python_tick_us_{when}": tick, f"plant_us_per_ecu_tick_{when}": plant}
+
+
 def run(quick: bool = False) -> dict:
     figures: dict = {"scenario": SCENARIO, "sim_time_s": QUICK_S if quick else 300.0}
     figures["load_average_1min_before"] = round(os.getloadavg()[0], 2)  # others' load, mostly
+    figures.update(_pace("before"))
     runs: dict[str, list[float]] = {}
     repeats = 1 if quick else REPEATS
     total = repeats * len(ECU_IMPLS) * len(MODES)
@@ -89,6 +102,7 @@ def run(quick: bool = False) -> dict:
                     if mode == "lockstep" and not suffix:
                         figures["bus"] = summary["bus"]
                         figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)
+    figures.update(_pace("after"))
     for key, factors in runs.items():
         figures[f"{key}_runs"] = factors
     return figures

@@ -24,6 +24,9 @@ def test_sil_bench_reports_every_run_and_the_loop_without_start_up():
         assert abs(figures[f"lockstep_loop_realtime_factor{suffix}"] - loop) < 0.02 * loop
         assert "lockstep_aborted" + suffix not in figures
     assert 0 < figures["bus_load_pct"] < 15
+    for when in ("before", "after"):  # the machine's pace, each in a loop of its own
+        assert 5 < figures[f"python_tick_us_{when}"] < 500
+        assert 2 < figures[f"plant_us_per_ecu_tick_{when}"] < 200
 
 
 def test_a_run_without_its_summary_is_an_error_that_names_it(tmp_path):
