@@ -32,13 +32,15 @@ class BenchError(RuntimeError):
     """A run of the bench failed to produce its summary."""
 
 
-def _scenario_file(tmp: Path, quick: bool) -> str:
-    """The scenario to run: the shipped one, or (quick) a copy of it cut to QUICK_S."""
-    path = scenario.load(SCENARIO).path
-    if not quick or path is None:
-        return SCENARIO
-    text = re.sub(r"(?m)^duration_s = .*$", f"duration_s = {QUICK_S}", path.read_text())
-    quick_file = tmp / f"{SCENARIO}-quick.toml"
+def _scenario_file(s: scenario.Scenario, tmp: Path, quick: bool) -> str:
+    """The scenario to run: the shipped one, or (quick) a copy of its file cut to QUICK_S."""
+    if not quick:
+        return s.name
+    assert s.path is not None  # (a shipped scenario has its file)
+    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {QUICK_S}", s.path.read_text())
+    if cut != 1:
+        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to cut for --quick")
+    quick_file = tmp / f"{s.name}-quick.toml"
     quick_file.write_text(text)
     return str(quick_file)
 
@@ -58,25 +60,26 @@ def _sil_run(name: str, out: Path, mode: str, impl: str) -> dict:
         ) from None
 
 
-def _pace(when: str) -> dict:
+def _pace(s: scenario.Scenario, when: str) -> dict:
     """The firmware's tick and the plant's ECU period now, each alone (a second in all)."""
     from ecu import bench as ecu_bench
     from sil.port_bench import plant_bound
 
     tick = ecu_bench.run(quick=True)["us_per_tick"]
-    plant = plant_bound(scenario.load(SCENARIO))["plant_cpu_us_per_ecu_tick"]
+    plant = plant_bound(s)["plant_cpu_us_per_ecu_tick"]
     return {f"python_tick_us_{when}": tick, f"plant_us_per_ecu_tick_{when}": plant}
 
 
 def run(quick: bool = False) -> dict:
-    figures: dict = {"scenario": SCENARIO, "sim_time_s": QUICK_S if quick else 300.0}
+    s = scenario.load(SCENARIO)
+    figures: dict = {"scenario": s.name, "sim_time_s": QUICK_S if quick else s.duration_s}
     figures["load_average_1min_before"] = round(os.getloadavg()[0], 2)  # others' load, mostly
-    figures.update(_pace("before"))
+    figures.update(_pace(s, "before"))
     runs: dict[str, list[float]] = {}
     repeats = 1 if quick else REPEATS
     total = repeats * len(ECU_IMPLS) * len(MODES)
     with tempfile.TemporaryDirectory() as tmp:
-        name = _scenario_file(Path(tmp), quick)
+        name = _scenario_file(s, Path(tmp), quick)
         for _ in range(repeats):
             for impl, suffix in ECU_IMPLS:
                 for mode, key in MODES:
@@ -102,7 +105,7 @@ def run(quick: bool = False) -> dict:
                     if mode == "lockstep" and not suffix:
                         figures["bus"] = summary["bus"]
                         figures["bus_load_pct"] = round(summary["bus_load_pct"], 2)
-    figures.update(_pace("after"))
+    figures.update(_pace(s, "after"))
     for key, factors in runs.items():
         figures[f"{key}_runs"] = factors
     return figures

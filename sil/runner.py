@@ -221,7 +221,8 @@ def run(opts: RunOptions) -> dict:
 
 
 def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
-    """The run, with ``state.children`` stopped by the caller whatever happens."""
+    """The run; should it raise, the caller stops ``state.children`` and discards
+    ``state.recorder``."""
     spec = ecu_spec = None
     # the processes first, so that their start-up overlaps the set-up: the recorder's (it imports
     # meanwhile), the plant's (1-1.5 s), and below the ECU's once its parameters are checked
