@@ -106,14 +106,12 @@ class E2EChecker:
 
     def check(self, frame: bytes | bytearray | memoryview) -> E2EStatus:
         """Classify one received frame and remember its counter when it is accepted."""
-        if len(frame) < 2 or _crc8(frame[1:], self._crc_start) != frame[0]:
-            status = _WRONGCRC
+        counter = frame[1] & 0x0F if len(frame) >= 2 else COUNTER_MODULO
+        if counter >= COUNTER_MODULO or _crc8(frame[1:], self._crc_start) != frame[0]:
+            status = _WRONGCRC  # (15 is never sent: a corrupted frame) nothing is remembered
         else:
-            counter = frame[1] & 0x0F
             last = self._last_counter
-            if counter >= COUNTER_MODULO:
-                status = _WRONGCRC  # 15 is never sent: a corrupted frame
-            elif last < 0:
+            if last < 0:
                 status = _OK
             else:
                 delta = (counter - last) % COUNTER_MODULO

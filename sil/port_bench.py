@@ -86,6 +86,7 @@ def arm_figures(elf: Path) -> dict:
     core_text, core_data, core_bss = _size(objects["ecu_core.c"])
     libgcc = _symbol_sizes(elf, ("__aeabi_ldivmod", "__udivmoddi4", "__aeabi_uldivmod"))
     frames = sum(sum(_size(objects[s])[:2]) for s in ("ecu_frames.c", "generated/turbojet.c"))
+    node = sum(_size(objects["ecu_node.c"])[:2])  # the CAN node (not in the flash target)
     ram = _symbol_sizes(elf, ("ecu", "params"))
     stack = _stack_bound()
     flash = core_text + core_data + sum(libgcc.values())
@@ -95,6 +96,7 @@ def arm_figures(elf: Path) -> dict:
         "cm4_core_flash_detail": f"ecu_core.o {core_text + core_data} + libgcc 64-bit "
         f"division {sum(libgcc.values())}",
         "cm4_frames_flash_bytes": frames,
+        "cm4_node_flash_bytes": node,
         "cm4_ram_bytes": ram_total,
         "cm4_ram_detail": f"ecu_t {ram.get('ecu', 0)} + params {ram.get('params', 0)} "
         f"+ stack bound {stack}",

@@ -33,8 +33,9 @@ def _build_dir() -> Path:
 
 BUILD_DIR = _build_dir()
 WARNINGS = ("-std=c99", "-Wall", "-Wextra", "-Wconversion", "-pedantic", "-Werror")
-CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c")
-HEADERS = ("ecu_core.h", "ecu_frames.h", "generated/turbojet.h")
+# the control core, the frame codec and the CAN node (ecu_node.c: the C twin of ecu/node.py)
+CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c", "ecu_node.c")
+HEADERS = ("ecu_core.h", "ecu_frames.h", "generated/turbojet.h", "ecu_node.h")
 ARM_CC = "arm-none-eabi-gcc"
 ARM_FLAGS = ("-mcpu=cortex-m4", "-mthumb", "-Os", "-ffunction-sections", "-fdata-sections")
 
@@ -80,7 +81,7 @@ def _compile(cc: str, flags: tuple[str, ...], sources: tuple[str, ...], out_name
 
 
 def host_library(cc: str | None = None) -> Path:
-    """The core and frame codec as a shared library for ctypes (with field names)."""
+    """The core, frame codec and CAN node as a shared library for ctypes (with field names)."""
     cc = cc or host_compiler()
     flags = (*WARNINGS, "-O2", "-fPIC", "-shared", "-DECU_WITH_NAMES")
     return _compile(cc, flags, CORE_SOURCES, "libecu_port.so")
@@ -118,7 +119,8 @@ def arm_replayer(systick: bool = False) -> Path:
 
 
 def arm_objects() -> dict[str, Path]:
-    """The control core and the frame codec compiled alone for the Cortex-M4 (for sizes)."""
+    """The control core, the frame codec and the CAN node, each compiled alone for the
+    Cortex-M4 (for sizes): source name -> object."""
     if not shutil.which(ARM_CC):
         raise PortBuildError(
             f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"

@@ -45,12 +45,13 @@ uint8_t ecu_e2e_crc(uint16_t data_id, const uint8_t data[8])
     return crc;
 }
 
+/* E2EChecker.check (protocol/e2e.py, max_delta=2) */
 static int e2e_check(ecu_frames_t *f, int kind, const uint8_t data[8])
 {
     int counter = data[1] & 0x0F;
     int status;
-    if (ecu_e2e_crc(rx_data_id[kind], data) != data[0] || counter >= COUNTER_MODULO) {
-        return ECU_E2E_WRONGCRC;
+    if (counter >= COUNTER_MODULO || ecu_e2e_crc(rx_data_id[kind], data) != data[0]) {
+        return ECU_E2E_WRONGCRC; /* (15 is never sent: a corrupted frame) nothing remembered */
     }
     if (f->rx_last[kind] < 0) {
         status = ECU_E2E_OK;
@@ -65,40 +66,42 @@ static int e2e_check(ecu_frames_t *f, int kind, const uint8_t data[8])
     return status;
 }
 
+int ecu_frames_check(ecu_frames_t *f, uint32_t frame_id, const uint8_t data[8])
+{
+    switch (frame_id) {
+    case ECU_FRAME_SENSORS: return e2e_check(f, RX_SENSORS, data);
+    case ECU_FRAME_ANALOG: return e2e_check(f, RX_ANALOG, data);
+    case ECU_FRAME_DEMAND: return e2e_check(f, RX_DEMAND, data);
+    default: return -1;
+    }
+}
+
 int ecu_frames_receive(ecu_frames_t *f, uint32_t frame_id, const uint8_t data[8],
                        ecu_inputs_t *in, int32_t *demand_tick)
 {
-    int status;
+    int status = ecu_frames_check(f, frame_id, data);
+    if (status != ECU_E2E_OK) {
+        return status;
+    }
     if (frame_id == ECU_FRAME_SENSORS) {
         struct turbojet_plant_sensors_t m;
-        status = e2e_check(f, RX_SENSORS, data);
-        if (status == ECU_E2E_OK) {
-            (void)turbojet_plant_sensors_unpack(&m, data, 8u);
-            in->tick = m.sensor_tick;
-            in->speed_rpm = (int32_t)m.shaft_speed;
-            in->egt_dk = m.egt;
-        }
+        (void)turbojet_plant_sensors_unpack(&m, data, 8u);
+        in->tick = m.sensor_tick;
+        in->speed_rpm = (int32_t)m.shaft_speed;
+        in->egt_dk = m.egt;
     } else if (frame_id == ECU_FRAME_ANALOG) {
         struct turbojet_plant_analog_t m;
-        status = e2e_check(f, RX_ANALOG, data);
-        if (status == ECU_E2E_OK) {
-            (void)turbojet_plant_analog_unpack(&m, data, 8u);
-            in->supply_mv = m.supply_voltage;
-            in->pump_ma = m.pump_current;
-        }
-    } else if (frame_id == ECU_FRAME_DEMAND) {
-        struct turbojet_demand_t m;
-        status = e2e_check(f, RX_DEMAND, data);
-        if (status == ECU_E2E_OK) {
-            (void)turbojet_demand_unpack(&m, data, 8u);
-            in->arm = m.arm_request;
-            in->stop = m.stop_request;
-            in->demand_cpct = m.speed_demand;
-            in->open_loop_mv = m.pump_voltage_demand;
-            *demand_tick = m.demand_tick;
-        }
+        (void)turbojet_plant_analog_unpack(&m, data, 8u);
+        in->supply_mv = m.supply_voltage;
+        in->pump_ma = m.pump_current;
     } else {
-        status = -1;
+        struct turbojet_demand_t m;
+        (void)turbojet_demand_unpack(&m, data, 8u);
+        in->arm = m.arm_request;
+        in->stop = m.stop_request;
+        in->demand_cpct = m.speed_demand;
+        in->open_loop_mv = m.pump_voltage_demand;
+        *demand_tick = m.demand_tick;
     }
     return status;
 }
@@ -107,6 +110,17 @@ int ecu_frames_receive(ecu_frames_t *f, uint32_t frame_id, const uint8_t data[8]
 static uint32_t sat_raw(int32_t x, int32_t lo, int32_t hi)
 {
     return (uint32_t)(x < lo ? lo : (x > hi ? hi : x));
+}
+
+/*
+ * Est_* and Gain_* (Q7.24) in EcuTelemetry: the DBC's maximum, 127.99999994, is just under
+ * (2^31 - 1) / 2^24, so the codec's raw range (protocol/codec.py) ends at 2^31 - 2
+ */
+#define TELEMETRY_Q24_MAX (INT32_MAX - 1)
+
+static int32_t sat_q24(int32_t x)
+{
+    return x > TELEMETRY_Q24_MAX ? TELEMETRY_Q24_MAX : x;
 }
 
 /* alive counter into byte 1, CRC into byte 0 */
@@ -151,18 +165,18 @@ void ecu_frames_telemetry(ecu_frames_t *f, const ecu_t *e, uint8_t data[8])
     (void)turbojet_ecu_telemetry_init(&m);
     m.telemetry_index = f->telemetry_index;
     switch (f->telemetry_index) {
-    case 0: m.est_ap21 = o->ap21_q24; break;
-    case 1: m.est_ap22 = o->ap22_q24; break;
-    case 2: m.est_lambda = o->lambda_q24; break;
-    case 3: m.est_theta21 = o->theta21_q24; break;
-    case 4: m.est_theta22 = o->theta22_q24; break;
-    case 5: m.gain_kx1 = o->kx1_q24; break;
-    case 6: m.gain_kx2 = o->kx2_q24; break;
-    case 7: m.gain_kr = o->kr_q24; break;
-    case 8: m.gain_kf1 = o->kf1_q24; break;
-    case 9: m.gain_kf2 = o->kf2_q24; break;
-    case 10: m.est_speed_dev = e->s.obs_n_q24; break;
-    case 11: m.est_speed_rate = e->s.obs_v_q24; break;
+    case 0: m.est_ap21 = sat_q24(o->ap21_q24); break;
+    case 1: m.est_ap22 = sat_q24(o->ap22_q24); break;
+    case 2: m.est_lambda = sat_q24(o->lambda_q24); break;
+    case 3: m.est_theta21 = sat_q24(o->theta21_q24); break;
+    case 4: m.est_theta22 = sat_q24(o->theta22_q24); break;
+    case 5: m.gain_kx1 = sat_q24(o->kx1_q24); break;
+    case 6: m.gain_kx2 = sat_q24(o->kx2_q24); break;
+    case 7: m.gain_kr = sat_q24(o->kr_q24); break;
+    case 8: m.gain_kf1 = sat_q24(o->kf1_q24); break;
+    case 9: m.gain_kf2 = sat_q24(o->kf2_q24); break;
+    case 10: m.est_speed_dev = sat_q24(e->s.obs_n_q24); break;
+    case 11: m.est_speed_rate = sat_q24(e->s.obs_v_q24); break;
     default: m.saturation_count = (int32_t)sat_raw(o->sat_events, 0, INT32_MAX); break;
     }
     (void)turbojet_ecu_telemetry_pack(data, &m, 8u);

@@ -11,7 +11,8 @@
  * (an OK since the last tick wins) and pass ECU_E2E_NONEWDATA for kinds that did not arrive.
  * Send: after ecu_tick, pack EcuActuator every tick, EcuStatus every 50 ms and EcuTelemetry
  * every tick (one of its 13 multiplexed values per frame, round robin), each with the next
- * alive counter and its CRC. Scheduling and the CAN driver are the integrator's.
+ * alive counter and its CRC. Scheduling and the CAN driver are the integrator's; ecu_node.h does
+ * all of this as the ECU's CAN node (the twin of ecu/node.py).
  */
 #ifndef ECU_FRAMES_H
 #define ECU_FRAMES_H
@@ -42,6 +43,13 @@ void ecu_frames_init(ecu_frames_t *f);
 
 /* CRC-8 of a frame's bytes 1..7 under a data ID (as protocol/e2e.py). */
 uint8_t ecu_e2e_crc(uint16_t data_id, const uint8_t data[8]);
+
+/*
+ * E2E check of one received frame (PlantSensors, PlantAnalog or Demand; its alive counter is
+ * remembered unless REPEATED). Returns ECU_E2E_OK, _REPEATED, _WRONGSEQUENCE or _WRONGCRC, or -1
+ * for a frame ID the ECU does not receive. ecu_frames_receive() and ecu_node.h build on it.
+ */
+int ecu_frames_check(ecu_frames_t *f, uint32_t frame_id, const uint8_t data[8]);
 
 /*
  * Check one received frame and, when OK, unpack it into *in (Demand also sets *demand_tick, the

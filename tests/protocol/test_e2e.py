@@ -102,3 +102,15 @@ def test_bad_checker_parameters_are_refused():
         E2EChecker(1, timeout_ticks=0)
     with pytest.raises(ValueError, match="data ID"):
         E2EChecker(70000)
+
+
+def test_counter_15_with_a_valid_crc_is_wrongcrc_and_not_remembered():
+    """15 is never sent: a frame carrying it is corrupt however its CRC came out, and the next
+    frame is judged from the counter before it (AUTOSAR's check keeps no state of such a frame)."""
+    checker = E2EChecker(0x1002)
+    for counter, expected in ((4, E2EStatus.OK), (15, E2EStatus.WRONGCRC), (5, E2EStatus.OK)):
+        frame = bytearray(8)
+        frame[1] = counter  # protect() takes the counter modulo 15: 15 is written by hand
+        frame[0] = crc8(frame[1:], data_id_crc_start(0x1002))
+        assert checker.check(frame) == expected, counter
+    assert checker.check(frame) == E2EStatus.REPEATED  # the 5 was remembered, the 15 was not

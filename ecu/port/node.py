@@ -1,0 +1,192 @@
+"""The C CAN node (``ecu_node.c``) through ctypes, with the node interface of
+:class:`ecu.node.EcuNode`, so a driver or the in-process bus runs either: ``start``,
+``on_frame``, ``on_timeout``, ``on_period``, ``finished``, ``timeout_s``, ``frame_ids`` and the
+counters. It runs a :class:`ecu.port.core.CEcu` (the C core) and sends the same frames, byte for
+byte and in the same order, as ``EcuNode(ecu=CEcu(...))`` without a service port and with
+``max_ticks=None`` (tests/port/test_node.py).
+
+The two records the wrapper shares with C (``ecu_can_frame_t``, ``ecu_node_config_t``) are read
+from the library's field strings, as :mod:`ecu.port.core` reads the core's; the node itself is an
+opaque buffer of ``ecu_node_size()`` bytes, read through accessor functions.
+
+For compiled callers (a numba loop, a C extension): :func:`frame_fn_address` is the address of
+``ecu_node_frame`` and :attr:`CEcuNode.address` that of the instance's ``ecu_node_t``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import re
+from functools import cache
+
+from ecu.port.core import CEcu, PortError, library
+from protocol.codec import Codec
+from protocol.lockstep import every_ticks
+from protocol.node import SendFn
+
+_FIELD = re.compile(r"(\w+) (\w+)(?:\[(\d+)\])?")
+_C_TYPES = {
+    "uint8_t": ctypes.c_uint8,
+    "uint16_t": ctypes.c_uint16,
+    "uint32_t": ctypes.c_uint32,
+    "int8_t": ctypes.c_int8,
+    "int16_t": ctypes.c_int16,
+    "int32_t": ctypes.c_int32,
+}
+FRAME_FIELDS = ("id", "data")
+CONFIG_FIELDS = ("lockstep", "every_status", "every_telemetry", "every_demand")
+
+
+def _struct(lib: ctypes.CDLL, symbol: str, expected: tuple[str, ...], what: str) -> type:
+    """A ctypes Structure from the library's "type name[n]" string, checked against the field
+    names this module sets or reads."""
+    start = ctypes.addressof(ctypes.c_char.in_dll(lib, symbol))
+    text = ctypes.cast(start, ctypes.c_char_p).value.decode()
+    fields: list[tuple[str, type]] = []
+    for ctype, name, count in _FIELD.findall(text):
+        if ctype not in _C_TYPES:
+            raise PortError(f"ecu_node.h {what}.{name}: type {ctype} unknown to the wrapper")
+        t = _C_TYPES[ctype]
+        fields.append((name, t * int(count) if count else t))
+    names = tuple(name for name, _ in fields)
+    if names != expected:
+        raise PortError(f"ecu_node.h {what} has fields {names}, the wrapper expects {expected}")
+    return type(what, (ctypes.Structure,), {"_fields_": fields})
+
+
+class _NodeLib:
+    def __init__(self) -> None:
+        lib = library().lib
+        self.frame_t = _struct(lib, "ecu_can_frame_names", FRAME_FIELDS, "ecu_can_frame_t")
+        self.config_t = _struct(lib, "ecu_node_config_names", CONFIG_FIELDS, "ecu_node_config_t")
+        self.max_out = ctypes.c_int.in_dll(lib, "ecu_node_max_out").value
+        vp = ctypes.c_void_p
+        for name, args, res in (
+            ("ecu_node_every", [ctypes.c_uint32, ctypes.c_uint32], ctypes.c_uint16),
+            ("ecu_node_init", [vp, vp, vp], None),
+            ("ecu_node_frame", [vp, ctypes.c_uint32, ctypes.c_char_p, vp], ctypes.c_int),
+            ("ecu_node_timeout", [vp, vp], ctypes.c_int),
+            ("ecu_node_period", [vp, vp], ctypes.c_int),
+            ("ecu_node_size", [], ctypes.c_size_t),
+            ("ecu_node_ticks", [vp], ctypes.c_uint32),
+            ("ecu_node_tick", [vp], ctypes.c_uint16),
+            ("ecu_node_late_sensor_frames", [vp], ctypes.c_uint32),
+            ("ecu_node_demand_waits", [vp], ctypes.c_uint32),
+            ("ecu_node_own_clock", [vp], ctypes.c_int),
+            ("ecu_node_waiting", [vp], ctypes.c_int),
+            ("ecu_node_inputs", [vp], ctypes.POINTER(library().inputs_t)),
+        ):
+            fn = getattr(lib, name)
+            fn.argtypes = args
+            fn.restype = res
+        self.lib = lib
+
+
+@cache
+def node_library() -> _NodeLib:
+    """The node's functions and records in the host library (built on first use)."""
+    return _NodeLib()
+
+
+def every(cycle_time_ms: int, rate_hz: int) -> int:
+    """``ecu_node_every``: the C twin of :func:`protocol.lockstep.every_ticks`."""
+    return node_library().lib.ecu_node_every(cycle_time_ms, rate_hz)
+
+
+def frame_fn_address() -> int:
+    """Address of ``int ecu_node_frame(ecu_node_t *, uint32_t, const uint8_t[8],
+    ecu_can_frame_t[ECU_NODE_MAX_OUT])`` in the loaded library (valid while the process runs)."""
+    return ctypes.cast(node_library().lib.ecu_node_frame, ctypes.c_void_p).value
+
+
+class CEcuNode:
+    """The C node on a C core: ``EcuNode``'s interface (see the module docstring). ``lockstep``
+    selects the clocking as in EcuNode; the node never finishes (``max_ticks=None``).
+
+    Received frames of the node's IDs must have 8 data bytes, the contract's length (a
+    ValueError otherwise); frames of other IDs are ignored, as EcuNode ignores them.
+    """
+
+    def __init__(self, ecu: CEcu, *, lockstep: bool = True, codec: Codec | None = None) -> None:
+        if not isinstance(ecu, CEcu):
+            raise TypeError(f"CEcuNode runs a C core (ecu.port.core.CEcu), not {type(ecu)}")
+        nl = node_library()
+        codec = codec or Codec()
+        self.ecu = ecu  # kept alive: the node points at its ecu_t
+        self.rate_hz = ecu.p.rate_hz
+        self.lockstep = lockstep
+        self.frame_ids = tuple(codec[m].frame_id for m in ("PlantSensors", "PlantAnalog", "Demand"))
+        self.every_status = every_ticks(codec["EcuStatus"].cycle_time_ms, self.rate_hz)
+        self.every_telemetry = every_ticks(codec["EcuTelemetry"].cycle_time_ms, self.rate_hz)
+        self.every_demand = every_ticks(codec["Demand"].cycle_time_ms, self.rate_hz)
+        config = nl.config_t(
+            lockstep=int(lockstep),
+            every_status=self.every_status,
+            every_telemetry=self.every_telemetry,
+            every_demand=self.every_demand,
+        )
+        size = nl.lib.ecu_node_size()
+        self._node = (ctypes.c_uint64 * ((size + 7) // 8))()  # 8-byte aligned, zeroed
+        self.address: int = ctypes.addressof(self._node)
+        self._ref = self._node  # (passed as the void * of every call)
+        nl.lib.ecu_node_init(self._ref, ctypes.byref(ecu._ecu), ctypes.byref(config))
+        self._out = (nl.frame_t * nl.max_out)()
+        self._frame = nl.lib.ecu_node_frame
+        self._timeout = nl.lib.ecu_node_timeout
+        self._period = nl.lib.ecu_node_period
+        self._lib = nl.lib
+        self.finished = False
+        # the inputs the next tick gets (EcuNode.i), a view into the node
+        self.i = nl.lib.ecu_node_inputs(self._ref).contents
+
+    def _send(self, count: int, send: SendFn) -> None:
+        out = self._out
+        for k in range(count):
+            frame = out[k]
+            send(frame.id, bytes(frame.data))
+
+    # -- the node interface (protocol/node.py) -----------------------------------------------
+    def start(self, send: SendFn) -> None:
+        pass
+
+    def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        if len(data) != 8:
+            if frame_id in self.frame_ids:
+                raise ValueError(f"frame {frame_id:#x} with {len(data)} data bytes: expected 8")
+            return
+        count = self._frame(self._ref, frame_id, bytes(data), self._out)
+        if count:
+            self._send(count, send)
+
+    def on_timeout(self, send: SendFn) -> None:
+        self._send(self._timeout(self._ref, self._out), send)
+
+    def on_period(self, send: SendFn) -> None:
+        self._send(self._period(self._ref, self._out), send)
+
+    # -- EcuNode's counters ------------------------------------------------------------------
+    @property
+    def timeout_s(self) -> float | None:
+        """1 / rate_hz while the plant is silent (the node ticks on its own clock), else None."""
+        return 1.0 / self.rate_hz if self._lib.ecu_node_own_clock(self._ref) else None
+
+    @property
+    def ticks(self) -> int:
+        """Ticks run (modulo 2**32)."""
+        return self._lib.ecu_node_ticks(self._ref)
+
+    @property
+    def tick(self) -> int:
+        return self._lib.ecu_node_tick(self._ref)
+
+    @property
+    def late_sensor_frames(self) -> int:
+        return self._lib.ecu_node_late_sensor_frames(self._ref)
+
+    @property
+    def demand_waits(self) -> int:
+        return self._lib.ecu_node_demand_waits(self._ref)
+
+    @property
+    def waiting(self) -> bool:
+        return bool(self._lib.ecu_node_waiting(self._ref))
