@@ -22,6 +22,11 @@ unknown IDs and bit counts in arrival order; the can.log lines as a character ma
 signals decoded by shifts and masks per message; the trace cells sample-and-hold by position,
 each distinct value %-formatted once. ``e2e``, ``unknown_ids`` and the tick trackers check the
 frames still pending when read; ``bits`` is complete after close.
+
+Frames that come already in the canonical order, whole ticks at a time as numpy arrays (a loop
+that runs the nodes itself), skip the per-frame work: ``record_ticks`` checks the block's order
+and ticks, E2E and bits vectorised, and places the block in the chunk as arrays; the files and
+figures are those of the same frames recorded one by one, byte for byte.
 """
 
 from __future__ import annotations
@@ -78,6 +83,55 @@ class _Group:
         self.single = True  # no other group writes these columns
 
 
+class _Segment:
+    """Frames placed in the log order, as arrays: in blocks (a tick, or a frame written alone)
+    whose frames are stamped from one base; per block its first frame and the frames heard when
+    it was written (what _not_decoded replays); and the trace rows ended among them."""
+
+    __slots__ = (
+        "ids",
+        "payload",
+        "lengths",
+        "times",
+        "starts",
+        "heard",
+        "datas",
+        "row_ticks",
+        "row_pos",
+    )
+
+    def __init__(
+        self,
+        ids: np.ndarray,
+        payload: np.ndarray,
+        lengths: np.ndarray,
+        times: np.ndarray,
+        starts: np.ndarray,
+        heard: np.ndarray,
+        datas: list[bytes] | None,
+        row_ticks: np.ndarray,
+        row_pos: np.ndarray,
+    ) -> None:
+        self.ids = ids  # int64
+        self.payload = payload  # (frames, 8) uint8, zero beyond each frame's length
+        self.lengths = lengths  # int64
+        self.times = times  # float64: the log's timestamps
+        self.starts = starts  # int64, per block
+        self.heard = heard  # int64, per block
+        self.datas = datas  # the frames' bytes (frames recorded one by one), or None
+        self.row_ticks = row_ticks  # int64: the tick of each row
+        self.row_pos = row_pos  # int64: frames placed before each row (from the run's start)
+
+
+# the frame classes in a tick, in their canonical order (record_ticks)
+_PLANT, _SENSORS, _OTHER, _ECU, _ACTUATOR = range(5)
+_CLASS = np.full(0x800, _OTHER, np.int8)
+_CLASS[[i for i in PLANT_IDS if i != SENSORS]] = _PLANT
+_CLASS[SENSORS] = _SENSORS
+_CLASS[[i for i in ECU_IDS if i != ACTUATOR]] = _ECU
+_CLASS[ACTUATOR] = _ACTUATOR
+
+
 class Recorder:
     def __init__(
         self,
@@ -107,6 +161,10 @@ class Recorder:
         self._complete: set[int] = set()  # ticks whose plant and ECU frames are all in
         self._bad: set[bytes] = set()  # bytes of frames with a bad CRC, not yet logged
         self._bad_events: list[tuple[int, bytes]] = []  # (arrival, bytes): bad CRCs to replay
+        # blocks of ticks heard (IDs, payload), not yet checked: all before the frames heard in
+        # the lists below; the arrival number of their first frame
+        self._heard_blocks: list[tuple[np.ndarray, np.ndarray]] = []
+        self._blocks_first = 0
         self._sensor_wrap = TickUnwrapper()
         self._actuator_wrap = TickUnwrapper()
 
@@ -119,6 +177,11 @@ class Recorder:
             if message.protected:
                 state = [data_id_crc_start(message.data_id), -1, [0] * len(E2EStatus), message.name]
             self._known[message.frame_id] = (message.length, state)
+        # the same per 11-bit ID, for lookups in bulk: the message's length, -1 for no message
+        self._length_of = np.full(0x800, -1, np.int64)
+        for frame_id, (length, _) in self._known.items():
+            if 0 <= frame_id < 0x800:
+                self._length_of[frame_id] = length
 
         # trace columns: every payload signal of every message, with its unit
         self._columns: dict[str, int] = {}
@@ -155,9 +218,13 @@ class Recorder:
         self._out_base: list[float] = []
         self._out_count: list[int] = []
         self._out_heard: list[int] = []  # per block: frames heard when it was written
-        self._out_done = 0  # frames written in earlier chunks
+        self._out_done = 0  # frames placed in the log order before those in the lists above
         self._row_ticks: list[int] = []
         self._row_pos: list[int] = []
+        # ... and what was gathered before those lists, as arrays (see _seal and record_ticks)
+        self._segments: list[_Segment] = []
+        self._sealed_rows = 0  # rows in the segments
+        self._chunk_done = 0  # frames written in earlier chunks
         self._chunk_rows = min(CHUNK_ROWS, WALL_CLOCK_CHUNK_ROWS) if wall_clock else CHUNK_ROWS
 
     def _build_groups(self) -> None:
@@ -275,6 +342,90 @@ class Recorder:
         if self._complete:
             self._flush_ready()
 
+    def record_ticks(self, frame_ids: np.ndarray, payload: np.ndarray) -> None:
+        """Whole ticks at once, their frames in the canonical order (see :func:`tick_block`):
+        the files, the figures and the state end up as if every frame had been recorded one by
+        one, with commands_sent() after the command node's frames on each PlantSensors, as the
+        command node does. The frames are checked and placed vectorised over the block, whose
+        first tick must be the next to be written (:attr:`tick`): frames recorded one by one
+        before it must make whole ticks (a block follows an EcuActuator). The arrays are copied.
+
+        Raises ValueError (nothing recorded) if the block is not such whole ticks.
+        """
+        if self.wall_clock:
+            raise ValueError("record_ticks: not in real time (its frames are written as they come)")
+        if self._trace_file.closed:
+            raise ValueError("record_ticks: the recorder is closed")
+        if self._ticks or self._plant_pending or self._ecu_pending:
+            pending = len(self._plant_pending) + len(self._ecu_pending)
+            for slot in self._ticks.values():
+                pending += len(slot.plant or ()) + len(slot.command) + len(slot.ecu or ())
+            raise ValueError(
+                f"record_ticks: {pending} frame(s) recorded one by one not yet written as whole"
+                f" ticks (ticks {sorted(self._ticks)} begun, the next to write {self.tick}):"
+                " a block must follow an EcuActuator"
+            )
+        ids, ends = tick_block(
+            frame_ids, payload, self.tick, self._sensor_wrap.last, self._actuator_wrap.last
+        )
+        if not len(ids):
+            return
+        payload = np.array(payload, np.uint8)  # (a copy: the caller may reuse its arrays)
+        lengths = np.full(len(ids), 8, np.int64)
+        if self._heard_ids:
+            self._check_heard()  # the frames heard one by one before the block: checked first
+        self._seal()  # and logged first
+        # in pieces that end where a chunk ends, each recorded whole before its chunk is written
+        # (a Ctrl-C held while it is written then leaves the recorder as after a tick)
+        done = 0
+        while done < len(ends):
+            room = self._chunk_rows - self._sealed_rows - len(self._row_ticks)
+            take = min(len(ends) - done, max(room, 1))
+            lo = int(ends[done - 1]) if done else 0
+            piece = ends[done : done + take] - lo
+            hi = lo + int(piece[-1])
+            self._place_ticks(ids[lo:hi], payload[lo:hi], lengths[lo:hi], piece)
+            done += take
+
+    def _place_ticks(
+        self, ids: np.ndarray, payload: np.ndarray, lengths: np.ndarray, ends: np.ndarray
+    ) -> None:
+        """Whole ticks from :attr:`tick` on (checked by tick_block), tick i ending before
+        frame ``ends[i]``: heard (E2E, ticks and bits are checked with the chunk, or when asked,
+        by _check_heard), placed in the log and ended in rows."""
+        first = self.frames  # arrival number of the first frame
+        n = len(ids)
+        self.frames += n
+        if not self._heard_blocks:
+            self._blocks_first = first
+        self._heard_blocks.append((ids, payload))  # checked with the chunk, or when asked
+        count = len(ends)
+        ticks = np.arange(self.tick, self.tick + count)
+        starts = np.concatenate(([0], ends[:-1]))
+        self._segments.append(
+            _Segment(
+                ids,
+                payload,
+                lengths,
+                self._timestamps(ticks * self.period_s, ends - starts),
+                starts,
+                first + ends,  # each tick written as its EcuActuator is heard
+                None,
+                ticks,
+                self._out_done + ends,
+            )
+        )
+        self._out_done += n
+        self._sealed_rows += count
+        self.rows += count
+        self.tick += count
+        last = self.tick - 1  # the full tick of the last PlantSensors and EcuActuator
+        self._sensor_wrap.last = self._actuator_wrap.last = last
+        if last > self.latest_sensor_tick:
+            self.latest_sensor_tick = last
+        if self._sealed_rows >= self._chunk_rows:
+            self._write_chunk()
+
     # -- ticks out -------------------------------------------------------------------------------
     def _flush_ready(self) -> None:
         ticks = self._ticks
@@ -319,7 +470,7 @@ class Recorder:
         self._row_pos.append(self._out_done + len(self._out_ids))
         self.rows += 1
         self.tick += 1
-        if len(self._row_ticks) >= self._chunk_rows:
+        if len(self._row_ticks) + self._sealed_rows >= self._chunk_rows:
             self._write_chunk()
 
     @property
@@ -381,6 +532,15 @@ class Recorder:
     # -- bulk ------------------------------------------------------------------------------------
     def _check_heard(self) -> None:
         """E2E and tick-sequence checks and bit counts of the frames heard, in arrival order."""
+        if self._heard_blocks:  # (heard before the frames in the lists)
+            blocks, self._heard_blocks = self._heard_blocks, []
+            ids = np.concatenate([b[0] for b in blocks]) if len(blocks) > 1 else blocks[0][0]
+            payload = np.concatenate([b[1] for b in blocks]) if len(blocks) > 1 else blocks[0][1]
+            lengths = np.full(len(ids), 8, np.int64)
+            self.bits.add_many(ids, payload, lengths)
+            first = self._blocks_first
+            for i in self._check_frames(ids, payload, lengths).tolist():  # logged, not decoded
+                self._bad_events.append((first + i, payload[i].tobytes()))
         heard_ids, self._heard_ids = self._heard_ids, []
         heard, self._heard_data = self._heard_data, []
         if not heard:
@@ -392,16 +552,31 @@ class Recorder:
         else:
             for frame_id, data in zip(heard_ids, heard, strict=True):
                 self.bits.add(frame_id, data)
-        good = np.zeros(len(ids), bool)  # known ID, right length, E2E not WRONGCRC
-        for frame_id, (length, _) in self._known.items():
-            good |= (ids == frame_id) & (lengths == length)
+        for i in self._check_frames(ids, payload, lengths).tolist():  # logged, never decoded
+            self._bad_events.append((first + i, heard[i]))
+
+    def _check_frames(
+        self, ids: np.ndarray, payload: np.ndarray, lengths: np.ndarray
+    ) -> np.ndarray:
+        """E2E and tick-sequence checks of frames heard one after the other (after those checked
+        before), unknown IDs counted; returns the indices of the frames with a bad CRC."""
+        inside = (ids >= 0) & (ids < 0x800)
+        if inside.all():  # known ID, right length, E2E not WRONGCRC
+            good = self._length_of[ids] == lengths
+        else:
+            good = np.zeros(len(ids), bool)
+            good[inside] = self._length_of[ids[inside]] == lengths[inside]
+            for frame_id, (length, _) in self._known.items():
+                if not 0 <= frame_id < 0x800:
+                    good |= (ids == frame_id) & (lengths == length)
         if not good.all():
             for frame_id in ids[~good].tolist():
                 self._unknown_ids[frame_id] += 1
+        present = set(np.unique(ids[good]).tolist())
         seen: list[tuple[int, str, int]] = []
-        bad: list[int] = []
+        bad: list[np.ndarray] = []
         for frame_id, (length, state) in self._known.items():
-            if state is None:
+            if state is None or frame_id not in present:
                 continue
             rows = np.flatnonzero(good & (ids == frame_id))
             if not len(rows):
@@ -429,11 +604,9 @@ class Recorder:
             if not valid.all():
                 invalid = rows[~valid]
                 good[invalid] = False
-                bad += invalid.tolist()
+                bad.append(invalid)
         seen.sort()
         self._e2e_seen += [(name, s) for _, name, s in seen]
-        for i in sorted(bad):  # logged, never decoded into the trace
-            self._bad_events.append((first + i, heard[i]))
         for frame_id, tracker in ((SENSORS, self._sensor_ticks), (ACTUATOR, self._actuator_ticks)):
             rows = np.flatnonzero(good & (ids == frame_id))
             if len(rows):
@@ -446,32 +619,52 @@ class Recorder:
                 else:
                     for tick in ticks.tolist():
                         tracker.observe(tick)
+        return np.sort(np.concatenate(bad)) if bad else np.zeros(0, np.intp)
 
     def _not_decoded(
-        self, frame_ids: list[int], datas: list[bytes], count: list[int], heard: list[int]
+        self,
+        ids: np.ndarray,
+        payload: np.ndarray,
+        lengths: np.ndarray,
+        starts: np.ndarray,
+        heard: np.ndarray,
     ) -> list[int]:
         """Frames logged with a bad CRC (by index in the chunk): never decoded into the trace.
 
         Replays, in the order they happened, a bad frame heard (its bytes go into the bad set)
         and a frame logged (bytes found in the set are taken out, and the frame not decoded).
+        The frames were logged in blocks beginning at ``starts``, each when ``heard`` frames had
+        been heard; blocks logged while the set is empty and no bad frame comes are skipped.
         """
         events, self._bad_events = self._bad_events, []
         bad = self._bad
         out: list[int] = []
         e = 0
-        i = 0
-        for n, heard_then in zip(count, heard, strict=True):
+        b = 0
+        blocks = len(starts)
+        ends = np.append(starts[1:], len(ids)).tolist()
+        starts_l, heard_l = starts.tolist(), heard.tolist()
+        while b < blocks:
+            if not bad:
+                if e == len(events):
+                    break
+                b = max(b, int(np.searchsorted(heard, events[e][0], "right")))
+                if b == blocks:
+                    break
+            heard_then = heard_l[b]
             while e < len(events) and events[e][0] < heard_then:
                 bad.add(events[e][1])
                 e += 1
             if bad:
-                for j in range(i, i + n):
-                    data = datas[j]
-                    known = self._known.get(frame_ids[j])
-                    if known is not None and len(data) == known[0] and data in bad:
-                        bad.discard(data)
-                        out.append(j)
-            i += n
+                for j in range(starts_l[b], ends[b]):
+                    known = self._known.get(int(ids[j]))
+                    length = int(lengths[j])
+                    if known is not None and length == known[0]:
+                        data = payload[j, :length].tobytes()
+                        if data in bad:
+                            bad.discard(data)
+                            out.append(j)
+            b += 1
         self._bad_events = events[e:]
         return out
 
@@ -481,7 +674,7 @@ class Recorder:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = len(datas)
         blob = b"".join(datas)
-        if len(blob) == 8 * n and max(map(len, datas)) == 8:
+        if len(blob) == 8 * n and (not n or max(map(len, datas)) == 8):
             payload = np.frombuffer(blob, np.uint8).reshape(n, 8)
             lengths = np.full(n, 8, np.int64)
         else:
@@ -490,6 +683,32 @@ class Recorder:
             for i, d in enumerate(datas):
                 payload[i, : min(len(d), 8)] = np.frombuffer(d[:8], np.uint8)
         return np.array(ids, np.int64), payload, lengths
+
+    def _seal(self) -> None:
+        """The frames and rows gathered one by one into a segment: before a block of ticks is
+        placed after them, and when the chunk is written."""
+        datas = self._out_data
+        if not datas and not self._row_ticks:
+            return
+        ids, payload, lengths = self._frames_array(self._out_ids, datas)
+        counts = np.array(self._out_count, np.int64)
+        segment = _Segment(
+            ids,
+            payload,
+            lengths,
+            self._timestamps(self._out_base, counts),
+            np.cumsum(counts) - counts,
+            np.array(self._out_heard, np.int64),
+            datas,
+            np.array(self._row_ticks, np.int64),
+            np.array(self._row_pos, np.int64),
+        )
+        self._segments.append(segment)
+        self._out_done += len(datas)
+        self._sealed_rows += len(self._row_ticks)
+        self._out_ids, self._out_data, self._out_base = [], [], []
+        self._out_count, self._out_heard = [], []
+        self._row_ticks, self._row_pos = [], []
 
     def _write_chunk(self) -> None:
         """Write the gathered frames to can.log and rows to trace.csv, decoded in bulk.
@@ -516,43 +735,53 @@ class Recorder:
 
     def _write_chunk_now(self) -> None:
         self._check_heard()
-        frame_ids, self._out_ids = self._out_ids, []
-        datas, self._out_data = self._out_data, []
-        base, self._out_base = self._out_base, []
-        count, self._out_count = self._out_count, []
-        heard, self._out_heard = self._out_heard, []
-        row_ticks, self._row_ticks = self._row_ticks, []
-        row_pos, self._row_pos = self._row_pos, []
-        done = self._out_done
-        n = len(datas)
-        self._out_done += n
+        self._seal()
+        segments, self._segments = self._segments, []
+        self._sealed_rows = 0
+        done = self._chunk_done  # frames written in earlier chunks
+        self._chunk_done = self._out_done
+        if not segments:
+            return
+        if len(segments) == 1:
+            (s,) = segments
+            ids, payload, lengths, times = s.ids, s.payload, s.lengths, s.times
+            row_ticks, row_pos = s.row_ticks, s.row_pos
+        else:
+            ids = np.concatenate([s.ids for s in segments])
+            payload = np.concatenate([s.payload for s in segments])
+            lengths = np.concatenate([s.lengths for s in segments])
+            times = np.concatenate([s.times for s in segments])
+            row_ticks = np.concatenate([s.row_ticks for s in segments])
+            row_pos = np.concatenate([s.row_pos for s in segments])
+        n = len(ids)
         if n:
-            ids, payload, lengths = self._frames_array(frame_ids, datas)
             if lengths.max() > 8:  # not classical CAN: one by one
-                ts = self._timestamps(base, count)
-                for frame_id, data, t in zip(frame_ids, datas, ts.tolist(), strict=True):
+                datas = [
+                    d
+                    for s in segments
+                    for d in (s.datas if s.datas is not None else [r.tobytes() for r in s.payload])
+                ]
+                for frame_id, data, t in zip(ids.tolist(), datas, times.tolist(), strict=True):
                     self.log.write(t, frame_id, data)
             else:
-                self.log.write_many(self._timestamps(base, count), ids, payload, lengths)
-        else:
-            ids = np.zeros(0, np.int64)
-            payload = np.zeros((0, 8), np.uint8)
-            lengths = np.zeros(0, np.int64)
-        no_decode = (
-            self._not_decoded(frame_ids, datas, count, heard)
-            if self._bad or self._bad_events
-            else []
-        )
+                self.log.write_many(times, ids, payload, lengths)
+        no_decode: list[int] = []
+        if self._bad or self._bad_events:
+            offsets = np.cumsum([0] + [len(s.ids) for s in segments[:-1]])
+            starts = np.concatenate([s.starts + o for s, o in zip(segments, offsets, strict=True)])
+            heard = np.concatenate([s.heard for s in segments])
+            no_decode = self._not_decoded(ids, payload, lengths, starts, heard)
         self._write_rows(ids, payload, lengths, no_decode, row_ticks, row_pos, done)
         self.log.flush()
         self._trace_file.flush()
 
     @staticmethod
-    def _timestamps(base: list[float], count: list[int]) -> np.ndarray:
-        counts = np.array(count, np.int64)
+    def _timestamps(base: list[float] | np.ndarray, count: list[int] | np.ndarray) -> np.ndarray:
+        """Frame i of a block at its base + i * 10 us."""
+        counts = np.asarray(count, np.int64)
         starts = np.cumsum(counts) - counts
         seq = np.arange(int(counts.sum())) - np.repeat(starts, counts)
-        return np.repeat(np.array(base, np.float64), counts) + seq * _FRAME_SPACING_S
+        return np.repeat(np.asarray(base, np.float64), counts) + seq * _FRAME_SPACING_S
 
     def _write_rows(
         self,
@@ -560,14 +789,14 @@ class Recorder:
         payload: np.ndarray,
         lengths: np.ndarray,
         no_decode: list[int],
-        row_ticks: list[int],
-        row_pos: list[int],
+        row_ticks: np.ndarray,
+        row_pos: np.ndarray,
         done: int,
     ) -> None:
         n = len(ids)
         ncols = len(self._carry)
         # rows plus one at the chunk's end (the values carried into the next chunk)
-        pos = np.array([*row_pos, done + n], np.int64) - done
+        pos = np.append(np.asarray(row_pos, np.int64), done + n) - done
         nrows = len(pos)
         # the values pool: the carried values first, then every decoded value; each cell of the
         # trace is an index into it
@@ -638,7 +867,7 @@ class Recorder:
         if nrows == 1:
             return
         cell = cell[:-1]
-        ticks = np.array(row_ticks, np.int64)
+        ticks = np.asarray(row_ticks, np.int64)
         c = self._columns
         true = values[cell[:, c["TrueSpeed"]]]
         meas = values[cell[:, c["ShaftSpeed"]]]
@@ -712,6 +941,107 @@ def _decode(words: np.ndarray, fields: list[tuple]) -> np.ndarray:
     return out
 
 
+def tick_block(
+    frame_ids: np.ndarray,
+    payload: np.ndarray,
+    first_tick: int,
+    sensor_last: int = -1,
+    actuator_last: int | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Checks that a block of frames is whole ticks in their canonical order, from ``first_tick``
+    on: each tick the plant's frames (PlantTruthA/B, PlantAnalog), PlantSensors(k), the command
+    node's frames (and any foreign ones), the ECU's (EcuStatus, EcuTelemetry), EcuActuator(k);
+    all of them 8-byte frames with 11-bit IDs, ``payload`` (frames, 8) uint8. The ticks are read
+    as the recorder reads them: unwrapped from ``sensor_last`` and ``actuator_last`` (the last
+    full ticks, -1 if none yet; None: the 16-bit ticks only). Vectorised; what went wrong is
+    worked out only when something did.
+
+    Returns the IDs (int64) and where each tick ends (the index after its EcuActuator); raises
+    ValueError naming the first frame that is wrong.
+    """
+    ids = np.asarray(frame_ids)
+    if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
+        raise ValueError(
+            f"record_ticks: frame_ids is not a 1-D integer array ({ids.dtype}, shape {ids.shape})"
+        )
+    data = np.asarray(payload)
+    if data.dtype != np.uint8 or data.shape != (len(ids), 8):
+        raise ValueError(
+            f"record_ticks: payload is not a ({len(ids)}, 8) uint8 array of 8-byte frames"
+            f" ({data.dtype}, shape {data.shape})"
+        )
+    ids = ids.astype(np.int64)
+    if not len(ids):
+        return ids, np.zeros(0, np.int64)
+    if ids.min() < 0 or ids.max() > 0x7FF:
+        i = int(np.flatnonzero((ids < 0) | (ids > 0x7FF))[0])
+        raise ValueError(f"record_ticks: frame {i} of the block: ID {int(ids[i])} is not 11-bit")
+    cls = _CLASS[ids]
+    if cls[-1] != _ACTUATOR:
+        raise ValueError("record_ticks: the block does not end with an EcuActuator (whole ticks)")
+    ends = np.flatnonzero(cls == _ACTUATOR) + 1
+    # within a tick the classes go up: nothing comes back after the next class has begun
+    down = cls[1:] < cls[:-1]
+    if down.any():
+        wrong = np.flatnonzero(down & (cls[:-1] != _ACTUATOR))
+        if len(wrong):
+            i = int(wrong[0]) + 1
+            raise ValueError(
+                f"record_ticks: frame {i} of the block: ID {int(ids[i]):#05x} after"
+                f" {int(ids[i - 1]):#05x} in a tick, not in the order of a tick (the plant's"
+                " frames, PlantSensors, the command node's frames, the ECU's frames, EcuActuator)"
+            )
+    sensors = np.flatnonzero(cls == _SENSORS)
+    # one PlantSensors in each tick: the k-th after tick k - 1 ends and before tick k ends
+    if len(sensors) != len(ends) or (sensors >= ends).any() or (sensors[1:] < ends[:-1]).any():
+        per_tick = np.diff(np.searchsorted(sensors, ends), prepend=0)
+        t = int(np.flatnonzero(per_tick != 1)[0])
+        start = int(ends[t - 1]) if t else 0
+        raise ValueError(
+            f"record_ticks: frames {start}..{int(ends[t]) - 1} of the block (tick"
+            f" {first_tick + t}): {int(per_tick[t])} PlantSensors, expected one"
+        )
+    # the ticks one after the other, from first_tick on: the 16-bit numbers, and the first as
+    # the recorder unwraps it (the others then each one more)
+    expected = np.arange(first_tick, first_tick + len(ends)) % TICK_MODULO
+    for name, rows, last in (
+        ("PlantSensors", sensors, sensor_last),
+        ("EcuActuator", ends - 1, actuator_last),
+    ):
+        tick16 = data[rows, 2] | data[rows, 3].astype(np.int64) << 8
+        wrong = tick16 != expected
+        if wrong.any():
+            j = int(np.argmax(wrong))
+            raise ValueError(
+                f"record_ticks: frame {int(rows[j])} of the block: {name} tick {int(tick16[j])},"
+                f" expected {int(expected[j])}"
+            )
+        if last is not None and (full := _unwrap_one(last, int(tick16[0]))) != first_tick:
+            raise ValueError(
+                f"record_ticks: frame {int(rows[0])} of the block: {name} tick"
+                f" {int(tick16[0])} reads as {full} after {last}, expected {first_tick}"
+            )
+    return ids, ends
+
+
+def _unwrap_one(last: int, tick16: int) -> int:
+    """:meth:`TickUnwrapper.full` of one 16-bit tick after the full tick ``last`` (-1: none)."""
+    if last < 0:
+        return tick16
+    delta = (tick16 - last) % TICK_MODULO
+    return last + (delta - TICK_MODULO if delta >= TICK_MODULO // 2 else delta)
+
+
+def _unwrap(last: int, tick16: np.ndarray) -> np.ndarray:
+    """:meth:`TickUnwrapper.full` of each 16-bit tick in turn, from ``last`` on (vectorised)."""
+    if not len(tick16):
+        return tick16
+    base = int(tick16[0]) if last < 0 else last
+    delta = np.diff(tick16, prepend=base) % TICK_MODULO
+    delta = np.where(delta >= TICK_MODULO // 2, delta - TICK_MODULO, delta)
+    return base + np.cumsum(delta)
+
+
 class TickUnwrapper:
     """Full tick numbers from the 16-bit ones on the bus (ticks only move forward, mostly)."""
 
@@ -748,3 +1078,15 @@ class InOrderTicks:
                 self.latest_sensor_tick = k
         elif frame_id == ACTUATOR:
             self.tick += 1
+
+    def track_many(self, frame_ids: np.ndarray, payload: np.ndarray) -> None:
+        """:meth:`track` of every frame of a block, vectorised: ``payload`` (frames, 8) uint8."""
+        ids = np.asarray(frame_ids)
+        self.tick += int(np.count_nonzero(ids == ACTUATOR))
+        rows = np.flatnonzero(ids == SENSORS)
+        if len(rows):
+            data = np.asarray(payload)
+            tick16 = data[rows, 2].astype(np.int64) | data[rows, 3].astype(np.int64) << 8
+            full = _unwrap(self._sensor_wrap.last, tick16)
+            self._sensor_wrap.last = int(full[-1])
+            self.latest_sensor_tick = max(self.latest_sensor_tick, int(full.max()))

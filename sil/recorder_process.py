@@ -6,10 +6,11 @@ quarter to a third of the run; in lockstep the plant and the ECU processes take 
 recorder's work in the run's process competed with them for the two cores. :class:`RecorderProcess`
 stands where the :class:`~sil.recorder.Recorder` stands for the command node: it takes the frames,
 and the command node's ``commands_sent``, in order and sends them in batches to a child process,
-which hands them in the same order to a Recorder there. The files are therefore the ones the
-Recorder writes in the run's process, byte for byte. The child is on no node's critical path, so
-it runs at the lowest priority (niceness 19): a node that wakes up takes the core from it at
-once, and it still gets a share of a busy machine, so it never starves.
+which hands them in the same order to a Recorder there (whole ticks given at once, by
+``record_ticks``, go as one message, after the frames before them). The files are therefore the
+ones the Recorder writes in the run's process, byte for byte. The child is on no node's critical
+path, so it runs at the lowest priority (niceness 19): a node that wakes up takes the core from it
+at once, and it still gets a share of a busy machine, so it never starves.
 
 While the run goes, the command node reads back the newest sensor tick (taken from the frames
 here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since no frame is
@@ -42,10 +43,11 @@ import numpy as np
 
 from protocol.codec import Codec
 from sil.parent_death import die_with_parent
-from sil.recorder import InOrderTicks, Recorder
+from sil.recorder import InOrderTicks, Recorder, tick_block
 
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
+_TICKS = "ticks"  # tags a block of whole ticks: (_TICKS, int32 IDs, (frames, 8) uint8 payload)
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
 NICE = 19  # the child's niceness: it is on no node's critical path, so a node that wakes up
 # never waits for it (SCHED_IDLE did no better, and an unprivileged process could not leave it to
@@ -132,11 +134,28 @@ class RecorderProcess(InOrderTicks):
     def commands_sent(self) -> None:
         self._ids.append(_COMMANDS_SENT)
 
+    def record_ticks(self, frame_ids: np.ndarray, payload: np.ndarray) -> None:
+        """Whole ticks at once (see :meth:`~sil.recorder.Recorder.record_ticks`), after the
+        frames recorded one by one; checked here (ValueError, nothing sent), sent as one
+        message."""
+        ids, _ = tick_block(frame_ids, payload, self.tick, self._sensor_wrap.last)
+        if not len(ids):
+            return
+        if self._ids:
+            self._send_batch()  # the frames before the block first
+        data = np.ascontiguousarray(payload, np.uint8)
+        self._send((_TICKS, ids.astype(np.int32).tobytes(), data.tobytes()))
+        self.frames += len(ids)
+        self.track_many(ids, data)
+
     def _send_batch(self) -> None:
+        self._send((self._ids.tobytes(), bytes(self._lengths), bytes(self._data)))
+        self._ids, self._lengths, self._data = array("i"), bytearray(), bytearray()
+
+    def _send(self, message: tuple) -> None:
         if self._broken or self._child.poll() is not None:
             raise RecorderFailed(self._failure())
-        self._outbox.put((self._ids.tobytes(), bytes(self._lengths), bytes(self._data)))
-        self._ids, self._lengths, self._data = array("i"), bytearray(), bytearray()
+        self._outbox.put(message)
 
     def _failure(self) -> str:
         try:
@@ -216,6 +235,11 @@ def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
         raise SystemExit(2) from None
     try:
         while (batch := _next(inbox)) is not None:
+            if isinstance(batch[0], str):  # (_TICKS, IDs, payload): whole ticks
+                _, ids, data = batch
+                frame_ids = np.frombuffer(ids, np.int32)
+                recorder.record_ticks(frame_ids, np.frombuffer(data, np.uint8).reshape(-1, 8))
+                continue
             ids, lengths, data = batch
             record, commands_sent = recorder.record, recorder.commands_sent
             at = 0
