@@ -21,6 +21,7 @@ plant/ is deleted and compiles afresh on first use.
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterable
 from pathlib import Path
 
 JIT = {"cache": True, "error_model": "numpy", "fastmath": {"nsz", "arcp", "contract", "afn"}}
@@ -31,25 +32,34 @@ CACHE_DIR = PLANT_DIR / "__pycache__"
 STAMP = CACHE_DIR / "numba-sources.sha256"
 
 
-def source_digest() -> str:
+def source_digest(sources: Iterable[Path] | None = None) -> str:
+    """SHA-256 over the names and bytes of ``sources`` (default: every plant source)."""
     h = hashlib.sha256()
-    for path in sorted(PLANT_DIR.glob("*.py")):
+    for path in sorted(PLANT_DIR.glob("*.py") if sources is None else sources):
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.hexdigest()
 
 
-def ensure_fresh() -> None:
-    digest = source_digest()
+def keep_cache_fresh(cache_dir: Path, stamp: Path, cached: str, sources: Iterable[Path]) -> None:
+    """Delete the cached machine code matching ``cached`` (a glob of numba's index and data files
+    without their suffix) in ``cache_dir`` unless ``stamp`` holds the digest of ``sources``;
+    then store the digest. For compiled code that inlines or links functions of other files."""
+    digest = source_digest(sources)
     try:
-        if STAMP.read_text() == digest:
+        if stamp.read_text() == digest:
             return
     except OSError:
         pass
-    for cached in list(CACHE_DIR.glob("*.nbi")) + list(CACHE_DIR.glob("*.nbc")):
-        cached.unlink(missing_ok=True)
+    for suffix in ("nbi", "nbc"):
+        for path in cache_dir.glob(f"{cached}.{suffix}"):
+            path.unlink(missing_ok=True)
     try:
-        CACHE_DIR.mkdir(exist_ok=True)
-        STAMP.write_text(digest)
+        cache_dir.mkdir(exist_ok=True)
+        stamp.write_text(digest)
     except OSError:
         pass  # read-only install: numba then caches elsewhere or not at all
+
+
+def ensure_fresh() -> None:
+    keep_cache_fresh(CACHE_DIR, STAMP, "*", sorted(PLANT_DIR.glob("*.py")))

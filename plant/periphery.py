@@ -320,14 +320,23 @@ class PlantBase:
 
     def _period_with(self, u: float, pump_enabled: bool, pump_in_loop: bool = True) -> PlantOutputs:
         """One period: faults due, the kernel with input u, the outputs."""
-        if self._faults.next_s <= self._tick * self._period + 1e-9:
-            self._apply_due_faults()
-        if not self._noise_left:
-            self._refill_noise()
+        self.before_period()
         tick = self._tick + 1
         flags = self.KERNEL(self._s, self._tables, u, pump_enabled, tick, pump_in_loop)
         self._noise_left -= 1
         self._tick = tick
+        return self.publish_outputs(flags)
+
+    def before_period(self) -> None:
+        """The part of a period that stays in Python, before the kernel: the faults that fall
+        due, and new noise blocks when the last ones are used up."""
+        if self._faults.next_s <= self._tick * self._period + 1e-9:
+            self._apply_due_faults()
+        if not self._noise_left:
+            self._refill_noise()
+
+    def publish_outputs(self, flags: int) -> PlantOutputs:
+        """The outputs record from the state array after a period (its tick, the flags)."""
         o = self.outputs
         (
             o.time_s,
@@ -347,7 +356,7 @@ class PlantBase:
             o.pump_v,
             o.pump_effectiveness,
         ) = self._s[OUT:NOISE].tolist()
-        o.tick = tick
+        o.tick = self._tick
         o.flags = flags
         return o
 
