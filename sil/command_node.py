@@ -11,6 +11,7 @@ the last tick.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -63,14 +64,25 @@ class CommandNode:
 
     def _play(self, tick: int, send: SendFn) -> None:
         """Send what is due at ``tick``: fault injections first, then the demand."""
+        for frame_id, data in self.frames_at(tick):
+            self._sent(send, frame_id, data)
+
+    def frames_at(self, tick: int) -> Iterator[tuple[int, bytearray]]:
+        """The frames due at ``tick`` in sending order (each packed when it is reached, into a
+        buffer the next one reuses), noting each fault injected."""
         for target, value in self.faults.get(tick, ()):
             self.fault_msg.pack([target, tick % TICK_MODULO, value])
-            self._sent(send, self.fault_msg.frame_id, self.fault_msg.data)
+            yield self.fault_msg.frame_id, self.fault_msg.data
             self.injected.append({"tick": tick, "target": target, "value": value})
         command = float(self.commands[tick])
         speed, volts = (0.0, command) if self.open_loop else (command, 0.0)
         self.demand.pack([1, 0, speed, volts, tick % TICK_MODULO])
-        self._sent(send, self.demand.frame_id, self.demand.data)
+        yield self.demand.frame_id, self.demand.data
+
+    def demand_ticks(self) -> range:
+        """The ticks the command node sends frames at in lockstep, in order: the first below the
+        lead from ``start``, the rest on the sensor frames."""
+        return range(0, self.last_tick + 1, self.every)
 
     def start(self, send: SendFn) -> None:
         if self.realtime:

@@ -36,6 +36,7 @@ from ecu import faults as ecu_faults
 from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params, preset
 from ecu.port.core import make_ecu
+from ecu.port.node import CEcuNode
 from plant.aerothermal import AeroThermalPlant
 from plant.fast_plant import FastPlant
 from plant.faults import Fault, FaultKind
@@ -52,6 +53,7 @@ from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
 from sil.command_node import CommandNode
+from sil.compiled_loop import CompiledLoop, compile_loop
 from sil.parent_death import die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
@@ -87,6 +89,7 @@ class RunOptions:
     ecu_impl: str = "python"  # ECU tick: the Python firmware or its C port ("c", ecu/port)
     ecu_extra_args: tuple[str, ...] = ()  # appended to `sil ecu` (e.g. --serial pty)
     ecu_bus: str | None = None  # the ECU's side of the fault bridge (default: a second udp bus)
+    compiled_loop: bool = True  # inproc with the C ECU: one compiled loop (sil/compiled_loop.py)
 
 
 @dataclass
@@ -95,6 +98,7 @@ class RunState:
     abort_reason: str | None = None
     children: dict[str, subprocess.Popen] = field(default_factory=dict)
     bus: str = "none (in process)"
+    loop: str | None = None  # in process: "compiled" (sil/compiled_loop.py) or "python"
     ecu_bus: str | None = None  # the ECU's side of the fault bridge
     bridge_errors: list[str] = field(default_factory=list)  # frames the bridge could not send
     bus_fault_events: list[dict] = field(default_factory=list)
@@ -251,9 +255,10 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     period = 1.0 / s.ecu_rate_hz
     # in process, the ECU and plant nodes are built before the clock starts, as the plant is
-    built = []
+    built: list = []
     if opts.mode == "inproc":
-        built = [EcuNode(ecu=make_ecu(opts.ecu_impl, compile_params(params))), PlantNode(plant)]
+        built = _inproc_nodes(opts, s, params, plant)
+        state.loop = "compiled" if isinstance(built[0], CEcuNode) else "python"
     del plant  # (on a bus the plant runs in its own process)
     codec = Codec()
     recorder: Recorder | RecorderProcess
@@ -282,7 +287,9 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     try:
         if opts.mode == "inproc":
             nodes = [command, *built]  # started in this order: the plant's tick 0 last
-            if s.bus_faults:
+            if state.loop == "compiled":
+                CompiledLoop(command, *built, recorder).run(progress)
+            elif s.bus_faults:
                 injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, codec)
                 FaultyInProcessBus(*nodes, injector).run(done=lambda: command.finished)
                 state.bus_fault_events = injector.events
@@ -306,6 +313,17 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         gc.unfreeze()
     wall = time.perf_counter() - state.started
     return _finish(opts, s, seed, recorder, command, state, wall)
+
+
+def _inproc_nodes(opts: RunOptions, s: Scenario, params: EcuParams, plant: Plant) -> list:
+    """The ECU and plant nodes of an in-process run: for the compiled loop (the C ECU, no bus
+    faults, a plant with a compiled node; unless ``opts.compiled_loop`` is off) the C node."""
+    ecu = make_ecu(opts.ecu_impl, compile_params(params))
+    plant_node = PlantNode(plant)
+    if opts.compiled_loop and opts.ecu_impl == "c" and not s.bus_faults and plant_node.compiled():
+        compile_loop()
+        return [CEcuNode(ecu), plant_node]
+    return [EcuNode(ecu=ecu), plant_node]
 
 
 def _bus_spec(opts: RunOptions) -> BusSpec:
@@ -569,6 +587,7 @@ def _finish(
         "abort_reason": state.abort_reason,
         "mode": opts.mode,
         "bus": state.bus,
+        **({"inproc_loop": state.loop} if state.loop else {}),
         **({"ecu_bus": state.ecu_bus} if state.ecu_bus else {}),
         "seed": seed,
         "sim_time_s": sim_time,

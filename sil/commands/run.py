@@ -62,6 +62,12 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         default="python",
         help="ECU tick implementation: the Python firmware or its C port (ecu/port)",
     )
+    parser.add_argument(
+        "--python-loop",
+        action="store_true",
+        help="inproc with the C ECU: carry the frames between the nodes in Python (the same "
+        "files, 3-4x slower) instead of the compiled loop",
+    )
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
@@ -134,6 +140,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         plots=not args.no_plots,
         ecu_impl=getattr(args, "ecu_impl", "python"),
         ecu_bus=getattr(args, "ecu_bus", None),
+        compiled_loop=not getattr(args, "python_loop", False),
     )
     _interrupt_on_signals()
     try:
