@@ -1,5 +1,7 @@
 """`sil bench sil`: real-time factor of a whole SIL run, in lockstep over the bus and in process,
-with the Python firmware and with its C port as the ECU (keys of the C runs end in ``_c_ecu``).
+with the Python firmware and with its C port as the ECU (keys of the C runs end in ``_c_ecu``);
+in process with the C ECU the compiled loop (sil/compiled_loop.py) and, for the ratio in the same
+minutes, the Python loop it replaces (``_c_ecu_python_loop``).
 
 Each run is the ``sil run`` command in a process of its own, as a user runs it (its set-up cold,
 as it is then: the node processes start while it is done, see :mod:`sil.runner`), and its figures
@@ -22,8 +24,18 @@ from pathlib import Path
 from sil import scenario
 
 SCENARIO = "thesis-5.3-mrac-aero"  # 300 s, aero-thermal plant, 1 ms steps, ECU at 100 Hz
-ECU_IMPLS = (("python", ""), ("c", "_c_ecu"))  # (`--ecu-impl`, suffix of its keys)
 MODES = (("lockstep", "realtime_factor"), ("inproc", "inproc_realtime_factor"))
+# (`--ecu-impl`, more `sil run` arguments, suffix of its keys, modes)
+CASES = (
+    ("python", (), "", MODES),
+    ("c", (), "_c_ecu", MODES),
+    ("c", ("--python-loop",), "_c_ecu_python_loop", MODES[1:]),
+)
+TARGETS = {  # key: at least (issues #5 and #8)
+    "realtime_factor": 40.0,
+    "inproc_realtime_factor": 100.0,
+    "inproc_realtime_factor_c_ecu": 500.0,
+}
 REPEATS = 3  # (1 with --quick)
 QUICK_S = 30.0  # --quick: the scenario cut to this
 
@@ -45,18 +57,18 @@ def _scenario_file(s: scenario.Scenario, tmp: Path, quick: bool) -> str:
     return str(quick_file)
 
 
-def _sil_run(name: str, out: Path, mode: str, impl: str) -> dict:
+def _sil_run(name: str, out: Path, mode: str, impl: str, extra: tuple[str, ...] = ()) -> dict:
     """``sil run`` in a process of its own; its summary."""
     cmd = [sys.executable, "-m", "sil.cli", "run", name, "--out", str(out), "--mode", mode]
-    cmd += ["--ecu-impl", impl, "--no-plots"]
+    cmd += ["--ecu-impl", impl, "--no-plots", *extra]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     try:
         return json.loads((out / "summary.json").read_text())
     except (OSError, ValueError):
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
+        args = " ".join((name, "--mode", mode, "--ecu-impl", impl, *extra))
         raise BenchError(
-            f"sil run {name} --mode {mode} --ecu-impl {impl} exited with code "
-            f"{proc.returncode} and no summary: {' / '.join(tail)}"
+            f"sil run {args} exited with code {proc.returncode} and no summary: {' / '.join(tail)}"
         ) from None
 
 
@@ -77,17 +89,19 @@ def run(quick: bool = False) -> dict:
     figures.update(_pace(s, "before"))
     runs: dict[str, list[float]] = {}
     repeats = 1 if quick else REPEATS
-    total = repeats * len(ECU_IMPLS) * len(MODES)
+    total = repeats * sum(len(modes) for *_, modes in CASES)
     with tempfile.TemporaryDirectory() as tmp:
         name = _scenario_file(s, Path(tmp), quick)
         for _ in range(repeats):
-            for impl, suffix in ECU_IMPLS:
-                for mode, key in MODES:
-                    summary = _sil_run(name, Path(tmp) / f"{mode}-{impl}", mode, impl)
+            for impl, extra, suffix, modes in CASES:
+                for mode, key in modes:
+                    out = Path(tmp) / f"{mode}{suffix}"
+                    summary = _sil_run(name, out, mode, impl, extra)
                     factor = round(summary["realtime_factor"], 2)
                     runs.setdefault(key + suffix, []).append(factor)
                     done = sum(map(len, runs.values()))
-                    print(f"run {done}/{total}: {mode}, {impl} ECU: {factor}x", file=sys.stderr)
+                    what = f"{mode}, {impl} ECU{' ' if extra else ''}{' '.join(extra)}"
+                    print(f"run {done}/{total}: {what}: {factor}x", file=sys.stderr)
                     if factor < max(runs[key + suffix]):
                         continue  # the figures below are the best run's
                     figures[key + suffix] = factor
@@ -108,4 +122,12 @@ def run(quick: bool = False) -> dict:
     figures.update(_pace(s, "after"))
     for key, factors in runs.items():
         figures[f"{key}_runs"] = factors
+    compiled, python = (
+        runs["inproc_realtime_factor_c_ecu"],
+        runs["inproc_realtime_factor_c_ecu_python_loop"],
+    )  # in process with the C ECU, the compiled loop against the Python one, run by run
+    figures["inproc_c_ecu_compiled_over_python_loop"] = round(
+        sum(a / b for a, b in zip(compiled, python, strict=True)) / len(compiled), 2
+    )
+    figures["targets_met"] = {key: figures[key] >= at for key, at in TARGETS.items()}
     return figures

@@ -124,7 +124,7 @@ def _record(ls, out_id, out_data, frame_id, data):  # noqa: ANN001
     ls[L_OUT] = n + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # (the recorder's feeder thread sends meanwhile)
 def run_frames(
     ls, q_id, q_origin, q_data, out_id, out_data, plan_first, plan_id, plan_data, ids,
     ecu_fn, ecu_node, ecu_out, s, tables, ns, nf, lay, buf,

@@ -31,6 +31,7 @@ from __future__ import annotations
 import os
 import pickle
 import queue
+import select
 import signal
 import subprocess
 import sys
@@ -47,6 +48,7 @@ from sil.recorder import InOrderTicks, Recorder, tick_block
 
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
+READY = b"R"  # the child to the parent: its Recorder is made (then, at the end, its figures)
 _TICKS = "ticks"  # tags a block of whole ticks: (_TICKS, int32 IDs, (frames, 8) uint8 payload)
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
 NICE = 19  # the child's niceness: it is on no node's critical path, so a node that wakes up
@@ -73,6 +75,7 @@ class RecorderProcess(InOrderTicks):
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
         self._feeder = threading.Thread(target=self._feed, name="sil-recorder-feed", daemon=True)
         self._broken = False
+        self._ready = False  # the child's READY has been read
         self._feeder.start()
         super().__init__()
         self.frames = 0
@@ -88,11 +91,25 @@ class RecorderProcess(InOrderTicks):
         *,
         commands: np.ndarray | None = None,
         channel: str = "vcan0",
+        wait: bool = True,
     ) -> RecorderProcess:
         """The child's Recorder settings (see :class:`~sil.recorder.Recorder`): from now on it
-        takes frames."""
+        takes frames. Returns once the child has made its Recorder (its files open), as the
+        in-process Recorder is made before a run begins, unless not ``wait``: then the child's
+        start-up overlaps what comes next. A child that could not make it fails the first frame
+        sent, or close, with :class:`RecorderFailed`."""
         self._outbox.put((out_dir, period_s, commands, channel))
+        if wait:
+            self._wait_ready()
         return self
+
+    def _wait_ready(self) -> None:
+        stdout = self._child.stdout
+        assert stdout is not None
+        ready, _, _ = select.select([stdout], [], [], CLOSE_TIMEOUT_S)
+        if not ready or stdout.read(1) != READY:  # (the child failed: its exit code tells)
+            self._broken = True
+        self._ready = True
 
     def discard(self) -> None:
         """The run ended before it began: the child goes without writing anything."""
@@ -187,6 +204,8 @@ class RecorderProcess(InOrderTicks):
             stdout = self._child.stdout
             assert stdout is not None
             try:
+                if not self._ready and stdout.read(1) != READY:
+                    raise EOFError
                 self._totals = pickle.load(stdout)
             except (EOFError, pickle.UnpicklingError):
                 raise RecorderFailed(self._failure()) from None
@@ -233,6 +252,8 @@ def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
     except OSError as exc:
         print(f"sil recorder: error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
+    outbox.write(READY)
+    outbox.flush()
     try:
         while (batch := _next(inbox)) is not None:
             if isinstance(batch[0], str):  # (_TICKS, IDs, payload): whole ticks

@@ -263,7 +263,10 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     codec = Codec()
     recorder: Recorder | RecorderProcess
     if state.recorder is not None:
-        recorder = state.recorder.open(opts.out_dir, period, commands=commands)
+        # in process the run's clock starts once the recorder is made; on a bus, its start-up
+        # overlaps the node processes', which the run counts (startup_s)
+        wait = opts.mode == "inproc"
+        recorder = state.recorder.open(opts.out_dir, period, commands=commands, wait=wait)
         state.recorder = None  # from here on the run closes it
     else:
         recorder = Recorder(

@@ -97,3 +97,19 @@ def test_sil_ecu_without_a_compiler_says_so(tmp_path):
     done = _sil("ecu", "--bus", "virtual:port-test", "--impl", "c", "--ticks", "1", env=env)
     assert done.returncode == 2
     assert "sil ecu: --impl c: no C compiler found" in done.stderr
+
+
+def test_sil_bench_port_reports_the_in_process_cases():
+    """`sil bench port`'s SIL part (quick: 30 s): every case's real-time factor, and the shares
+    of the compiled run's parts, which are parts of one whole."""
+    from sil import port_bench
+
+    figures = port_bench.sil_figures(quick=True)
+    for key in ("c_ecu", "c_ecu_python_loop", "python_ecu"):
+        assert figures[f"sil_inproc_realtime_factor_{key}"] > 0
+        assert figures[f"sil_inproc_cpu_realtime_factor_{key}"] > 0
+    parts = [v for k, v in figures.items() if k.startswith("sil_c_ecu_cumulative_pct_")]
+    assert len(parts) == 5 and all(0 <= p <= 100 for p in parts)
+    assert figures["sil_c_ecu_cumulative_pct_compiled_loop"] > 0
+    assert sum(parts) <= 100.5  # (the parts do not nest)
+    assert isinstance(figures["sil_inproc_target_met"], bool)

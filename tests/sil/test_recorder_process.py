@@ -48,7 +48,7 @@ def _scenario(tmp_path: Path, duration: float) -> Path:
 class _InProcess:
     """The Recorder where the runner would start the recorder process."""
 
-    def open(self, out_dir, period_s, *, commands=None, channel="vcan0"):  # noqa: ANN001
+    def open(self, out_dir, period_s, *, commands=None, channel="vcan0", wait=True):  # noqa: ANN001, ARG002
         return Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
 
     def discard(self) -> None:
@@ -180,3 +180,25 @@ def test_a_recorder_that_cannot_write_names_the_file_and_the_run_is_aborted(tmp_
     assert f"sil recorder: error: [Errno 21] Is a directory: '{out / 'can.log'}'" in (
         capfd.readouterr().err
     )
+
+
+def test_open_returns_once_the_child_has_made_its_recorder(tmp_path):
+    """Made before the run begins, as the in-process Recorder: its files exist when open()
+    returns (the child's start-up is the set-up's, not the run's)."""
+    recorder = RecorderProcess()
+    recorder.open(tmp_path, 0.01)
+    try:
+        assert (tmp_path / "can.log").exists()
+        assert (tmp_path / "trace.csv").exists()
+    finally:
+        recorder.close()
+    assert recorder.totals()["frames"] == 0
+
+
+def test_a_child_not_waited_for_still_answers_at_close(tmp_path):
+    """open(wait=False): the child's start-up overlaps what comes next; close reads its READY
+    before its figures."""
+    recorder = RecorderProcess()
+    recorder.open(tmp_path, 0.01, wait=False)
+    recorder.close()
+    assert recorder.totals()["frames"] == 0 and (tmp_path / "can.log").exists()
