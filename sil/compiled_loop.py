@@ -27,6 +27,7 @@ from __future__ import annotations
 import ctypes
 from collections.abc import Callable
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from llvmlite import ir
@@ -45,10 +46,10 @@ from plant.node import (
     advance_compiled,
     python_due,
 )
+from plant.periphery import OUT, OUT_FIELDS
 from protocol.lockstep import TICK_MODULO
 from sil.command_node import CommandNode
-from sil.recorder import ACTUATOR, SENSORS, Recorder
-from sil.recorder_process import RecorderProcess
+from sil.recorder import ACTUATOR, SENSORS
 
 _HERE = Path(__file__).resolve()
 # the loop links the plant's compiled functions: its cached machine code goes with their sources
@@ -87,6 +88,8 @@ NODE_OUT = 3  # ECU_NODE_MAX_OUT
 I_SENSORS, I_ACTUATOR, I_FAULT, I_ECU, I_PLANT = 0, 1, 2, 3, 6  # I_ECU: 3, I_PLANT: 4 IDs
 # why the loop returned
 DONE, CHUNK, FAULT_FRAME, PLANT_PYTHON, IDLE = range(5)
+# the plant's truth kept per tick answered (CompiledLoop.truth): true speed %N and EGT, K
+TRUTH = (OUT + OUT_FIELDS.index("n_pct"), OUT + OUT_FIELDS.index("egt_true_k"))
 
 
 @intrinsic
@@ -127,7 +130,7 @@ def _record(ls, out_id, out_data, frame_id, data):  # noqa: ANN001
 @njit(cache=True, nogil=True)  # (the recorder's feeder thread sends meanwhile)
 def run_frames(
     ls, q_id, q_origin, q_data, out_id, out_data, plan_first, plan_id, plan_data, ids,
-    ecu_fn, ecu_node, ecu_out, s, tables, ns, nf, lay, buf,
+    ecu_fn, ecu_node, ecu_out, s, tables, ns, nf, lay, buf, truth,
 ):  # fmt: skip  # noqa: ANN001, ANN201
     """Deliver frames (InProcessBus.run) until the run is done, the chunk is full or Python
     has something to do; returns why (DONE, CHUNK, FAULT_FRAME, PLANT_PYTHON, IDLE)."""
@@ -150,7 +153,11 @@ def run_frames(
                 _on_sensors(ls, q_id, q_origin, q_data, out_id, out_data, plan_first, plan_id,
                             plan_data, data[2] | np.int64(data[3]) << 8)  # fmt: skip
             elif frame_id == ids[I_ACTUATOR]:
-                ls[L_ANSWERED] += 1
+                k = ls[L_ANSWERED]
+                if k < len(truth):  # the plant as it is when the ECU answers tick k
+                    truth[k, 0] = s[TRUTH[0]]
+                    truth[k, 1] = s[TRUTH[1]]
+                ls[L_ANSWERED] = k + 1
                 ls[L_BOUNDARY] = ls[L_OUT]
                 if ls[L_ANSWERED] > ls[L_LAST_TICK]:
                     ls[L_FINISHED] = 1
@@ -214,6 +221,18 @@ def _plant_advance(ls, q_id, q_origin, q_data, ids, s, tables, ns, nf, lay, buf)
     _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT + 3], buf[24:32])
 
 
+class Recording(Protocol):
+    """What the loop hands the frames to: the Recorder, the RecorderProcess, a campaign's Probe."""
+
+    def record(
+        self, frame_id: int, data: bytes | bytearray, wall_s: float | None = None
+    ) -> None: ...
+
+    def commands_sent(self) -> None: ...
+
+    def record_ticks(self, frame_ids: np.ndarray, payload: np.ndarray) -> None: ...
+
+
 def compile_loop() -> None:
     """Compile :func:`run_frames` now, or load it from numba's cache: a set-up step, so that a
     run does not spend its first call on it. (An empty queue: it returns at once.)"""
@@ -222,7 +241,7 @@ def compile_loop() -> None:
     ls = np.zeros(L_SIZE, np.int64)
     run_frames(
         ls, ints, ints, frames, ints, frames, ints, ints, frames, ints, 0, 0, data, floats, floats,
-        ints, floats, ints, data,
+        ints, floats, ints, data, np.zeros((1, 2)),
     )  # fmt: skip
 
 
@@ -239,13 +258,16 @@ class CompiledLoop:
         command: CommandNode,
         ecu: CEcuNode,
         plant: PlantNode,
-        recorder: Recorder | RecorderProcess,
+        recorder: Recording,
     ) -> None:
         if not plant.compiled():
             raise ValueError(f"{type(plant.plant).__name__}: the plant node has no compiled twin")
         if ctypes.sizeof(node_library().frame_t) != FRAME_BYTES:
             raise ValueError("ecu_can_frame_t is not the 12 bytes the compiled loop reads")
         self.command, self.ecu, self.plant, self.recorder = command, ecu, plant, recorder
+        # per tick answered, the plant's true speed (%N) and EGT (K) when the ECU answered it:
+        # what a campaign's probe reads from the plant in process (sil/campaign/probe.py)
+        self.truth = np.full((command.last_tick + 1, 2), np.nan)
         self._first_tick = True  # the frames up to the first EcuActuator go one by one
         self._one_by_one = False  # every frame from now on (after a chunk of no whole tick)
         self._own_ids = (command.demand.frame_id, command.fault_msg.frame_id)
@@ -318,6 +340,7 @@ class CompiledLoop:
                 why = run_frames(
                     ls, q_id, q_origin, q_data, out_id, out_data, plan_first, plan_id, plan_data,
                     ids, fn, node, ecu_out, state, tables, ns, nf, plant._layout, plant._buf,
+                    self.truth,
                 )  # fmt: skip
                 self._hand_over(ls, out_id, out_data, whole_ticks=True)
                 if progress is not None:

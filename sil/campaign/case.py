@@ -1,7 +1,8 @@
 """One campaign case: the scenario's three nodes in this process with a :class:`Probe`.
 
 The same nodes and order as ``sil run --mode inproc`` (:mod:`sil.runner`), so the figures equal
-those of the printed ``sil run`` command line; only the recording is left out.
+those of the printed ``sil run`` command line; only the recording is left out. With the C ECU and
+no bus faults, as there, the nodes run in the compiled loop (:mod:`sil.compiled_loop`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params
 from ecu.port.core import make_ecu
+from ecu.port.node import CEcuNode
 from plant.node import PlantNode
 from protocol.codec import Codec
 from protocol.node import InProcessBus
@@ -22,6 +24,7 @@ from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
 from sil.campaign.probe import Probe
 from sil.command_node import CommandNode
+from sil.compiled_loop import CompiledLoop, compile_loop
 from sil.runner import build_plant, ecu_params, ecu_trim_voltage
 from sil.scenario import Scenario
 
@@ -42,8 +45,11 @@ class CaseRun:
         return np.asarray(getattr(self.probe, name))
 
 
-def run_case(s: Scenario, seed: int | None = None, ecu_impl: str = "python") -> CaseRun:
-    """Run a case; ``ecu_impl``: the firmware's Python original or its C port (ecu.port)."""
+def run_case(
+    s: Scenario, seed: int | None = None, ecu_impl: str = "python", compiled_loop: bool = True
+) -> CaseRun:
+    """Run a case; ``ecu_impl``: the firmware's Python original or its C port (ecu.port), which
+    runs in the compiled loop unless ``compiled_loop`` is off (or there are bus faults)."""
     seed = s.seed if seed is None else seed
     t0 = time.perf_counter()
     plant = build_plant(s, seed)
@@ -58,10 +64,17 @@ def run_case(s: Scenario, seed: int | None = None, ecu_impl: str = "python") -> 
         codec, probe, commands, ecu_rate_hz=s.ecu_rate_hz, open_loop=open_loop, faults=s.faults
     )
     # one codec for all three (18 ms each to build): each node packs only its own messages
-    ecu = EcuNode(ecu=make_ecu(ecu_impl, compile_params(params)), codec=codec)
+    core = make_ecu(ecu_impl, compile_params(params))
     plant_node = PlantNode(plant, codec=codec)
     events: list[dict] = []
     stalls: dict[str, int] = {}
+    if compiled_loop and ecu_impl == "c" and not s.bus_faults and plant_node.compiled():
+        compile_loop()
+        loop = CompiledLoop(command, CEcuNode(core, codec=codec), plant_node, probe)
+        loop.run()
+        probe.take_truth(loop.truth)
+        return CaseRun(s, params, probe, len(commands), time.perf_counter() - t0)
+    ecu = EcuNode(ecu=core, codec=codec)
     if s.bus_faults:
         injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, codec)
         bus = FaultyInProcessBus(command, ecu, plant_node, injector)

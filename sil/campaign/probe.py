@@ -6,12 +6,18 @@ does, the true speed of PlantTruthB, the ECU's reference speed, fault word and l
 EcuStatus and the pump voltage and mode of EcuActuator; the plant's true speed and EGT are read
 from the plant in process (``truth``), so invariants hold on the engine, not on what its sensors
 claim.
+
+A run in the compiled loop (sil/compiled_loop.py, the C ECU) hands the frames over in blocks
+(:meth:`Probe.record_ticks`, decoded vectorised to the same rows) and the plant's truth per tick
+afterwards (:meth:`Probe.take_truth`), as the loop kept it when the ECU answered each tick.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+
+import numpy as np
 
 from protocol.codec import Codec
 from sil.recorder import ACTUATOR, N_MAX_RPM, InOrderTicks
@@ -51,6 +57,37 @@ class Probe(InOrderTicks):
         if handler is not None:
             handler(data)
 
+    def record_ticks(self, frame_ids: np.ndarray, payload: np.ndarray) -> None:
+        """:meth:`record` of every frame of a block ((frames, 8) uint8 payload), vectorised: a
+        row per EcuActuator; the rows' true speed and EGT stay NaN until :meth:`take_truth`."""
+        ids = np.asarray(frame_ids)
+        data = np.ascontiguousarray(payload, np.uint8)
+        self.track_many(ids, data)
+        words = data.view("<u8").ravel()
+        rows = np.flatnonzero(ids == ACTUATOR)
+        if not len(rows):
+            return
+        truth_b, status = self._truth_b, self._status
+        speed, self._speed = _held(ids, words, rows, truth_b, 2, self._speed, _percent_n)
+        ref, self._ref = _held(ids, words, rows, status, 4, self._ref, _centi)
+        fault_word, held_word = _held(ids, words, rows, status, 1, self._fault_word, _same)
+        owner, held_owner = _held(ids, words, rows, status, 3, self._owner, _same)
+        self._fault_word, self._owner = int(held_word), int(held_owner)
+        self.speed_pct += speed.tolist()
+        self.ref_pct += ref.tolist()
+        self.fault_word += fault_word.astype(np.int64).tolist()
+        self.owner += owner.astype(np.int64).tolist()
+        self.mode += _field(words[rows], self._actuator, 1).tolist()
+        self.pump_v += (_field(words[rows], self._actuator, 4) * 0.001).tolist()
+        self.n_pct += [math.nan] * len(rows)
+        self.egt_k += [math.nan] * len(rows)
+
+    def take_truth(self, truth: np.ndarray) -> None:
+        """The plant's true speed (%N) and EGT (K) per row, as the loop kept them ((rows, 2))."""
+        n = len(self.n_pct)
+        self.n_pct = truth[:n, 0].tolist()
+        self.egt_k = truth[:n, 1].tolist()
+
     def commands_sent(self) -> None:
         """Nothing waits: in process the frames come in order and a row is taken per actuator
         frame."""
@@ -78,3 +115,34 @@ class Probe(InOrderTicks):
         self.owner.append(self._owner)
         self.mode.append(raw[1])
         self.pump_v.append(raw[4] * 0.001)
+
+
+def _percent_n(raw: np.ndarray) -> np.ndarray:
+    return 100.0 * raw / N_MAX_RPM  # (as _on_truth_b)
+
+
+def _centi(raw: np.ndarray) -> np.ndarray:
+    return raw * 0.01  # (as _on_status)
+
+
+def _same(raw: np.ndarray) -> np.ndarray:
+    return raw
+
+
+def _held(ids, words, rows, message, i: int, held: float, convert) -> tuple[np.ndarray, float]:  # noqa: ANN001
+    """Per row (an index into the block), ``convert`` of raw field i of the last frame of
+    ``message`` before it, else ``held``; and the value held after the block."""
+    at = np.flatnonzero(ids == message.frame_id)
+    last = np.searchsorted(at, rows) - 1  # (into ``at``)
+    values = np.full(len(rows), held, np.float64)
+    got = last >= 0
+    if got.any():
+        values[got] = convert(_field(words[at[last[got]]], message, i))
+    return values, float(values[-1])
+
+
+def _field(words: np.ndarray, message, i: int) -> np.ndarray:  # noqa: ANN001
+    """Raw field i of a message in 64-bit little-endian frame words (MessageCodec.unpack_raw)."""
+    start, mask, sign_bit, _lo, _hi = message._fields[i]
+    raw = ((words >> np.uint64(start)) & np.uint64(mask)).astype(np.int64)
+    return np.where(raw & sign_bit, raw - (sign_bit << 1), raw) if sign_bit else raw
