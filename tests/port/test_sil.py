@@ -50,14 +50,6 @@ def _udp_spec() -> str:
     )
 
 
-def _first_difference(a: bytes, b: bytes) -> str | None:
-    la, lb = a.splitlines(), b.splitlines()
-    for i, (x, y) in enumerate(zip(la, lb, strict=False)):
-        if x != y:
-            return f"line {i + 1}: {x!r} != {y!r}"
-    return None if len(la) == len(lb) else f"lengths differ: {len(la)} != {len(lb)} lines"
-
-
 def _run(tmp_path: Path, impl: str, *mode: str) -> bytes:
     scenario = tmp_path / "short.toml"
     scenario.write_text(SCENARIO)
@@ -74,17 +66,17 @@ def _run(tmp_path: Path, impl: str, *mode: str) -> bytes:
 
 
 @pytest.mark.slow
-def test_lockstep_can_log_is_byte_identical_with_the_c_ecu(tmp_path):
+def test_lockstep_can_log_is_byte_identical_with_the_c_ecu(tmp_path, first_difference):
     python_log = _run(tmp_path, "python", "--bus", _udp_spec())
     c_log = _run(tmp_path, "c", "--bus", _udp_spec())
     assert len(c_log.splitlines()) > 1000
-    assert _first_difference(c_log, python_log) is None
+    assert first_difference(c_log, python_log) is None
 
 
-def test_inproc_can_log_is_byte_identical_with_the_c_ecu(tmp_path):
+def test_inproc_can_log_is_byte_identical_with_the_c_ecu(tmp_path, first_difference):
     python_log = _run(tmp_path, "python", "--mode", "inproc")
     c_log = _run(tmp_path, "c", "--mode", "inproc")
-    assert _first_difference(c_log, python_log) is None
+    assert first_difference(c_log, python_log) is None
 
 
 def test_sil_ecu_without_a_compiler_says_so(tmp_path):

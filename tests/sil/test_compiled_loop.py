@@ -25,26 +25,24 @@ def _run(s, out: Path, compiled: bool, **kw) -> dict:
     return run(opts)
 
 
-def _first_difference(a: bytes, b: bytes) -> str | None:
-    la, lb = a.splitlines(), b.splitlines()
-    for i, (x, y) in enumerate(zip(la, lb, strict=False)):
-        if x != y:
-            return f"line {i + 1}: {x!r} != {y!r}"
-    return None if len(la) == len(lb) else f"lengths differ: {len(la)} != {len(lb)} lines"
+@pytest.fixture
+def same_run(tmp_path, first_difference):
+    """Run a scenario in both loops, check they agree; the compiled run's summary."""
 
+    def check(s, **kw) -> dict:
+        compiled = _run(s, tmp_path / "compiled", True, **kw)
+        python = _run(s, tmp_path / "python", False, **kw)
+        assert compiled["inproc_loop"] == "compiled" and python["inproc_loop"] == "python"
+        for name in ("can.log", "trace.csv"):
+            a = (tmp_path / "compiled" / name).read_bytes()
+            b = (tmp_path / "python" / name).read_bytes()
+            assert a == b, f"{name}: {first_difference(a, b)}"
+        strip = {k: v for k, v in compiled.items() if k not in TIMINGS}
+        assert strip == {k: v for k, v in python.items() if k not in TIMINGS}
+        assert compiled["status"] == "completed"
+        return compiled
 
-def _same_run(s, tmp_path: Path, **kw) -> dict:
-    compiled = _run(s, tmp_path / "compiled", True, **kw)
-    python = _run(s, tmp_path / "python", False, **kw)
-    assert compiled["inproc_loop"] == "compiled" and python["inproc_loop"] == "python"
-    for name in ("can.log", "trace.csv"):
-        a = (tmp_path / "compiled" / name).read_bytes()
-        b = (tmp_path / "python" / name).read_bytes()
-        assert a == b, f"{name}: {_first_difference(a, b)}"
-    strip = {k: v for k, v in compiled.items() if k not in TIMINGS}
-    assert strip == {k: v for k, v in python.items() if k not in TIMINGS}
-    assert compiled["status"] == "completed"
-    return compiled
+    return check
 
 
 @pytest.mark.parametrize(
@@ -56,12 +54,12 @@ def _same_run(s, tmp_path: Path, **kw) -> dict:
         ("thesis-5.2-mrac-fast", 30.0),  # the fast plant
     ],
 )
-def test_the_compiled_loop_writes_what_the_python_loop_writes(tmp_path, name, duration_s):
+def test_the_compiled_loop_writes_what_the_python_loop_writes(same_run, name, duration_s):
     s = scenarios.load(name)
-    _same_run(replace(s, duration_s=min(duration_s, s.duration_s)), tmp_path)
+    same_run(replace(s, duration_s=min(duration_s, s.duration_s)))
 
 
-def test_fault_injections_and_pump_wear_as_in_the_python_loop(tmp_path):
+def test_fault_injections_and_pump_wear_as_in_the_python_loop(same_run):
     """The pump failure of sec. 6.3 (FaultInject frames, handled in Python at their tick), more
     faults on top, on an engine built with a worn pump that wears on (faults of the plant's own
     schedule from tick 0)."""
@@ -73,7 +71,7 @@ def test_fault_injections_and_pump_wear_as_in_the_python_loop(tmp_path):
         scenarios.Fault(32.0, "EGT_OPEN_CIRCUIT", 1.0),
     )
     plant = replace(s.plant, pump_gain=0.97, pump_wear_per_s=1e-3, turbine_flow=0.98)
-    summary = _same_run(replace(s, duration_s=33.0, faults=faults, plant=plant), tmp_path)
+    summary = same_run(replace(s, duration_s=33.0, faults=faults, plant=plant))
     assert [f["tick"] for f in summary["faults_injected"]] == [3000, 3100, 3150, 3200]
     assert summary["faults"], "the open thermocouple is reported"
 

@@ -56,15 +56,6 @@ def _sil(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     )
 
 
-def _first_difference(a: bytes, b: bytes) -> str | None:
-    """The first differing line of two logs (pytest's own diff of megabytes never ends)."""
-    la, lb = a.splitlines(), b.splitlines()
-    for i, (x, y) in enumerate(zip(la, lb, strict=False)):
-        if x != y:
-            return f"line {i + 1}: {x!r} != {y!r}"
-    return None if len(la) == len(lb) else f"lengths differ: {len(la)} != {len(lb)} lines"
-
-
 def _no_nodes_left(spec: str) -> bool:
     found = subprocess.run(["pgrep", "-f", f"--bus {spec}"], capture_output=True, text=True)
     return found.stdout.strip() == ""
@@ -126,7 +117,7 @@ def test_inproc_run_writes_everything(tmp_path):
 
 
 @pytest.mark.slow
-def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
+def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path, first_difference):
     scenario = _scenario(tmp_path)
     logs = []
     for i in range(2):
@@ -143,7 +134,7 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
         assert ecu["frames_received"] > 0 and ecu["guard_timeouts"] == 0 and "periods" not in ecu
         logs.append((out / "can.log").read_bytes())
         assert _no_nodes_left(spec)
-    assert _first_difference(logs[0], logs[1]) is None
+    assert first_difference(logs[0], logs[1]) is None
     # the in-process run goes through the same codec and lockstep rules: the same frames
     out = tmp_path / "inproc"
     assert (
@@ -152,7 +143,7 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path):
         ).returncode
         == 0
     )
-    assert _first_difference((out / "can.log").read_bytes(), logs[0]) is None
+    assert first_difference((out / "can.log").read_bytes(), logs[0]) is None
 
 
 def test_real_time_run_is_paced_by_the_wall_clock_and_reports_jitter(tmp_path):
