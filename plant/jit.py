@@ -32,10 +32,10 @@ CACHE_DIR = PLANT_DIR / "__pycache__"
 STAMP = CACHE_DIR / "numba-sources.sha256"
 
 
-def source_digest(sources: Iterable[Path] | None = None) -> str:
-    """SHA-256 over the names and bytes of ``sources`` (default: every plant source)."""
+def source_digest(sources: Iterable[Path]) -> str:
+    """SHA-256 over the names and bytes of ``sources``."""
     h = hashlib.sha256()
-    for path in sorted(PLANT_DIR.glob("*.py") if sources is None else sources):
+    for path in sorted(sources):
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.hexdigest()

@@ -66,18 +66,22 @@ class CommandNode:
         """Send what is due at ``tick``: fault injections first, then the demand."""
         for frame_id, data in self.frames_at(tick):
             self._sent(send, frame_id, data)
+        self.injected += self.injections_at(tick)
 
     def frames_at(self, tick: int) -> Iterator[tuple[int, bytearray]]:
         """The frames due at ``tick`` in sending order (each packed when it is reached, into a
-        buffer the next one reuses), noting each fault injected."""
+        buffer the next one reuses)."""
         for target, value in self.faults.get(tick, ()):
             self.fault_msg.pack([target, tick % TICK_MODULO, value])
             yield self.fault_msg.frame_id, self.fault_msg.data
-            self.injected.append({"tick": tick, "target": target, "value": value})
         command = float(self.commands[tick])
         speed, volts = (0.0, command) if self.open_loop else (command, 0.0)
         self.demand.pack([1, 0, speed, volts, tick % TICK_MODULO])
         yield self.demand.frame_id, self.demand.data
+
+    def injections_at(self, tick: int) -> list[dict]:
+        """The fault injections sent at ``tick``, as ``injected`` lists them."""
+        return [{"tick": tick, "target": t, "value": v} for t, v in self.faults.get(tick, ())]
 
     def demand_ticks(self) -> range:
         """The ticks the command node sends frames at in lockstep, in order: the first below the

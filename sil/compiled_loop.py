@@ -294,10 +294,7 @@ class CompiledLoop:
         """Start the nodes and deliver frames until the command node is finished (or the frames
         run out); every frame recorded reaches the recorder, also on an exception."""
         command, plant = self.command, self.plant
-        injected_before = len(command.injected)
         plan_first, plan_id, plan_data = self._plan()
-        planned_injections = command.injected[injected_before:]
-        del command.injected[injected_before:]
         per_tick = int(np.diff(plan_first).max(initial=0))
         limit = CHUNK_FRAMES
         out_id = np.zeros(limit + per_tick + 16, np.int64)
@@ -360,7 +357,8 @@ class CompiledLoop:
             self._hand_over(ls, out_id, out_data, whole_ticks=False)
             plant.from_compiled(ns, nf)
             played = int(ls[L_PLAYED])
-            command.injected += [i for i in planned_injections if i["tick"] <= played]
+            for tick in sorted(t for t in command.faults if t <= played):
+                command.injected += command.injections_at(tick)
             command.finished = bool(ls[L_FINISHED])
 
     def _hand_over(

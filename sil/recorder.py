@@ -930,14 +930,18 @@ class Recorder:
         return out[out != 32].tobytes().decode("ascii")
 
 
+def raw_field(words: np.ndarray, start: int, mask: int, sign_bit: int) -> np.ndarray:
+    """One signal's raw values (int64) in 64-bit little-endian frame words (the vectorised
+    MessageCodec.unpack_raw of one field)."""
+    raw = ((words >> np.uint64(start)) & np.uint64(mask)).astype(np.int64)
+    return np.where(raw & sign_bit, raw - (sign_bit << 1), raw) if sign_bit else raw
+
+
 def _decode(words: np.ndarray, fields: list[tuple]) -> np.ndarray:
     """Physical values (frames, signals) of 64-bit little-endian frame words."""
     out = np.empty((len(words), len(fields)), np.float64)
     for j, (start, mask, sign_bit, scale, offset) in enumerate(fields):
-        raw = ((words >> np.uint64(start)) & np.uint64(mask)).astype(np.int64)
-        if sign_bit:
-            raw = np.where(raw & sign_bit, raw - (sign_bit << 1), raw)
-        out[:, j] = raw.astype(np.float64) * scale + offset
+        out[:, j] = raw_field(words, start, mask, sign_bit).astype(np.float64) * scale + offset
     return out
 
 

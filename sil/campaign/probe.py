@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from protocol.codec import Codec
-from sil.recorder import ACTUATOR, N_MAX_RPM, InOrderTicks
+from sil.recorder import ACTUATOR, N_MAX_RPM, InOrderTicks, raw_field
 
 Truth = Callable[[], tuple[float, float]]  # (true speed %N, true EGT K) now
 
@@ -142,7 +142,6 @@ def _held(ids, words, rows, message, i: int, held: float, convert) -> tuple[np.n
 
 
 def _field(words: np.ndarray, message, i: int) -> np.ndarray:  # noqa: ANN001
-    """Raw field i of a message in 64-bit little-endian frame words (MessageCodec.unpack_raw)."""
+    """Raw field i of a message in 64-bit little-endian frame words."""
     start, mask, sign_bit, _lo, _hi = message._fields[i]
-    raw = ((words >> np.uint64(start)) & np.uint64(mask)).astype(np.int64)
-    return np.where(raw & sign_bit, raw - (sign_bit << 1), raw) if sign_bit else raw
+    return raw_field(words, start, mask, sign_bit)

@@ -377,10 +377,11 @@ def _record_run(tmp: Path, scenario_name: str, ecu_impl: str, duration_s: float)
     from sil import runner, scenario
 
     s = dataclasses.replace(scenario.load(scenario_name), duration_s=duration_s)
-    options = {"mode": "inproc", "plots": False, "progress": False, "ecu_impl": ecu_impl}
-    if "compiled_loop" in {f.name for f in dataclasses.fields(runner.RunOptions)}:
-        options["compiled_loop"] = False  # the Python EcuNode writes the reference log
-    summary = runner.run(runner.RunOptions(s, tmp / scenario_name, **options))
+    options = runner.RunOptions(
+        s, tmp / scenario_name, mode="inproc", plots=False, progress=False, ecu_impl=ecu_impl,
+        compiled_loop=False,  # the Python EcuNode writes the reference log
+    )  # fmt: skip
+    summary = runner.run(options)
     assert summary["status"] == "completed", summary
     plant = runner.build_plant(s, s.seed)
     params = compile_params(runner.ecu_params(s, runner.ecu_trim_voltage(s, plant)))
