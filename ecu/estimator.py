@@ -45,6 +45,16 @@ from ecu.fixedpoint import acc_q40, mul_q24, sat32, sub_sat
 from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
 
+R32 = 1 << 31  # adds half an LSB before a >> 32: round to nearest (ties up), not down
+R24 = 1 << 23
+
+
+def _increment_q40(phi_e_q16: int, gain_q28: int) -> int:
+    """Eq. 4.31's step -(Gamma P dt) phi e in Q7.40, rounded to nearest: the adaptation
+    integrates it for as long as the engine runs, so a truncation's half-LSB bias per tick would
+    drift the estimates along the directions the input excites least."""
+    return (-phi_e_q16 * gain_q28 + 8) >> 4
+
 
 def pump_bias_q16(th: array, p: FirmwareParams) -> int:
     """d0 = (Lambda-hat - Lambda_c) (V0 - V_d) in %N/s^2 (Q15.16); 0 without pump scaling. The fuel
@@ -101,15 +111,15 @@ def estimator_step(
         return
     # eq. 4.31: increments -(Gamma P dt) phi e in Q7.40: phi e in Q15.16 (it exceeds the Q7.24
     # range in transients) times Gamma P dt in Q3.28, >> 4
-    acc_q40(th, s.theta_ext, AP21, (-sat32((n_mid * e) >> 32) * p.g_a1_q28) >> 4)
-    acc_q40(th, s.theta_ext, AP22, (-sat32((v_mid * e) >> 32) * p.g_a2_q28) >> 4)
+    acc_q40(th, s.theta_ext, AP21, _increment_q40(sat32((n_mid * e + R32) >> 32), p.g_a1_q28))
+    acc_q40(th, s.theta_ext, AP22, _increment_q40(sat32((v_mid * e + R32) >> 32), p.g_a2_q28))
     if p.pump_scaling_on:
         phi = sat32((g * (u + p.pump_v0_q24)) >> 24)  # Lambda-hat's regressor g(dN) (u + V0 - V_d)
-        acc_q40(th, s.theta_ext, LAM, (-sat32((phi * e) >> 32) * p.g_lam_q28) >> 4)
+        acc_q40(th, s.theta_ext, LAM, _increment_q40(sat32((phi * e + R32) >> 32), p.g_lam_q28))
     else:
-        acc_q40(th, s.theta_ext, LAM, (-sat32((u * e) >> 32) * p.g_lam_q28) >> 4)
-        acc_q40(th, s.theta_ext, TH1, (-sat32((f1 * e) >> 32) * p.g_th1_q28) >> 4)
-        acc_q40(th, s.theta_ext, TH2, (-sat32((f2_q16 * e) >> 24) * p.g_th2_q28) >> 4)
+        acc_q40(th, s.theta_ext, LAM, _increment_q40(sat32((u * e + R32) >> 32), p.g_lam_q28))
+        acc_q40(th, s.theta_ext, TH1, _increment_q40(sat32((f1 * e + R32) >> 32), p.g_th1_q28))
+        acc_q40(th, s.theta_ext, TH2, _increment_q40(sat32((f2_q16 * e + R24) >> 24), p.g_th2_q28))
     if p.lambda_floor_on and th[LAM] < p.lambda_floor_q24:  # projection onto Lambda >= floor
         th[LAM] = p.lambda_floor_q24
         s.theta_ext[LAM] = 0

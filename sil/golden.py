@@ -231,6 +231,10 @@ SOURCES: dict[str, Source] = {
     "mrac-staircase": _scenario("mrac-staircase", "thesis-5.4-staircase", 2500),
     "pid-staircase": _scenario("pid-staircase", "thesis-6.2-staircase-pid", 2500),
     "open-loop-estimator": _scenario("open-loop-estimator", "thesis-4.3-estimator-aero", 2500),
+    "estimator-reproducing": _scenario(
+        "estimator-reproducing", "thesis-4.2-estimator-fast-reproducing", 2500
+    ),
+    "mrac-reproducing": _scenario("mrac-reproducing", "thesis-5.2-mrac-fast-reproducing", 2500),
     "limiters-hot": _scenario("limiters-hot", _HOT_LIMITS, 2500),
     "faults": _scenario("faults", _FAULTS, 2500),
     "egt-open": _scenario("egt-open", _EGT_OPEN, 1000),

@@ -146,6 +146,8 @@ def ecu_overrides(s: Scenario, trim_v: float) -> dict[str, object]:
         "rate_hz": int(round(s.ecu_rate_hz)),
         "trim_v": trim_v,
     }
+    if s.controller.reading is not None:
+        overrides["reading"] = s.controller.reading
     overrides.update(s.controller.params)
     return overrides
 
@@ -423,6 +425,8 @@ def _ecu_args(opts: RunOptions, s: Scenario, params: EcuParams, ecu_spec: BusSpe
             args += ["--controller", str(value)]
         elif name == "rate_hz":
             args += ["--rate", str(value)]
+        elif name == "reading":
+            args += ["--reading", str(value)]
         else:
             args += ["--param", f"{name}={value!r}"]
     return args + list(opts.ecu_extra_args)

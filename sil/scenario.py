@@ -20,6 +20,8 @@ Shipped scenarios live in ``sil/scenarios/`` and are found by name.
     [controller]
     kind = "mrac"              # mrac | pid | open_loop
     preset = "sec5_3_mrac_aero"  # an ECU parameter preset (ecu.params.PRESETS; optional)
+    reading = "printed"        # printed | reproducing: how the document's gains are read
+                               # (ecu.params.READINGS; optional, default the preset's)
     params = { }               # overrides of ECU parameters by name (optional)
 
     [command]                  # %N for mrac/pid, volts for open_loop
@@ -65,7 +67,7 @@ from typing import Any
 
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
-from ecu.params import PRESETS, EcuParams
+from ecu.params import PRESETS, READINGS, EcuParams
 from protocol.dbc import load_database
 from sil import profiles
 from sil.busfault.spec import KINDS, RATED, BusFault, Expectation
@@ -118,6 +120,7 @@ class ControllerSettings:
     kind: str = "mrac"
     preset: str | None = None
     params: dict[str, float] = field(default_factory=dict)
+    reading: str | None = None  # ecu.params.READINGS; None: the preset's
 
 
 @dataclass(frozen=True)
@@ -394,8 +397,9 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
     c = top.sub("controller")
     kind = c.text("kind", "mrac", choices=CONTROLLERS)
     preset = c.text("preset", choices=tuple(sorted(PRESETS))) if "preset" in c.table else None
+    reading = c.text("reading", choices=READINGS) if "reading" in c.table else None
     params_reader = c.sub("params")
-    known = {f.name for f in fields(EcuParams)} - {"controller", "rate_hz"}
+    known = {f.name for f in fields(EcuParams)} - {"controller", "rate_hz", "reading"}
     for key in params_reader.table:
         if key not in known:
             raise params_reader.fail(key, "an ECU parameter (ecu.params.EcuParams field)", key)
@@ -428,7 +432,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
         rate,
         int(seed),
         plant,
-        ControllerSettings(kind, preset, params),
+        ControllerSettings(kind, preset, params, reading),
         base if base == "trim" else float(base),
         components,
         tuple(sorted(faults, key=lambda f: f.time_s)),

@@ -185,6 +185,15 @@ static int32_t pump_current_checks(ecu_t *e, int32_t pump_ma, int32_t v_q24)
 /* ---- ecu/estimator.py (eq. 4.7, 4.31) ------------------------------------------------------ */
 
 /* d0 = (Lambda-hat - Lambda_c) (V0 - V_d), %N/s^2 (Q15.16); 0 without pump scaling */
+#define R32 ((int64_t)1 << 31) /* half an LSB before >> 32: round to nearest, ties up */
+#define R24 ((int64_t)1 << 23)
+
+/* eq. 4.31's step -(Gamma P dt) phi e in Q7.40, rounded to nearest */
+static int64_t increment_q40(int32_t phi_e_q16, int32_t gain_q28)
+{
+    return (-(int64_t)phi_e_q16 * gain_q28 + 8) >> 4;
+}
+
 static int32_t pump_bias_q16(ecu_t *e)
 {
     const ecu_params_t *p = e->p;
@@ -243,22 +252,23 @@ static void estimator_step(ecu_t *e, int32_t n0, int32_t v0, int32_t n1, int32_t
     if (p->dead_zone_on && -p->dead_zone_q24 < err && err < p->dead_zone_q24) {
         return;
     }
-    /* increments in Q7.40: phi e in Q15.16 times Gamma P dt in Q3.28, >> 4 */
+    /* increments in Q7.40: phi e in Q15.16 times Gamma P dt in Q3.28, >> 4, each rounded to
+       nearest (a truncation's half-LSB bias per tick would drift the estimates) */
     acc_q40(e, &th[ECU_AP21], &ext[ECU_AP21],
-            (-(int64_t)sat32(e, ((int64_t)n_mid * err) >> 32) * p->g_a1_q28) >> 4);
+            increment_q40(sat32(e, ((int64_t)n_mid * err + R32) >> 32), p->g_a1_q28));
     acc_q40(e, &th[ECU_AP22], &ext[ECU_AP22],
-            (-(int64_t)sat32(e, ((int64_t)v_mid * err) >> 32) * p->g_a2_q28) >> 4);
+            increment_q40(sat32(e, ((int64_t)v_mid * err + R32) >> 32), p->g_a2_q28));
     if (p->pump_scaling_on) {
         int32_t phi = sat32(e, ((int64_t)g * ((int64_t)u + p->pump_v0_q24)) >> 24);
         acc_q40(e, &th[ECU_LAM], &ext[ECU_LAM],
-                (-(int64_t)sat32(e, ((int64_t)phi * err) >> 32) * p->g_lam_q28) >> 4);
+                increment_q40(sat32(e, ((int64_t)phi * err + R32) >> 32), p->g_lam_q28));
     } else {
         acc_q40(e, &th[ECU_LAM], &ext[ECU_LAM],
-                (-(int64_t)sat32(e, ((int64_t)u * err) >> 32) * p->g_lam_q28) >> 4);
+                increment_q40(sat32(e, ((int64_t)u * err + R32) >> 32), p->g_lam_q28));
         acc_q40(e, &th[ECU_TH1], &ext[ECU_TH1],
-                (-(int64_t)sat32(e, ((int64_t)f1 * err) >> 32) * p->g_th1_q28) >> 4);
+                increment_q40(sat32(e, ((int64_t)f1 * err + R32) >> 32), p->g_th1_q28));
         acc_q40(e, &th[ECU_TH2], &ext[ECU_TH2],
-                (-(int64_t)sat32(e, ((int64_t)f2_q16 * err) >> 24) * p->g_th2_q28) >> 4);
+                increment_q40(sat32(e, ((int64_t)f2_q16 * err + R24) >> 24), p->g_th2_q28));
     }
     if (p->lambda_floor_on && th[ECU_LAM] < p->lambda_floor_q24) {
         th[ECU_LAM] = p->lambda_floor_q24;

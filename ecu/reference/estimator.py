@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecu.params import EcuParams, _tustin
+from ecu.params import EcuParams, _tustin, firmware_convention
 
 
 @dataclass
@@ -20,7 +20,7 @@ class FloatEstimator:
     e2: float = 0.0
 
     def __post_init__(self) -> None:
-        p = self.params
+        self.params = p = firmware_convention(self.params)
         self.ap21, self.ap22 = p.init_ap_row2
         self.lam = p.init_lambda
         self.th1, self.th2 = p.init_theta_row2

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecu.params import EcuParams, _tustin
+from ecu.params import EcuParams, _tustin, firmware_convention
 from ecu.reference.estimator import FloatEstimator
 
 
@@ -21,7 +21,7 @@ class FloatMrac:
     xm2: float = 0.0
 
     def __post_init__(self) -> None:
-        p = self.params
+        self.params = p = firmware_convention(self.params)
         self.kx1, self.kx2 = p.init_kx
         self.kr = p.init_kr
         self.kf1, self.kf2 = p.init_kf

@@ -33,6 +33,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("mrac", "pid", "open_loop"),
         help="override the preset's controller",
     )
+    parser.add_argument(
+        "--reading",
+        choices=("printed", "reproducing"),
+        help="how the document's gains are read (ecu.params.READINGS; default: the preset's)",
+    )
     parser.add_argument("--rate", type=int, metavar="HZ", help="override the tick rate (50-1000)")
     parser.add_argument("--ticks", type=int, metavar="N", help="stop after answering N ticks")
     parser.add_argument(
@@ -115,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         overrides["controller"] = args.controller
     if args.rate:
         overrides["rate_hz"] = args.rate
+    if args.reading:
+        overrides["reading"] = args.reading
     try:
         params = preset(args.preset, **overrides)
         if args.commission:
