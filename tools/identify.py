@@ -24,7 +24,9 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_filter
 
-ORDERS = ("second", "first", "first-quadratic")
+# eq. 3.5; eq. 3.1 (linear second order); eq. B.4; appendix B linear; B.4 + dN^2 dV
+ORDERS = ("second", "second-linear", "first", "first-linear", "first-quadratic")
+SECOND_ORDERS = ("second", "second-linear")
 
 
 @dataclass(frozen=True)
@@ -106,6 +108,10 @@ def regressors(dn: np.ndarray, dn_dot: np.ndarray, dv: np.ndarray, order: str) -
     """The regressor matrix X of eq. 3.14 (or of eq. B.7 for the first-order models)."""
     if order == "second":
         return np.column_stack([dn, dn_dot, dv, dn * dv, dn * dn * dv])
+    if order == "second-linear":
+        return np.column_stack([dn, dn_dot, dv])
+    if order == "first-linear":
+        return np.column_stack([dn, dv])
     if order == "first":
         return np.column_stack([dn, dv, dn * dv])
     if order == "first-quadratic":
@@ -124,8 +130,8 @@ def simulate(
 ) -> np.ndarray:
     """Speed (%N) of the identified model driven by the recorded voltage (RK4, input held)."""
     th = [float(v) for v in theta] + [0.0] * (5 - len(theta))
-    second = order == "second"
-    if not second and order not in ORDERS:
+    second = order in SECOND_ORDERS
+    if order not in ORDERS:
         raise ValueError(f"model order '{order}' is not one of {', '.join(ORDERS)}")
 
     def rate(dn: float, dn_dot: float, u: float) -> tuple[float, float]:
@@ -185,19 +191,27 @@ class Identification:
 
 def derived_parameters(theta: np.ndarray, order: str) -> dict[str, float | list[str]]:
     """omega_n, zeta, alpha_i and the roots (ch. 3); tau and alpha_i (appendix B)."""
-    if order == "second":
+    if order in SECOND_ORDERS:
         wn = math.sqrt(-theta[0]) if theta[0] < 0 else math.nan
         roots = np.roots([1.0, -theta[1], -theta[0]])
-        return {
+        out = {
             "omega_n": wn,
             "zeta": -theta[1] / (2 * wn) if wn else math.nan,
             "alpha0": theta[2] / wn**2,
+        }
+        if order == "second-linear":
+            return {**out, "K": out["alpha0"], "roots": [f"{r:.4f}" for r in roots]}
+        return {
+            **out,
             "alpha1": theta[3] / wn**2,
             "alpha2": theta[4] / wn**2,
             "roots": [f"{r:.4f}" for r in roots],
         }
     tau = -1.0 / theta[0] if theta[0] != 0 else math.inf
-    out = {"tau": tau, "K": theta[1] * tau, "alpha0": theta[1] * tau, "alpha1": theta[2] * tau}
+    out = {"tau": tau, "K": theta[1] * tau, "alpha0": theta[1] * tau}
+    if order == "first-linear":
+        return out
+    out["alpha1"] = theta[2] * tau
     if order == "first-quadratic":
         out["alpha2"] = theta[3] * tau
     return out
@@ -247,7 +261,7 @@ def identify(
     d = derivatives(rec, window)
     dn, dv = d.n - trim.n_pct, rec.v - trim.v
     x = regressors(dn, d.n_dot, dv, order)
-    y = d.n_ddot if order == "second" else d.n_dot
+    y = d.n_ddot if order in SECOND_ORDERS else d.n_dot
     keep = smooth_input(rec.v, d.window) if skip_steps else np.ones(len(y), bool)
     if keep.sum() < x.shape[1] * 5:
         raise ValueError(

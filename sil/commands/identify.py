@@ -26,7 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--order",
         choices=ident.ORDERS,
         default="second",
-        help="model: eq. 3.5 (second), eq. B.4 (first), B.4 + dN^2 dV",
+        help="model: eq. 3.5 (second, default), eq. 3.1 (second-linear), eq. B.4 (first), "
+        "appendix B's linear first order (first-linear), B.4 + dN^2 dV (first-quadratic)",
     )
     parser.add_argument("--trim-n", type=float, metavar="PCT", help="trim speed, %%N_max")
     parser.add_argument("--trim-v", type=float, metavar="VOLTS", help="trim pump voltage")

@@ -7,19 +7,21 @@ printed set-up cannot reach a published value (docs/errata.md), the row says so 
 against the value an independent integration predicts for that set-up (``predicted``), so that
 it is still checked.
 
-Sections (this module: the fast-model sections, :mod:`sil.verify.fast`):
+Sections (SECTIONS):
+- trim (eq. 2.32), identification (eq. 3.1, 3.23, appendix B), sec. 4.3 and 5.3 on the
+  aero-thermal engine, controllers (sec. 5.4 and the claims of ch. 6): :mod:`sil.verify.aero`;
 - sec. 4.2, the estimator alone on the eq. 3.24 model, and sec. 5.2, the indirect MRAC on it,
-  both readings; the published numbers are checked against the firmware's fixed-point kernels
-  handed the true state (as the document's simulation had it), next to their float64 twins and
-  to the whole firmware seeing speed in whole rpm.
+  both readings (this module and :mod:`sil.verify.fast`); the published numbers are checked
+  against the firmware's fixed-point kernels handed the true state (as the document's
+  simulation had it), next to their float64 twins and to the whole firmware seeing speed in
+  whole rpm.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
-from sil.verify import fast
+from sil.verify import aero, fast
 from sil.verify.fast import RunResult, rms
+from sil.verify.rows import Row, check, info, rel
 
 # sec. 4.2 and 5.2 results as published (shared/reference/thesis_reference.json); Theta_f-hat is
 # printed in the order [dN dV, dN^2 dV] and K_f in the order of eq. 3.10, [dN^2 dV, dN dV]
@@ -60,59 +62,6 @@ PREDICTED_TOL = 0.05  # relative, against PREDICTED_PRINTED: the discretisations
 TRACKING_WINDOW_S = 100.0  # tracking RMS over the last 100 s
 TRACKING_TOL_PCT = 0.1
 TWIN_TOL = {"sec4_2": 0.03, "sec5_2": 0.01}  # fixed point against float64, worst estimate
-
-
-@dataclass
-class Row:
-    name: str
-    source: str
-    reading: str
-    published: float | None
-    reached: float
-    tolerance: str | None
-    ok: bool
-    predicted: float | None = None
-    note: str = ""
-
-
-def check(
-    name: str,
-    source: str,
-    reading: str,
-    published: float | None,
-    reached: float,
-    tol: float,
-    relative: bool,
-    *,
-    against: float | None = None,
-    predicted: float | None = None,
-    note: str = "",
-) -> Row:
-    """``reached`` within ``tol`` of ``predicted`` if given, else of ``against`` (default: the
-    published value)."""
-    target = predicted if predicted is not None else (published if against is None else against)
-    assert target is not None
-    bound = tol * abs(target) if relative else tol
-    return Row(
-        name,
-        source,
-        reading,
-        published,
-        reached,
-        f"{tol * 100:g} %" if relative else f"{tol:g} abs",
-        bool(abs(reached - target) <= bound),
-        predicted,
-        note,
-    )
-
-
-def info(name: str, source: str, reading: str, reached: float, note: str) -> Row:
-    """A figure shown for understanding, not checked."""
-    return Row(name, source, reading, None, reached, None, True, None, note)
-
-
-def _rel(a: float, b: float) -> float:
-    return abs(a - b) / max(abs(b), 1e-12)
 
 
 def _published_value(name: str, key: str) -> float:
@@ -166,7 +115,7 @@ def fast_rows(name: str, reading: str, seconds: float | None = None) -> list[Row
     if name == "sec5_2":
         rows.append(_tracking_row(tag, src, reading, core))
     keys = ("ap21", "ap22", "lam") + (("kx1", "kx2", "kr") if name == "sec5_2" else ())
-    worst = max(_rel(e[k], core_float.estimates[k]) for k in keys)
+    worst = max(rel(e[k], core_float.estimates[k]) for k in keys)
     rows.append(
         check(
             f"{tag} fixed point vs float64 twin, true state: worst estimate (rel.)",
@@ -242,44 +191,27 @@ def _ecu_rows(name: str, reading: str, tag: str, src: str, secs: float) -> list[
     return rows
 
 
-def verification_rows(seconds: float | None = None) -> list[Row]:
-    """Every row: sec. 4.2 and 5.2 in both readings."""
-    rows: list[Row] = []
-    for name in fast.SCENARIOS:
-        for reading in fast.READINGS:
-            rows.extend(fast_rows(name, reading, seconds))
-    return rows
+SECTIONS = ("trim", "identification", "sec4.2", "sec4.3", "sec5.2", "sec5.3", "controllers")
 
 
-def as_dicts(rows: list[Row]) -> list[dict]:
-    return [asdict(r) for r in rows]
+def section_rows(section: str, seconds: float | None = None) -> list[Row]:
+    """The rows of one section (SECTIONS); ``seconds`` overrides the adaptive runs' durations."""
+    if section == "trim":
+        return aero.trim_rows()
+    if section == "identification":
+        return aero.scenario_rows(aero.IDENTIFICATION_SCENARIOS, aero.identification_rows)
+    if section == "controllers":
+        return aero.scenario_rows(aero.CONTROLLER_SCENARIOS, aero.controller_rows)
+    if section in aero.ADAPTIVE:
+        return aero.adaptive_rows(section, seconds)
+    if section in ("sec4.2", "sec5.2"):
+        name = section.replace(".", "_")
+        return [row for reading in fast.READINGS for row in fast_rows(name, reading, seconds)]
+    raise ValueError(f"unknown section {section!r}; choose from {', '.join(SECTIONS)}")
 
 
-def format_table(rows: list[Row]) -> str:
-    """A plain-text table of the rows; notes and sources below it, numbered."""
-
-    def num(x: object) -> str:
-        return "-" if x is None else (f"{x:.5g}" if isinstance(x, float) else str(x))
-
-    width = max(len(r.name) for r in rows)
-    head = (
-        f"{'check':<{width}}  {'reading':<11}  {'published':>10}  {'predicted':>10}  "
-        f"{'reached':>10}  {'tolerance':>9}  ok"
-    )
-    lines = [head]
-    notes: list[str] = []
-    for r in rows:
-        mark = ""
-        if r.note:
-            if r.note not in notes:
-                notes.append(r.note)
-            mark = f" [{notes.index(r.note) + 1}]"
-        lines.append(
-            f"{r.name:<{width}}  {r.reading:<11}  {num(r.published):>10}  {num(r.predicted):>10}  "
-            f"{num(r.reached):>10}  {num(r.tolerance):>9}  {'yes' if r.ok else 'NO'}{mark}"
-        )
-    lines.append("")
-    lines.extend(f"[{k}] {n}" for k, n in enumerate(notes, 1))
-    sources = sorted({r.source for r in rows})
-    lines.append("sources: " + "; ".join(sources))
-    return "\n".join(lines)
+def verification_rows(
+    seconds: float | None = None, sections: tuple[str, ...] = SECTIONS
+) -> list[Row]:
+    """The rows of the given sections, in the document's order."""
+    return [row for section in sections for row in section_rows(section, seconds)]

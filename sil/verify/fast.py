@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -113,17 +114,31 @@ class _Histories:
         )
 
 
-def run_core(p: EcuParams, seconds: float) -> RunResult:
+class TruePlant(Protocol):
+    """A plant as the document's simulation saw it: true speed deviation and rate out, the pump
+    voltage's deviation from trim in (FastEngine, or sil.verify.aero.AeroTruth)."""
+
+    dn_pct: float
+    dn_dot: float
+
+    @property
+    def n_pct(self) -> float: ...
+
+    def step(self, dv_volt: float, dt_s: float) -> None: ...
+
+
+def run_core(p: EcuParams, seconds: float, plant: TruePlant | None = None) -> RunResult:
     """The fixed-point estimator and MRAC kernels on the plant's true state (Q7.24), in the
     order of :class:`ecu.reference.loop.FloatLoop` given true rates: each estimator interval
-    ends m ticks back (m the rate window's half), so that the two runs see the same intervals."""
+    ends m ticks back (m the rate window's half), so that the two runs see the same intervals.
+    The plant defaults to the eq. 3.24 fast model."""
     fp = compile_params(p)
     s = EcuState()
     for k in range(N_THETA):
         s.theta_q24[k] = fp.init_theta_q24[k]
     m = fp.rate_half_window
     hist: deque[list[int]] = deque(maxlen=m + 2)  # [dN, dN', u] per tick, newest last
-    plant = FastEngine()
+    plant = FastEngine() if plant is None else plant
     n = round(seconds * p.rate_hz)
     dt = 1.0 / p.rate_hz
     h = _Histories(n, dt)
@@ -178,11 +193,13 @@ def run_ecu(p: EcuParams, seconds: float) -> RunResult:
     return h.result(tuple(ecu.s.theta_q24[k] / Q24 for k in SLOTS))
 
 
-def run_float(p: EcuParams, seconds: float, true_rate: bool) -> RunResult:
+def run_float(
+    p: EcuParams, seconds: float, true_rate: bool, plant: TruePlant | None = None
+) -> RunResult:
     """The float64 twin; with ``true_rate`` it gets the plant's exact speed and rate (the twin
     of :func:`run_core`), without it the speed in whole rpm (the twin of :func:`run_ecu`)."""
     loop = FloatLoop(p)
-    plant = FastEngine()
+    plant = FastEngine() if plant is None else plant
     n = round(seconds * p.rate_hz)
     dt = 1.0 / p.rate_hz
     h = _Histories(n, dt)

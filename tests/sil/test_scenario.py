@@ -13,6 +13,7 @@ REQUIRED = [
     "thesis-3.3-staircase",
     "thesis-3.3-square",
     "thesis-3.3-sine",
+    "thesis-3.1-band-90-94",
     "thesis-4.2-estimator-fast",
     "thesis-4.3-estimator-aero",
     "thesis-5.2-mrac-fast",

@@ -59,6 +59,40 @@ def test_first_order_models_of_appendix_b():
     assert abs(quad.theta[3]) < 0.01  # no dN^2 dV term in the data
 
 
+def _linear_record(order: str, gain: float, a: float, b: float = 0.0) -> ident.Recording:
+    """A linear model's answer to voltage steps, integrated here independently of the tool:
+    first order dN' = (K dV - dN) / tau (a = tau); second order dN'' = wn^2 (K dV - dN)
+    - 2 zeta wn dN' (a = wn, b = zeta); Euler at 0.1 ms, sampled at 10 ms."""
+    t = np.arange(0, 80, 0.01)
+    dv = np.where((t // 7) % 2 == 0, 0.8, -0.6)
+    n, n_dot, out = 0.0, 0.0, np.empty_like(t)
+    for k, u in enumerate(dv):
+        out[k] = n
+        for _ in range(100):
+            if order == "first-linear":
+                n += 1e-4 * (gain * u - n) / a
+            else:
+                n_ddot = a * a * (gain * u - n) - 2 * b * a * n_dot
+                n, n_dot = n + 1e-4 * n_dot, n_dot + 1e-4 * n_ddot
+    return ident.Recording(t, TRIM.n_pct + out, TRIM.v + dv, order)
+
+
+def test_linear_models_of_eq_3_1_and_appendix_b():
+    first = ident.identify(
+        _linear_record("first-linear", 1.85, 0.8), order="first-linear", trim=TRIM
+    )
+    assert first.derived["K"] == pytest.approx(1.85, rel=0.01)
+    assert first.derived["tau"] == pytest.approx(0.8, rel=0.01)
+    rec = _linear_record("second-linear", 2.2, 1.4, 0.85)
+    second = ident.identify(rec, order="second-linear", trim=TRIM)
+    assert second.derived["K"] == pytest.approx(2.2, rel=0.01)
+    assert second.derived["omega_n"] == pytest.approx(1.4, rel=0.02)
+    assert second.derived["zeta"] == pytest.approx(0.85, rel=0.02)
+    assert second.nrmse_pct < 0.5
+    with pytest.raises(ValueError, match="second-order model"):
+        ident.ecu_commissioning(second)  # the ECU needs eq. 3.5's five parameters
+
+
 def test_trim_estimate_and_window_errors():
     rec = _eq_3_24_record(seconds=20)
     assert ident.estimate_trim(rec).n_pct == pytest.approx(89.68 + 0.45, abs=0.5)
