@@ -55,9 +55,18 @@ class _InProcess:
         pass
 
 
-def _recorder_processes() -> list[int]:
-    found = subprocess.run(["pgrep", "-f", "sil.recorder_process"], capture_output=True, text=True)
+def _recorder_processes(parent: int | None = None) -> list[int]:
+    """Recorder processes alive (of ``parent`` only, if given: other runs may share the
+    machine)."""
+    where = ["-P", str(parent)] if parent is not None else []
+    found = subprocess.run(
+        ["pgrep", *where, "-f", "sil.recorder_process"], capture_output=True, text=True
+    )
     return [int(pid) for pid in found.stdout.split()]
+
+
+def _alive(pids: list[int]) -> list[int]:
+    return [pid for pid in pids if Path(f"/proc/{pid}").exists()]
 
 
 @pytest.mark.parametrize("mode", ["inproc", "lockstep"])
@@ -95,6 +104,8 @@ def test_ctrl_c_keeps_every_frame_recorded(tmp_path):
     while not (trace.exists() and trace.stat().st_size > 400_000):  # a chunk or two is written
         assert time.monotonic() < deadline and proc.poll() is None, proc.stderr
         time.sleep(0.05)
+    recorders = _recorder_processes(proc.pid)
+    assert len(recorders) == 1
     proc.send_signal(signal.SIGINT)
     proc.communicate(timeout=60)
     assert proc.returncode == 1
@@ -112,9 +123,9 @@ def test_ctrl_c_keeps_every_frame_recorded(tmp_path):
     # the recorder process is not waited for once its files are closed: it leaves on its own,
     # within moments on an idle machine, later on a loaded one
     deadline = time.monotonic() + 10.0
-    while _recorder_processes() and time.monotonic() < deadline:
+    while _alive(recorders) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert _recorder_processes() == []
+    assert _alive(recorders) == []
 
 
 def test_a_dead_recorder_process_is_reported_and_what_it_wrote_stays(tmp_path):
