@@ -47,7 +47,7 @@ from protocol.bus import BusSpec, BusSpecError, default_spec, open_bus, parse_sp
 from protocol.busload import bus_load_pct
 from protocol.codec import Codec
 from protocol.node import DriverStats, InProcessBus, bus_batch_receiver, bus_sender, unusable
-from sil import metrics, profiles
+from sil import metrics, profiles, results
 from sil.busfault.bridge import Bridge, SensorTicks, WallTicks
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
@@ -207,15 +207,18 @@ def run(opts: RunOptions) -> dict:
     """Run the scenario, write can.log, trace.csv, summary.json and plots; return the summary."""
     s = opts.scenario
     seed = s.seed if opts.seed is None else opts.seed
+    results.clear(opts.out_dir)  # an earlier run's files never pass for this one's
     opts.out_dir.mkdir(parents=True, exist_ok=True)
-    if s.path is not None:
-        (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
-    if opts.mode != "inproc" and s.plant.varied:
-        raise ValueError(f"{s.name}: engine variation needs --mode inproc")
+    results.mark(opts.out_dir, "running", s.name)
     state = RunState()
     try:
+        if s.path is not None:
+            (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
+        if opts.mode != "inproc" and s.plant.varied:
+            raise ValueError(f"{s.name}: engine variation needs --mode inproc")
         return _run(opts, s, seed, state)
-    except BaseException:
+    except BaseException as exc:
+        results.mark(opts.out_dir, "failed", s.name, _failure(exc, state))
         _stop(state.children)
         if state.recorder is not None:
             state.recorder.discard()
@@ -224,6 +227,13 @@ def run(opts: RunOptions) -> dict:
             if log.exists() and log.stat().st_size == 0:
                 log.unlink()
         raise
+
+
+def _failure(exc: BaseException, state: RunState) -> str:
+    """The reason a run failed by ``exc`` gives in its summary."""
+    what = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else str(exc)
+    what = what or type(exc).__name__
+    return what if state.started else f"{what} (before the run began)"
 
 
 def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
@@ -589,9 +599,9 @@ def _finish(
         state.status = "aborted"
         state.abort_reason = state.abort_reason or f"trace.csv cannot be read: {exc}"
     summary = {
-        "scenario": s.name,
         "status": state.status,
         "abort_reason": state.abort_reason,
+        "scenario": s.name,
         "mode": opts.mode,
         "bus": state.bus,
         **({"inproc_loop": state.loop} if state.loop else {}),
@@ -629,7 +639,7 @@ def _finish(
         summary["plots"] = [
             p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind)
         ]
-    (opts.out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    results.write_summary(opts.out_dir, summary)
     for path in _handshake_files(opts.out_dir):
         path.unlink(missing_ok=True)
-    return summary
+    return results.status_first(summary)

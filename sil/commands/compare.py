@@ -12,6 +12,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from sil import results  # noqa: E402
 from sil.metrics import load_trace  # noqa: E402
 
 NAME = "compare"
@@ -28,10 +29,25 @@ FIELDS = (
 )
 
 
+EPILOG = """exit status:
+  0  both runs completed; table and plot written
+  1  --allow-incomplete: compared, but a run did not complete (marked INCOMPLETE)
+  2  refused: a folder without a readable summary.json and trace.csv, a run whose status is not
+     "completed" (unless --allow-incomplete), or bad arguments"""
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EPILOG
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("run_a", type=Path, help="output folder of the first run")
     parser.add_argument("run_b", type=Path, help="output folder of the second run")
     parser.add_argument("--out", type=Path, help="folder for compare.png (default: RUN_B)")
+    parser.add_argument(
+        "--allow-incomplete",
+        action="store_true",
+        help="compare what an aborted run recorded, marked INCOMPLETE (exit 1), instead of "
+        "refusing it",
+    )
     parser.add_argument("--json", action="store_true", help="print the table as JSON")
 
 
@@ -39,24 +55,36 @@ def _fmt(value: object) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
-def _load(run: Path) -> tuple[dict, dict]:
-    for name in ("summary.json", "trace.csv"):
-        if not (run / name).is_file():
-            raise FileNotFoundError(f"{run}: no {name} (is this the output folder of a run?)")
+def _load(run: Path, allow_incomplete: bool) -> tuple[dict, dict, str | None]:
+    """The run's summary, trace and why it is incomplete (None: completed). Raises
+    :class:`~sil.results.IncompleteRun` for a folder it cannot compare."""
+    summary = results.load_summary(run)
+    why = results.incomplete_reason(summary)
+    if why is not None and not allow_incomplete:
+        raise results.IncompleteRun(
+            f"{run}: incomplete run ({why}); --allow-incomplete compares what it recorded"
+        )
+    if not (run / "trace.csv").is_file():
+        raise results.IncompleteRun(f"{run}: no trace.csv" + (f" ({why})" if why else ""))
     try:
-        summary = json.loads((run / "summary.json").read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{run / 'summary.json'}: not valid JSON: {exc}") from None
-    return summary, load_trace(run / "trace.csv")
+        trace = load_trace(run / "trace.csv")
+    except (OSError, ValueError) as exc:
+        raise results.IncompleteRun(f"{run / 'trace.csv'}: cannot be read: {exc}") from None
+    return summary, trace, why
 
 
 def run(args: argparse.Namespace) -> int:
+    allow = getattr(args, "allow_incomplete", False)
     try:
-        (sa, ta), (sb, tb) = _load(args.run_a), _load(args.run_b)
-    except (FileNotFoundError, ValueError) as exc:
+        (sa, ta, why_a), (sb, tb, why_b) = _load(args.run_a, allow), _load(args.run_b, allow)
+    except results.IncompleteRun as exc:
         print(f"sil compare: {exc}", file=sys.stderr)
         return 2
-    names = (sa.get("scenario", str(args.run_a)), sb.get("scenario", str(args.run_b)))
+    for run_dir, why in ((args.run_a, why_a), (args.run_b, why_b)):
+        if why is not None:
+            print(f"sil compare: {run_dir}: INCOMPLETE run ({why})", file=sys.stderr)
+    code = 0 if why_a is None and why_b is None else 1
+    names = (_name(sa, args.run_a, why_a), _name(sb, args.run_b, why_b))
     rows = [{"field": f, "a": sa.get(f), "b": sb.get(f)} for f in FIELDS]
     out = args.out or args.run_b
     out.mkdir(parents=True, exist_ok=True)
@@ -77,13 +105,24 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(
             json.dumps(
-                {"a": names[0], "b": names[1], "rows": rows, "plot": str(out / "compare.png")},
+                {
+                    "a": names[0],
+                    "b": names[1],
+                    "incomplete": {"a": why_a, "b": why_b},
+                    "rows": rows,
+                    "plot": str(out / "compare.png"),
+                },
                 indent=2,
             )
         )
-        return 0
+        return code
     print(f"{'':<18} {names[0]:>28} {names[1]:>28}")
     for r in rows:
         print(f"{r['field']:<18} {_fmt(r['a']):>28} {_fmt(r['b']):>28}")
     print(f"plot: {out / 'compare.png'}")
-    return 0
+    return code
+
+
+def _name(summary: dict, run: Path, why: str | None) -> str:
+    name = str(summary.get("scenario", run))
+    return name if why is None else f"{name} (INCOMPLETE)"

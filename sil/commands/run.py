@@ -10,6 +10,7 @@ import threading
 from pathlib import Path
 
 from protocol.bus import BusSpecError
+from sil import results
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
 
@@ -127,6 +128,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         scenario = scenarios.load(scenario_ref)
     except scenarios.ScenarioError as exc:
         print(f"sil run: {exc}", file=sys.stderr)
+        _refused_into(out or args.out, scenario_ref, str(exc))
         return 2
     out = out or args.out or Path("out") / scenario.name
     options = RunOptions(
@@ -156,6 +158,14 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         print(f"sil run: aborted: {summary['abort_reason']}", file=sys.stderr)
         return 1
     return 0
+
+
+def _refused_into(out: Path | None, scenario_ref: str, reason: str) -> None:
+    """A refused run into an existing folder leaves no earlier run's results claiming to be its
+    own: they are removed and the summary says it failed (a folder not there is not made)."""
+    if out is not None and out.is_dir():
+        results.clear(out)
+        results.mark(out, "failed", scenario_ref, f"{reason} (before the run began)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -263,7 +263,9 @@ def test_a_bad_parameter_stops_the_plant_process_started_before_it_was_checked(t
     assert result.returncode == 2
     assert "rate_window_s=1000.0: must span at least two ticks" in result.stderr
     assert _no_nodes_left(spec)
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["scenario.toml"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["scenario.toml", "summary.json"]
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["status"] == "failed" and "rate_window_s=1000.0" in summary["abort_reason"]
 
 
 def test_replay_into_the_ecu_finds_no_difference_and_then_the_changed_parameter(tmp_path):
@@ -366,7 +368,7 @@ def test_compare_two_runs(tmp_path):
     assert rows["tracking_rms_pct"] == (a["tracking_rms_pct"], b["tracking_rms_pct"])
     assert (tmp_path / "b" / "compare.png").stat().st_size > 10_000
     missing = _sil("compare", str(tmp_path / "a"), str(tmp_path / "nowhere"))
-    assert missing.returncode == 2 and "no summary.json" in missing.stderr
+    assert missing.returncode == 2 and "nowhere: no such folder" in missing.stderr
 
 
 OPEN_THERMOCOUPLE = """
