@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import gzip
 import re
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TextIO
+from typing import BinaryIO, TextIO
 
 import can
 import numpy as np
@@ -168,14 +169,13 @@ _CSV_HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"
 def detect_format(path: Path) -> tuple[str, bool]:
     """The log format from the file's content (not its name), and whether it is gzipped."""
     with path.open("rb") as f:
-        head = f.read(4096)
+        head = f.read(65536)
     gz = head[:2] == b"\x1f\x8b"
-    if gz:
-        with gzip.open(path, "rb") as f:
-            try:
-                head = f.read(4096)
-            except (OSError, EOFError) as exc:
-                raise LogReadError(path, "byte 0", f"corrupt gzip data: {exc}", 0) from None
+    if gz:  # what the head decompresses to (a gzip file cut short fails later, at its end)
+        try:
+            head = zlib.decompressobj(wbits=31).decompress(head, 4096)
+        except zlib.error as exc:
+            raise LogReadError(path, "byte 0", f"corrupt gzip data: {exc}", 0) from None
     if head[:4] == b"LOGG":
         return "blf", gz
     text = head.decode("latin-1")
@@ -200,32 +200,75 @@ _CANDUMP = re.compile(r"^\((\d+\.\d+)\)\s+(\S+)\s+([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8}
 
 
 class _CountingText:
-    """A text file that counts the lines handed out, for error positions."""
+    """A text file handed out line by line (an iterator), counting the lines for error positions.
+    With ``require_eol`` a last line without its end of line is a record cut short (an ASC
+    file's closing ``End TriggerBlock`` excepted); without, the format's parser must tell."""
 
-    def __init__(self, f) -> None:
-        self._f = f
+    def __init__(self, f: TextIO, require_eol: bool = True) -> None:
+        self._f = f  # opened with newline="": the ends of line as written
+        self._require_eol = require_eol
         self.line = 0
+        self.last = ""  # the last line that was not blank, stripped
+        self._crlf: bool | None = None  # the file's lines end with CR LF (its first line's do)
+        self._half_end = False  # the last line read ends with CR where the others have CR LF
+        self.unterminated = False  # the last line read has no end of line
 
-    def __iter__(self):
-        for line in self._f:
-            self.line += 1
-            yield line
+    def __iter__(self) -> _CountingText:
+        return self
 
-    def readline(self, *args):
+    def __next__(self) -> str:
+        line = self.readline()
+        if not line:
+            raise StopIteration
+        return line
+
+    def readline(self) -> str:
+        line = self._f.readline()
+        if not line:
+            if self._half_end:
+                raise ValueError(f"last line cut short (CR without LF): {self.last[:60]!r}")
+            return line
         self.line += 1
-        return self._f.readline(*args)
+        self.unterminated = not line.endswith(("\n", "\r"))
+        if not self._require_eol:
+            self.last = line.strip() or self.last
+            return line
+        if self._crlf is None and line.endswith(("\n", "\r")):
+            self._crlf = line.endswith("\r\n")
+        self._half_end = bool(self._crlf) and line.endswith("\r")
+        text = line.strip()
+        if text:
+            self.last = text
+        if not line.endswith(("\n", "\r")) and text.lower() != _ASC_END:
+            raise ValueError(f"last line cut short (no end of line): {line[:60]!r}")
+        return line
 
     def __getattr__(self, name):
         return getattr(self._f, name)
 
 
-def _candump_frames(f: _CountingText, path: Path):
+_ASC_END = "end triggerblock"
+
+
+class _TRCReader(can.TRCReader):
+    """python-can's TRC reader, but a line it cannot parse is an error, not a line dropped. PEAK's
+    own tools end a file without an end of line, so a last line without one must be a whole
+    record: a record cut short lacks its last columns (or some data bytes, which
+    :func:`_check_length` finds), and a line of a type python-can skips is no record."""
+
+    def _parse_line(self, line: str) -> can.Message | None:
+        try:
+            return self._parse_cols(tuple(line.split(maxsplit=self._num_columns)))
+        except (IndexError, ValueError) as exc:
+            what = "a column missing" if isinstance(exc, IndexError) else str(exc)
+            raise ValueError(f"not a whole TRC record ({what}): {line[:60]!r}") from None
+
+
+def _candump_frames(f: _CountingText):
     for line in f:
         text = line.strip()
         if not text:
             continue
-        if not line.endswith("\n"):
-            raise ValueError(f"last line cut short (no end of line): {text[:60]!r}")
         m = _CANDUMP.match(text)
         if m is None:
             raise ValueError(f"not a candump -L line: {text[:60]!r}")
@@ -271,49 +314,110 @@ def _candump_frames(f: _CountingText, path: Path):
             )
 
 
-def read_frames(path: Path) -> Iterator[can.Message]:
-    """Every frame of a log (candump -L, ASC, BLF, TRC or python-can CSV, optionally gzipped).
+def _check_length(message: can.Message) -> None:
+    """A classical data frame's bytes must be as many as its DLC says (python-can's text readers
+    take both as written)."""
+    if message.is_fd or message.is_remote_frame or message.is_error_frame:
+        return
+    if message.dlc != len(message.data):
+        raise ValueError(f"{len(message.data)} data bytes for DLC {message.dlc}")
 
-    Raises :class:`LogReadError` naming the line (text formats) or byte offset (BLF) where
-    reading failed; the frames before it have been yielded.
+
+class LogReader:
+    """Every frame of a log (candump -L, ASC, BLF, TRC or python-can CSV, optionally gzipped),
+    with the position of the last one handed out (:attr:`position`).
+
+    A truncated or corrupt file raises :class:`LogReadError` naming the line (text formats) or
+    byte offset (BLF) where reading failed, once the frames before it have been handed out: a
+    last line cut short (no end of line), a line that is not a record of the format, an ASC file
+    without its closing ``End TriggerBlock``, a gzip stream or BLF file that ends early.
     """
-    fmt, gz = detect_format(path)
-    count = 0
-    if fmt == "blf":
-        raw = gzip.open(path, "rb") if gz else path.open("rb")
-        size = path.stat().st_size
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.frames = 0
+        self._text: _CountingText | None = None
+
+    @property
+    def position(self) -> str:
+        """The last frame's line (text formats) or its number in the file (BLF)."""
+        return f"line {self._text.line}" if self._text is not None else f"frame {self.frames}"
+
+    def __iter__(self) -> Iterator[can.Message]:
+        fmt, gz = detect_format(self.path)
+        return self._blf(gz) if fmt == "blf" else self._text_frames(fmt, gz)
+
+    def _error(self, position: str, reason: str) -> LogReadError:
+        return LogReadError(self.path, position, reason, self.frames)
+
+    def _blf(self, gz: bool) -> Iterator[can.Message]:
+        raw = gzip.open(self.path, "rb") if gz else self.path.open("rb")
         try:
-            reader = can.BLFReader(raw)
+            reader = can.BLFReader(_KeptOpen(raw))
             for message in reader:
-                count += 1
+                self.frames += 1
                 yield message
+            if gz:
+                raw.read()  # to the end: a gzip stream cut short fails its check there
+            size = raw.tell() if gz else self.path.stat().st_size
         except Exception as exc:  # python-can raises struct.error, BLFParseError, zlib.error
             where = "unknown byte" if raw.closed else f"byte {raw.tell()}"
-            raise LogReadError(path, where, f"corrupt BLF: {exc}", count) from None
+            where += " (decompressed)" if gz and not raw.closed else ""
+            what = "truncated gzip data" if isinstance(exc, EOFError) else "corrupt BLF"
+            raise self._error(where, f"{what}: {exc}") from None
         finally:
             raw.close()
-        if not gz and size < reader.file_size:  # python-can stops quietly at a short file
-            raise LogReadError(
-                path,
-                f"byte {size}",
-                f"truncated BLF: the header says {reader.file_size} bytes",
-                count,
+        if size < reader.file_size:  # python-can stops quietly at a short file
+            raise self._error(
+                f"byte {size}", f"truncated BLF: the header says {reader.file_size} bytes"
             )
-        return
-    text = gzip.open(path, "rt", encoding="latin-1") if gz else path.open(encoding="latin-1")
-    counted = _CountingText(text)
-    try:
-        if fmt == "candump":
-            frames = _candump_frames(counted, path)
-        else:
-            reader = {"asc": can.ASCReader, "trc": can.TRCReader, "csv": can.CSVReader}[fmt]
-            frames = iter(reader(counted))
-        for message in frames:
-            count += 1
-            yield message
-    except (ValueError, IndexError, KeyError, EOFError, OSError) as exc:
-        raise LogReadError(
-            path, f"line {counted.line}", str(exc) or type(exc).__name__, count
-        ) from None
-    finally:
-        text.close()
+
+    def _text_frames(self, fmt: str, gz: bool) -> Iterator[can.Message]:
+        path = self.path
+        opener = gzip.open if gz else open
+        text = opener(path, "rt", encoding="latin-1", newline="")
+        counted = self._text = _CountingText(text, require_eol=fmt != "trc")
+        try:
+            if fmt == "candump":
+                frames = _candump_frames(counted)
+            else:
+                reader = {"asc": can.ASCReader, "trc": _TRCReader, "csv": can.CSVReader}[fmt]
+                frames = iter(reader(counted))
+            frame_line = 0  # the line of the last frame
+            check = fmt != "candump"  # (a candump frame's DLC is its data's length)
+            for message in frames:
+                if check:
+                    _check_length(message)
+                self.frames += 1
+                frame_line = counted.line
+                yield message
+            if fmt == "asc" and counted.last.lower() != _ASC_END:
+                raise ValueError("truncated ASC: it ends without 'End TriggerBlock'")
+            if counted.unterminated and frame_line != counted.line:
+                raise ValueError(f"last line cut short (no end of line): {counted.last[:60]!r}")
+        except (ValueError, IndexError, KeyError, EOFError, OSError) as exc:
+            reason = str(exc) or type(exc).__name__
+            if isinstance(exc, EOFError):
+                reason = f"truncated gzip data: {reason}"
+            raise self._error(f"line {counted.line}", reason) from None
+        finally:
+            text.close()
+
+
+class _KeptOpen:
+    """A binary file that a reader's ``close`` leaves open (python-can's readers close their file
+    at the end; what remains is checked after them)."""
+
+    def __init__(self, f: BinaryIO) -> None:
+        self._f = f
+
+    def close(self) -> None:
+        pass
+
+    def __getattr__(self, name):
+        return getattr(self._f, name)
+
+
+def read_frames(path: Path) -> LogReader:
+    """Every frame of a log: see :class:`LogReader`."""
+    return LogReader(path)

@@ -366,7 +366,8 @@ def read_csv(
 def read_can_log(path: Path) -> Recording:
     """Speed (PlantSensors) and pump voltage (EcuActuator) from a CAN log with our DBC."""
     from protocol.codec import Codec
-    from sil.canlog import read_frames
+    from sil.canlog import LogReadError, read_frames
+    from tools.replay import wrong_length
 
     codec = Codec()
     sensors, actuator = codec["PlantSensors"], codec["EcuActuator"]
@@ -375,9 +376,14 @@ def read_can_log(path: Path) -> Recording:
     out = [0.0] * 8
     speed = math.nan
     t, n, v = [], [], []
-    for msg in read_frames(path):
-        if msg.is_extended_id or msg.is_fd or msg.is_error_frame or len(msg.data) != 8:
+    reader = read_frames(path)
+    for msg in reader:
+        if msg.is_extended_id or msg.is_fd or msg.is_error_frame or msg.is_remote_frame:
             continue
+        ours = codec.by_id.get(msg.arbitration_id)
+        if ours in (sensors, actuator) and len(msg.data) != ours.length:
+            reason = wrong_length(ours, len(msg.data))
+            raise LogReadError(path, reader.position, reason, reader.frames - 1)
         if msg.arbitration_id == sensors.frame_id:
             sensors.unpack(msg.data, out)
             speed = out[i_speed] * 100.0 / N_MAX_RPM
@@ -404,6 +410,6 @@ def read_recording(
         fmt, _ = detect_format(path)
     except LogReadError:
         fmt = "other"
-    if fmt in ("candump", "asc", "blf", "trc"):
+    if fmt in ("candump", "asc", "blf", "trc", "csv"):  # csv: python-can's CSV log
         return read_can_log(path)
     return read_csv(path, time_column, speed_column, voltage_column, speed_unit)

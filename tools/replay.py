@@ -19,7 +19,7 @@ import numpy as np
 
 from protocol.codec import Codec
 from protocol.e2e import E2EChecker, E2EStatus
-from sil.canlog import read_frames
+from sil.canlog import LogReadError, read_frames
 
 _SPIN_S = 0.0015
 
@@ -31,6 +31,7 @@ class LogStats:
     frames: int = 0
     decoded: Counter[str] = field(default_factory=Counter)
     unknown_ids: Counter[int] = field(default_factory=Counter)
+    wrong_length: Counter[str] = field(default_factory=Counter)  # wrong_length() text -> count
     skipped: Counter[str] = field(default_factory=Counter)  # reason -> count
     e2e: dict[str, Counter[str]] = field(default_factory=dict)  # message -> status -> count
 
@@ -39,6 +40,7 @@ class LogStats:
             "frames": self.frames,
             "decoded": dict(self.decoded),
             "unknown_ids": {f"0x{k:X}": v for k, v in sorted(self.unknown_ids.items())},
+            "wrong_length": dict(self.wrong_length),
             "skipped": dict(self.skipped),
             "e2e_problems": {
                 m: {s: n for s, n in c.items() if s != "OK"}
@@ -46,6 +48,14 @@ class LogStats:
                 if set(c) - {"OK"}
             },
         }
+
+
+def wrong_length(message, got: int) -> str:
+    """How a frame of one of our messages (a codec message) with a wrong length is reported."""
+    return (
+        f"wrong length for {message.name} (0x{message.frame_id:03X}): "
+        f"got {got}, expected {message.length}"
+    )
 
 
 def skip_reason(msg: can.Message) -> str | None:
@@ -69,17 +79,24 @@ class Decoder:
             m.frame_id: m.checker(max_delta=1) for m in self.codec.messages if m.protected
         }
         self._out = [0.0] * 16
+        self.problem: str | None = None  # why the last frame was not decoded, if one of ours
 
     def decode(self, msg: can.Message) -> dict[str, float] | None:
-        """The frame's signals by name, or None when it is not one of our messages."""
+        """The frame's signals by name, or None when it is not one of our messages (then
+        :attr:`problem` says why, if its ID is one of ours)."""
         self.stats.frames += 1
+        self.problem = None
         reason = skip_reason(msg)
         if reason is not None:
             self.stats.skipped[reason] += 1
             return None
         message = None if msg.is_extended_id else self.codec.by_id.get(msg.arbitration_id)
-        if message is None or len(msg.data) != message.length:
+        if message is None:
             self.stats.unknown_ids[msg.arbitration_id] += 1
+            return None
+        if len(msg.data) != message.length:
+            self.problem = wrong_length(message, len(msg.data))
+            self.stats.wrong_length[self.problem] += 1
             return None
         checker = self._checkers.get(msg.arbitration_id)
         if checker is not None:
@@ -241,10 +258,15 @@ def into_ecu(
     report = EcuComparison()
     a, b = [0.0] * 16, [0.0] * 16
     node.start(send)
-    for msg in read_frames(path):
+    reader = read_frames(path)
+    for msg in reader:
         if skip_reason(msg) is not None or msg.is_extended_id:
             continue
         frame_id = msg.arbitration_id
+        ours = codec.by_id.get(frame_id)
+        if ours is not None and len(msg.data) != ours.length:
+            reason = wrong_length(ours, len(msg.data))
+            raise LogReadError(path, reader.position, reason, reader.frames - 1)
         if frame_id in inputs:
             node.on_frame(frame_id, msg.data, send)
             continue

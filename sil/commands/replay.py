@@ -63,13 +63,19 @@ def _print_report(report: dict, as_json: bool) -> None:
 
 
 def _dry_run(args: argparse.Namespace, keep) -> int:
+    """Every frame decoded, then the report; exit 1 if the log is truncated or corrupt, or holds
+    frames of our messages with a wrong length (each kind named once, with its first position)."""
     decoder = replay.Decoder()
     error = None
+    first_seen: dict[str, str] = {}  # wrong-length problem -> position of its first frame
+    reader = read_frames(args.log)
     try:
-        for msg in read_frames(args.log):
+        for msg in reader:
             if not keep(msg.arbitration_id):
                 continue
             signals = decoder.decode(msg)
+            if decoder.problem is not None:
+                first_seen.setdefault(decoder.problem, reader.position)
             if args.json:
                 continue
             if signals is not None:
@@ -77,7 +83,7 @@ def _dry_run(args: argparse.Namespace, keep) -> int:
                 values = " ".join(f"{k}={v:g}" for k, v in signals.items())
                 print(f"{msg.timestamp:12.6f} {msg.arbitration_id:03X} {name} {values}")
             else:
-                kind = replay.skip_reason(msg) or "unknown ID"
+                kind = decoder.problem or replay.skip_reason(msg) or "unknown ID"
                 print(
                     f"{msg.timestamp:12.6f} {msg.arbitration_id:03X} ({kind}) "
                     f"{bytes(msg.data).hex()}"
@@ -88,10 +94,12 @@ def _dry_run(args: argparse.Namespace, keep) -> int:
     if error is not None:
         report["error"] = str(error)
     _print_report(report, args.json)
+    for problem, position in first_seen.items():
+        count = decoder.stats.wrong_length[problem]
+        print(f"sil replay: {args.log}: {position}: {problem} ({count} frames)", file=sys.stderr)
     if error is not None:
         print(f"sil replay: {error}", file=sys.stderr)
-        return 1
-    return 0
+    return 1 if error is not None or first_seen else 0
 
 
 def _into_ecu(args: argparse.Namespace) -> int:
