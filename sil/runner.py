@@ -58,6 +58,7 @@ from sil.parent_death import die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.scenario import HEALTH, Scenario
+from sil.watchdog import Watchdog, interrupt_reason
 
 # fault bits listed in the summary: all but the two that only describe the present tick
 REPORTED_FAULTS = {
@@ -103,6 +104,7 @@ class RunState:
     bridge_errors: list[str] = field(default_factory=list)  # frames the bridge could not send
     bus_fault_events: list[dict] = field(default_factory=list)
     recorder: RecorderProcess | None = None  # the recorder's process, made before the set-up
+    ecu_heard: dict[int, float] | None = None  # the fault bridge's ECU side: ID -> when heard
     started: float = 0.0  # perf_counter when the run began
     nodes_up: float | None = None  # perf_counter when the node processes were up, at tick 0
 
@@ -173,6 +175,7 @@ def _stop(children: dict[str, subprocess.Popen]) -> None:
     for proc in children.values():
         if proc.poll() is None:
             proc.send_signal(signal.SIGTERM)
+            proc.send_signal(signal.SIGCONT)  # a stopped process takes the SIGTERM then
     deadline = time.monotonic() + 3.0
     for proc in children.values():
         try:
@@ -231,7 +234,7 @@ def run(opts: RunOptions) -> dict:
 
 def _failure(exc: BaseException, state: RunState) -> str:
     """The reason a run failed by ``exc`` gives in its summary."""
-    what = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else str(exc)
+    what = interrupt_reason(exc) if isinstance(exc, KeyboardInterrupt) else str(exc)
     what = what or type(exc).__name__
     return what if state.started else f"{what} (before the run began)"
 
@@ -313,8 +316,8 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         else:
             assert spec is not None and ecu_spec is not None
             _run_on_bus(opts, s, seed, (spec, ecu_spec), command, state)
-    except KeyboardInterrupt:
-        state.status, state.abort_reason = "aborted", "interrupted (Ctrl-C)"
+    except KeyboardInterrupt as exc:
+        state.status, state.abort_reason = "aborted", interrupt_reason(exc)
     except RecorderFailed as exc:
         state.status, state.abort_reason = "aborted", str(exc)
     finally:
@@ -462,6 +465,7 @@ def _run_on_bus(
             ecu_side = stack.enter_context(open_bus(ecu_spec))
             bridge = stack.enter_context(Bridge(plant_side, ecu_side, injector, ticks=clock))
             state.bridge_errors = bridge.errors
+            state.ecu_heard = bridge.ecu_side_heard  # the ECU's frames before the injector
         # once both are ready (the ECU listening, the plant built and waiting for its start
         # file), the demands begin and the plant sends tick 0: in real time too,
         # the ECU is armed only when the engine's frames are coming
@@ -542,12 +546,15 @@ def _listen(
     period: float,
 ) -> None:
     """The command node's loop: frames in (all those queued at each read), and a watch on the
-    node processes."""
+    node processes: one that exits, or one that sends nothing for ``watchdog.SILENCE_S`` (stopped
+    or stuck), aborts the run."""
     died_at = None
     receive = bus_batch_receiver(bus)
     paced = not realtime and getattr(bus, "recv_frames", None) is not None
     start = time.monotonic()
     next_period = next_check = start
+    dog = Watchdog(command.codec.messages, start)
+    seen: dict[int, float] = {}  # frame ID -> when last heard
     while not command.finished:
         now = time.monotonic()
         if realtime and now >= next_period:
@@ -557,13 +564,10 @@ def _listen(
         if now >= next_check:
             next_check = now + 0.2
             if died_at is None:
-                for name, proc in state.children.items():
-                    code = proc.poll()
-                    if code is not None:
-                        state.status = "aborted"
-                        state.abort_reason = f"{name} process exited with code {code} mid-run"
-                        died_at = now
-                        break
+                died_at = _node_exited(state, now)
+                if died_at is None and (silent := _silent(dog, seen, state, now)) is not None:
+                    state.status, state.abort_reason = "aborted", silent
+                    return  # its peer has run on its own clock since its guard time
             elif now - died_at > GRACE_S:
                 return
         frames = receive(min(0.05, next_period - now) if realtime else 0.05)
@@ -572,12 +576,33 @@ def _listen(
                 if unusable(got) is not None:
                     continue
                 got = (got.arbitration_id, got.data)
+            seen[got[0]] = now
             wall_s = time.monotonic() - start if realtime else None
             command.on_frame(got[0], got[1], send, wall_s=wall_s)
             if command.finished:
                 return
         if frames and paced:
             time.sleep(LOCKSTEP_READ_S)
+
+
+def _node_exited(state: RunState, now: float) -> float | None:
+    """``now`` if a node process has exited (the run is then marked aborted), else None."""
+    for name, proc in state.children.items():
+        code = proc.poll()
+        if code is not None:
+            state.status = "aborted"
+            state.abort_reason = f"{name} process exited with code {code} mid-run"
+            return now
+    return None
+
+
+def _silent(dog: Watchdog, seen: dict[int, float], state: RunState, now: float) -> str | None:
+    """Why the run must end because a node fell silent, or None."""
+    if state.ecu_heard is not None:  # through the bridge: what the ECU sent, before any fault
+        # (only the ECU's IDs: the bridge may hear its own frames to the ECU's side)
+        ecu = {i: at for i, at in dict(state.ecu_heard).items() if dog.node_of.get(i) == "ECU"}
+        seen = {**seen, **{i: max(at, seen.get(i, at)) for i, at in ecu.items()}}
+    return dog.silent(seen, now)
 
 
 def _finish(

@@ -99,6 +99,7 @@ class Bridge:
         self._last = -1  # the last tick whose babble went out
         self._stop = threading.Event()
         self._notifiers: list[can.Notifier] = []
+        self.ecu_side_heard: dict[int, float] = {}  # frame ID -> time.monotonic() last heard
         self._pump: threading.Thread | None = None
 
     def start(self) -> None:
@@ -129,6 +130,8 @@ class Bridge:
         self.stop()
 
     def _heard(self, msg: can.Message, to: int) -> None:
+        if to == 0:  # from the ECU's side: when its frames came, by ID, before the injector
+            self.ecu_side_heard[msg.arbitration_id] = time.monotonic()
         if msg.is_error_frame or msg.is_remote_frame or msg.is_fd or msg.is_extended_id:
             return
         data = bytes(msg.data)

@@ -13,6 +13,7 @@ from protocol.bus import BusSpecError
 from sil import results
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
+from sil.watchdog import Terminated, interrupt_reason
 
 NAME = "run"
 HELP = "run a scenario: plant and ECU nodes over a bus (or in one process), with results"
@@ -109,6 +110,8 @@ def _fmt(value) -> str:
 
 
 def _raise_interrupt(signum: int, frame: object) -> None:
+    if signum == signal.SIGTERM:
+        raise Terminated("SIGTERM")
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
@@ -150,6 +153,9 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
     except (BusSpecError, ValueError) as exc:
         print(f"sil run: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:  # before the run began, or while it ended
+        print(f"sil run: aborted: {interrupt_reason(exc)}", file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps(summary, indent=2, default=float))
     else:
