@@ -17,7 +17,7 @@ import pytest
 from sil.watchdog import Watchdog
 
 SCENARIO = """
-duration_s = 300
+duration_s = 3000
 [plant]
 model = "aero"
 [controller]
@@ -53,7 +53,9 @@ def _alive(pid: int) -> bool:
 
 
 def _start(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, list[int]]:
-    """A 300 s lockstep run over the udp bus, once it is going; with its children's PIDs."""
+    """A 3000 s lockstep run over the udp bus (a minute or more: its nodes are still running when
+    the recorder, at the lowest priority, has written the first trace), once it is going; with its
+    children's PIDs."""
     path = tmp_path / "long.toml"
     path.write_text(SCENARIO)
     out = tmp_path / "run"
@@ -69,7 +71,9 @@ def _start(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, list[int]
             children = [int(p) for p in subprocess.run(
                 ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True
             ).stdout.split()]  # fmt: skip
-            assert len(children) == 3, children  # the recorder, the plant and the ECU
+            if len(children) != 3:  # the recorder, the plant and the ECU
+                proc.kill()
+                raise AssertionError(f"children of the run: {children}, not 3")
             return proc, out, children
         time.sleep(0.2)
     proc.kill()
@@ -77,7 +81,14 @@ def _start(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, list[int]
 
 
 def _ended(proc: subprocess.Popen, out: Path, spec: str, children: list[int]) -> dict:
-    proc.communicate(timeout=60)
+    try:
+        proc.communicate(timeout=60)
+    finally:  # a run that hangs is ended here, its stopped children with it
+        if proc.poll() is None:
+            proc.kill()
+            for pid in children:
+                if _alive(pid):
+                    os.kill(pid, signal.SIGKILL)
     assert proc.returncode == 1
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "aborted"
