@@ -80,38 +80,34 @@ def fast_rows(name: str, reading: str, seconds: float | None = None) -> list[Row
     tag = name.replace("sec", "sec ").replace("_", ".")
     rows: list[Row] = []
     e = core.estimates
-    if reading == "printed":
-        for key, predicted in PREDICTED_PRINTED[name].items():
-            rows.append(
-                check(
-                    f"{tag} {LABELS[key]}",
-                    src,
-                    reading,
-                    _published_value(name, key),
-                    e[key],
-                    PREDICTED_TOL,
-                    True,
-                    predicted=predicted,
-                    note="the printed set-up cannot reach the published value; checked against "
-                    "its independently predicted value",
-                )
+    cannot = (
+        "the printed set-up cannot reach the published value; checked against its "
+        "independently predicted value"
+    )
+    keys = PREDICTED_PRINTED[name] if reading == "printed" else PUBLISHED[name]
+    for key in keys:
+        if reading == "printed":
+            predicted, (tol, relative), note = (
+                PREDICTED_PRINTED[name][key],
+                (PREDICTED_TOL, True),
+                cannot,
             )
-    else:
-        for key in PUBLISHED[name]:
-            tol, relative = TOLERANCE[name][key]
+        else:
+            predicted, (tol, relative) = None, TOLERANCE[name][key]
             note = "published negative; eq. 5.15-5.16 drive it positive" if key == "kr" else ""
-            rows.append(
-                check(
-                    f"{tag} {LABELS[key]}",
-                    src,
-                    reading,
-                    _published_value(name, key),
-                    e[key],
-                    tol,
-                    relative,
-                    note=note,
-                )
+        rows.append(
+            check(
+                f"{tag} {LABELS[key]}",
+                src,
+                reading,
+                _published_value(name, key),
+                e[key],
+                tol,
+                relative,
+                predicted=predicted,
+                note=note,
             )
+        )
     if name == "sec5_2":
         rows.append(_tracking_row(tag, src, reading, core))
     keys = ("ap21", "ap22", "lam") + (("kx1", "kx2", "kr") if name == "sec5_2" else ())

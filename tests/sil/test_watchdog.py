@@ -115,7 +115,7 @@ def test_a_stopped_node_aborts_the_run_naming_it(tmp_path, victim, name):
     match = re.fullmatch(rf"the {name} sent no frame for (\d+\.\d) s \(stopped or stuck\)",
                          summary["abort_reason"])  # fmt: skip
     assert match is not None, summary["abort_reason"]
-    assert 4.0 < float(match.group(1)) <= 5.0  # found within 5 s of its last frame
+    assert 4.0 <= float(match.group(1)) <= 5.0  # past 4 s (printed to 0.1 s), within 5
     assert took < 15.0  # found, the others stopped and everything written
     assert summary["sim_time_s"] > 1.0 and summary["frames"] > 1000
 
