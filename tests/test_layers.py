@@ -44,3 +44,18 @@ def test_package_imports_only_what_it_may(package: str) -> None:
         if top != package and top not in ALLOWED[package]
     ]
     assert not wrong, "\n".join(wrong)
+
+
+def test_nothing_imports_tools() -> None:
+    """tools/ holds thin utilities (the vcan VM, probes) that use the packages; no package and
+    no other tool reaches back into it."""
+    files = [f for p in sorted(OURS - {"tools"}) for f in sorted((ROOT / p).rglob("*.py"))]
+    files += sorted((ROOT / "tools").rglob("*.py"))
+    assert files
+    wrong = [
+        f"{f.relative_to(ROOT)}:{line} imports tools"
+        for f in files
+        for top, line in imported_packages(f).items()
+        if top == "tools"
+    ]
+    assert not wrong, "\n".join(wrong)

@@ -15,7 +15,7 @@ TARGETS = {
     "codec": "protocol.bench",
     "plant": "plant.bench",
     "ecu": "ecu.bench",
-    "replay": "tools.replay_bench",
+    "replay": "sil.replay_bench",
     "sil": "sil.bench",
     "service": "sil.console.bench",
     "port": "sil.port_bench",

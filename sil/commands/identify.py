@@ -13,8 +13,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from sil import identify as ident  # noqa: E402
 from sil.canlog import LogReadError  # noqa: E402
-from tools import identify as ident  # noqa: E402
 
 NAME = "identify"
 HELP = "identify the fast engine model (eq. 3.5 or appendix B) from a trace, CAN log or CSV"

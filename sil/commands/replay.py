@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 
 from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
+from sil import replay
 from sil.canlog import LogReadError, read_frames
-from tools import replay
 
 NAME = "replay"
 HELP = (

@@ -22,11 +22,11 @@ from plant.engine import engine_rates
 from plant.interface import PlantConfig
 from plant.sensors import SpeedPickupConfig
 from plant.trim import trim_summary
+from sil import identify as ident
 from sil import runner, scenario
 from sil.metrics import load_trace, tracking_rms_pct
 from sil.verify.fast import run_core
 from sil.verify.rows import Row, at_least, check
-from tools import identify as ident
 
 TRIM_FUEL_KG_S = 0.008  # eq. 2.33
 # eq. 2.32

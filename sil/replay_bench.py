@@ -8,8 +8,8 @@ from pathlib import Path
 
 from protocol.bus import open_bus
 from protocol.codec import Codec
+from sil import replay
 from sil.canlog import CandumpWriter, read_frames
-from tools import replay
 
 
 def _write_log(path: Path, frames: int, rate_hz: float) -> None:

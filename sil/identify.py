@@ -367,7 +367,7 @@ def read_can_log(path: Path) -> Recording:
     """Speed (PlantSensors) and pump voltage (EcuActuator) from a CAN log with our DBC."""
     from protocol.codec import Codec
     from sil.canlog import LogReadError, read_frames
-    from tools.replay import wrong_length
+    from sil.replay import wrong_length
 
     codec = Codec()
     sensors, actuator = codec["PlantSensors"], codec["EcuActuator"]
