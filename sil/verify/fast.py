@@ -102,8 +102,13 @@ def scenario_params(name: str, reading: str = "printed", **overrides: object) ->
 
 
 class _Histories:
-    def __init__(self, n: int, dt: float) -> None:
-        self.t = np.arange(n) * dt
+    """The time histories of one run of ``seconds`` at the ECU rate of ``p``."""
+
+    def __init__(self, p: EcuParams, seconds: float) -> None:
+        n = round(seconds * p.rate_hz)
+        self.dt = 1.0 / p.rate_hz
+        self.ticks = range(n)
+        self.t = np.arange(n) * self.dt
         self.n_pct = np.empty(n)
         self.nref = np.empty(n)
         self.v = np.empty(n)
@@ -139,10 +144,9 @@ def run_core(p: EcuParams, seconds: float, plant: TruePlant | None = None) -> Ru
     m = fp.rate_half_window
     hist: deque[list[int]] = deque(maxlen=m + 2)  # [dN, dN', u] per tick, newest last
     plant = FastEngine() if plant is None else plant
-    n = round(seconds * p.rate_hz)
-    dt = 1.0 / p.rate_hz
-    h = _Histories(n, dt)
-    for k in range(n):
+    h = _Histories(p, seconds)
+    dt = h.dt
+    for k in h.ticks:
         sq = square(k * dt)
         dn = round(plant.dn_pct * Q24)
         rate = round(plant.dn_dot * Q24)
@@ -176,10 +180,9 @@ def run_ecu(p: EcuParams, seconds: float) -> RunResult:
     i.supply_mv = 22200
     i.pump_ma = 1800
     i.arm = 1
-    n = round(seconds * p.rate_hz)
-    dt = 1.0 / p.rate_hz
-    h = _Histories(n, dt)
-    for k in range(n):
+    h = _Histories(p, seconds)
+    dt = h.dt
+    for k in h.ticks:
         sq = square(k * dt)
         i.tick = k
         i.speed_rpm = round(plant.n_pct * RPM_PER_PCT)
@@ -200,10 +203,9 @@ def run_float(
     of :func:`run_core`), without it the speed in whole rpm (the twin of :func:`run_ecu`)."""
     loop = FloatLoop(p)
     plant = FastEngine() if plant is None else plant
-    n = round(seconds * p.rate_hz)
-    dt = 1.0 / p.rate_hz
-    h = _Histories(n, dt)
-    for k in range(n):
+    h = _Histories(p, seconds)
+    dt = h.dt
+    for k in h.ticks:
         sq = square(k * dt)
         demand = p.trim_n_pct + sq
         v_open = p.trim_v + sq

@@ -95,3 +95,11 @@ def test_sil_verify_sections_and_json(capsys: pytest.CaptureFixture[str]) -> Non
         "trim N [pct]",
     ]
     assert all(r["source"].startswith("eq. 2.32") and r["reading"] == "-" for r in rows)
+
+
+def test_the_command_offers_every_section() -> None:
+    """`sil verify --section` lists the sections without importing the runs at start-up."""
+    from sil.commands import verify as command
+    from sil.verify import SECTIONS
+
+    assert command.SECTIONS == SECTIONS
