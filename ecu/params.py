@@ -56,9 +56,9 @@ class EcuParams:
     # (READINGS); the firmware runs in the printed convention, see firmware_convention()
     reading: str = "printed"
     trim_n_pct: float = 89.68  # N0, the fast model's trim point
-    # V0, pump voltage at trim: 11.56 V delivers the trim's 8 g/s against its P3 in our plant's
+    # V0, pump voltage at trim: 12.41 V delivers the trim's 8 g/s against its P3 in our plant's
     # pump table (plant.aerothermal: trim_pump_voltage); the fast model is in deviations from it
-    trim_v: float = 11.56
+    trim_v: float = 12.41
 
     # online estimator (eq. 4.7, 4.31); row 1 of A_p and Theta_f is kinematic and not adapted
     am_row2: tuple[float, float] = (-25.0, -10.0)  # identification model A_m row 2

@@ -35,7 +35,7 @@ OLYMPUS_SPEC = {
     "max_fuel_kg_s": 0.4 / 60.0,
 }
 TRIM_FUEL_KG_S = 0.008
-DEFAULT_FUEL_KG_S = np.round(np.arange(0.002, 0.0125001, 0.0005), 6)
+DEFAULT_FUEL_KG_S = np.round(np.arange(0.0015, 0.0125001, 0.0005), 6)
 
 
 def running_line(

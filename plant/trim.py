@@ -17,6 +17,7 @@ SCALE = np.array([1e5, 1e5, 1e3, 100.0])  # Pa, Pa, K, %N
 TRIM_GUESS = np.array([294845.0, 162676.0, 1159.0, 89.68])  # eq. 2.32
 DT_S = 0.001
 MIN_RUNNING_N_PCT = 10.0
+DECELERATING_PCT_S = 0.1  # %N/s: still decelerating after settling, no steady state near
 
 
 class SteadyState(NamedTuple):
@@ -66,10 +67,17 @@ def solve_steady(
     # settle without the lean limit: a steady state is wanted, not the transient on the way
     burning = model._replace(params=model.params._replace(far_lean=0.0))
     advance_fuel(x, g_fuel, 1.0, int(settle_s / DT_S), DT_S, burning, work)
+    settled = x.copy()
     x = _newton(model, g_fuel, x)
     residual = float(np.max(np.abs(_rates(model, g_fuel, x) / SCALE)))
     st = Stations(*stations(x, g_fuel, model))
     if not residual <= 1e-6:  # also catches NaN
+        if _rates(model, g_fuel, settled)[3] < -DECELERATING_PCT_S:
+            raise ValueError(
+                f"fuel flow {g_fuel * 1e3:.2f} g/s keeps no running engine (after {settle_s:g} s "
+                f"it still decelerates through N = {settled[3]:.1f} %, below its lowest steady "
+                "state)"
+            )
         raise RuntimeError(f"no steady state found at {g_fuel * 1e3:.2f} g/s (residual {residual})")
     if _stopped(x):
         raise ValueError(

@@ -199,20 +199,20 @@ value = 0.95
 """
 
 _OVERSPEED = """
-description = "Open loop, no limit loops, EGT trip raised: 19 V drives the engine over 105 %N"
+description = "Open loop, no limit loops, EGT trip and v_max raised: 21.9 V takes it over 105 %N"
 duration_s = 10
 [plant]
 model = "aero"
 [controller]
 kind = "open_loop"
-params = { limiters_on = 0, egt_limit_k = 1450, egt_max_k = 1550 }
+params = { limiters_on = 0, egt_limit_k = 1450, egt_max_k = 1550, v_max = 22.0 }
 [command]
 base = "trim"
 [[command.component]]
 kind = "ramp"
 start_s = 1
 end_s = 6
-value = 7.5
+value = 9.5
 """
 
 

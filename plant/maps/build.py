@@ -7,18 +7,30 @@ Shapes (n = corrected speed / N_max):
   0.7 g_ch(n) at the surge ratio beta_s(n) = 1 + (BETA_SURGE_100 - 1) n^2, cubic in between
   (negative slope everywhere, so the compressor plenum is stable), and a steep fall of flow beyond
   surge;
-- compressor efficiency, eq. 2.8: a paraboloid around 0.85 g_ch(n), peak efficiency highest near
-  80 % speed;
+- compressor efficiency, eq. 2.8: a paraboloid around 0.85 g_ch(n), the same peak efficiency on
+  every speed line from 70 % up, rising towards low speed (no Mach losses) by EFF_LOW_SPEED_RISE;
 - turbine flow function, eq. 2.18: tanh in the expansion ratio (a nozzle guide vane that
   chokes), weakly falling with N/sqrt(T4);
-- turbine efficiency, eq. 2.19: the classical parabola in the blade-to-jet speed ratio
-  U/C ~ (N/sqrt(T4)) / sqrt(1 - beta_t^-0.25), peak at U/C_opt;
+- turbine efficiency, eq. 2.19: a parabola in the blade-to-jet speed ratio
+  U/C ~ (N/sqrt(T4)) / sqrt(1 - beta_t^-0.25), 1 - TURB_EFF_CURVATURE (1 - v)^2 in
+  v = (U/C) / (U/C)_opt, the trim at v = UC_TRIM_OVER_OPT (peak 0.92 once scaled to the trim);
 - gear pump, sec. 2.2: displacement flow proportional to the voltage above a dead band, minus a
   leakage that rises linearly with outlet pressure, the leakage slope flattening as voltage rises.
 Calibration: the trim of eq. 2.32 fixes, through the component equations of ch. 2, the flows,
 the turbine efficiency and the nozzle area; each table is scaled so that its bilinear
 interpolation returns exactly those values at the trim point, then refine() removes what the
 components' own fixed-point passes on gamma leave over, so that eq. 2.32 is an equilibrium.
+Dynamics: with the plenums, the burner and J fixed by the document, the shaft is the only slow
+state; its time constant at constant pump voltage is J omega^2 / (-d(eta_m P_t - P_c)/d ln omega)
+and its gain dN/dV = (dN/dg_f on the running line) (dg_f/dV of the pump). What the document
+leaves open sets both, towards its appendix B fit over 90-94 %N (K 1.85 %N/V, tau 0.8 s): the
+turbine efficiency's curvature (below the optimum U/C its efficiency rises with speed, which
+lengthens tau, and falls as T4 rises, which takes power from a fuel step), the compressor's choke
+flow exponent (fuel per %N along the running line) and the pump's flow per volt (both lower K).
+The limits: EGT at 100 %N stays below the ECU's EGT limit, the pump voltage at 100 %N below its
+v_max, a large fuel step still overspeeds the engine, and the running line reaches idle (below
+45 %N at 1.5 g/s): the steeper turbine curve takes efficiency from the engine at low speed, which
+the compressor's low-speed efficiency gives back (without it the engine hangs below 47 %N).
 """
 
 from __future__ import annotations
@@ -42,12 +54,15 @@ TRIM_X = np.array([294845.0, 162676.0, 1159.0, 89.68])  # eq. 2.32
 ETA_C_TRIM = 0.76  # chosen compressor efficiency at trim (small centrifugal stage)
 
 BETA_SURGE_100 = 4.4  # surge pressure ratio at 100 % corrected speed
-FLOW_EXPONENT = 1.2  # choke flow ~ n^FLOW_EXPONENT
+FLOW_EXPONENT = 1.45  # choke flow ~ n^FLOW_EXPONENT
 SURGE_FLOW_FRACTION = 0.7
 TURB_CHOKE_RATE = 1.9  # tanh slope of the turbine flow function
 UC_TRIM_OVER_OPT = 0.6  # blade speed ratio at trim relative to the optimum
+TURB_EFF_CURVATURE = 1.34  # turbine efficiency 1 - c (1 - v)^2, v = (U/C) / (U/C)_opt
+EFF_LOW_SPEED_N = 0.7  # compressor peak efficiency constant above this corrected speed
+EFF_LOW_SPEED_RISE = 0.06  # and rising linearly below it, by this much at zero speed
 
-PUMP_FLOW_PER_VOLT = 0.8e-3  # kg/s per V above the dead band, at zero outlet pressure
+PUMP_FLOW_PER_VOLT = 0.74e-3  # kg/s per V above the dead band, at zero outlet pressure
 PUMP_DEAD_BAND_V = 0.5
 PUMP_LEAK_PER_PA = 4.0e-9  # kg/s per Pa at PUMP_LEAK_REF_V
 PUMP_LEAK_REF_V = 6.0
@@ -71,7 +86,7 @@ def compressor_eff_shape(g: np.ndarray, n: np.ndarray, g_ch_100: float) -> np.nd
     """Isentropic efficiency (unscaled) on the grid corrected flow x n."""
     gg, nn = np.meshgrid(g, n, indexing="ij")
     g_ch = np.maximum(g_ch_100 * nn**FLOW_EXPONENT, 0.02)
-    peak = 0.80 - 0.3 * (nn - 0.8) ** 2
+    peak = 0.80 + EFF_LOW_SPEED_RISE * np.maximum(EFF_LOW_SPEED_N - nn, 0.0) / EFF_LOW_SPEED_N
     return np.clip(peak - 2.0 * ((gg - 0.85 * g_ch) / g_ch) ** 2, 0.30, 0.85)
 
 
@@ -90,7 +105,7 @@ def turbine_eff_shape(
     b, nt = np.meshgrid(beta, n_t, indexing="ij")
     uc_opt = _uc(np.array(beta_trim), np.array(n_t_trim)) / UC_TRIM_OVER_OPT
     v = _uc(b, nt) / uc_opt
-    return np.clip(0.85 * (2.0 * v - v * v), 0.20, 0.90)
+    return np.clip(1.0 - TURB_EFF_CURVATURE * (1.0 - v) ** 2, 0.20, 1.0)
 
 
 def pump_flow_shape(voltage: np.ndarray, pressure: np.ndarray) -> np.ndarray:

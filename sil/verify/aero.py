@@ -20,13 +20,14 @@ from ecu.params import preset
 from plant.aerothermal import AeroThermalPlant, make_model
 from plant.engine import engine_rates
 from plant.interface import PlantConfig
+from plant.linearise import Linearisation, linearise, linearise_at_speed
 from plant.sensors import SpeedPickupConfig
-from plant.trim import trim_summary
+from plant.trim import solve_steady, trim_summary
 from sil import identify as ident
 from sil import runner, scenario
 from sil.metrics import load_trace, tracking_rms_pct
 from sil.verify.fast import run_core
-from sil.verify.rows import Row, at_least, check
+from sil.verify.rows import Row, at_least, check, explained, info
 
 TRIM_FUEL_KG_S = 0.008  # eq. 2.33
 # eq. 2.32
@@ -35,6 +36,7 @@ TRIM = {"P3_Pa": 294845.0, "P5_Pa": 162676.0, "T4_K": 1159.0, "N_pct": 89.68}
 EQ_3_23 = {"omega_n": 1.3437, "zeta": 0.8692, "alpha0": 2.6709}
 EQ_3_1 = {"omega_n": 1.4, "zeta": 0.85, "K": 2.2}  # linear second order, 90-94 %N
 APPENDIX_B = {"K": 1.85, "tau": 0.8}  # linear first order
+BAND_CENTRE_PCT = 92.0  # eq. 3.1 and appendix B: 90-94 %N
 SEC_4_3 = {"ap21": -1.901, "ap22": -2.458, "lam": 4.979}
 SEC_5_3 = {"ap21": -1.903, "ap22": -2.301, "lam": 4.93, "kx1": -4.687, "kx2": -1.557, "kr": 5.071}
 LAMBDA_RATIO_AFTER_FAILURE = 0.5  # ch. 6: the pump's effectiveness halves, Lambda-hat with it
@@ -145,22 +147,76 @@ def trim_rows() -> list[Row]:
     ]
 
 
+ONE_SLOW_POLE = (
+    "not identifiable on an engine with one slow pole (the shaft; next poles near -90 +- 45j "
+    "rad/s): a second-order fit finds only its gain and its low-frequency lag 2 zeta / omega_n, "
+    "and splits the lag between omega_n and zeta by the fast poles and the smoothing "
+    "(docs/errata.md)"
+)
+DRIFT = (
+    "not identifiable on an engine with one slow pole: A_p-hat and Lambda-hat drift together "
+    "along the direction the data do not excite, only their ratio, the gain, settles; without "
+    "the firmware's robustness (the document's set-up) the sec. 5.3 MRAC loses the engine at "
+    "the first downward step (docs/errata.md)"
+)
+LAG_TOL = 0.2  # a second-order fit's 2 zeta / omega_n against the first-order fit's tau
+GAIN_TOL = 0.1  # the estimator's -Lambda / A_p21 against the linearised plant's dN/dV
+
+
+def linearised(n_pct: float | None = None) -> Linearisation:
+    """The plant linearised with its pump at the trim of eq. 2.32, or at speed ``n_pct``."""
+    model = make_model()
+    if n_pct is None:
+        return linearise(model, solve_steady(model, TRIM_FUEL_KG_S), TRIM_FUEL_KG_S)
+    return linearise_at_speed(model, n_pct)
+
+
+def _lag(fit: dict[str, float]) -> float:
+    return 2.0 * fit["zeta"] / fit["omega_n"]
+
+
 def identification_rows(r: dict[str, Run]) -> list[Row]:
-    """Eq. 3.23 on the fig. 3.3 staircase; eq. 3.1 and appendix B on steps within 90-94 %N."""
+    """Eq. 3.23 on the fig. 3.3 staircase; eq. 3.1 and appendix B on steps within 90-94 %N.
+
+    The plant has one slow pole, so the second-order fits are checked on what they identify:
+    the gain, and the low-frequency lag 2 zeta / omega_n against the first-order fit's tau on
+    the same record."""
     staircase, band = (r[name] for name in IDENTIFICATION_SCENARIOS)
-    rows = []
-    second = identified(staircase, "second")
+    second, first = identified(staircase, "second"), identified(staircase, "first")
     src = "eq. 3.23 (sil identify on thesis-3.3-staircase, eq. 3.5)"
-    for key, value in EQ_3_23.items():
-        rows.append(check(f"eq. 3.23 {key}", src, "-", value, second[key], 0.3, True))
-    linear = identified(band, "second-linear")
+    published_lag = 2.0 * EQ_3_23["zeta"] / EQ_3_23["omega_n"]
+    rows = [
+        explained(f"eq. 3.23 {key}", src, "-", EQ_3_23[key], second[key], ONE_SLOW_POLE)
+        for key in ("omega_n", "zeta")
+    ]
+    rows += [
+        check("eq. 3.23 lag 2 zeta / omega_n (s)", src, "-", published_lag, _lag(second),
+              LAG_TOL, True, predicted=first["tau"],
+              note="predicted: tau of the first-order fit (eq. B.9) on the same record"),
+        check("eq. 3.23 alpha0", src, "-", EQ_3_23["alpha0"], second["alpha0"], 0.3, True),
+    ]  # fmt: skip
+    linear, first = identified(band, "second-linear"), identified(band, "first-linear")
     src = "eq. 3.1 (sil identify --order second-linear on thesis-3.1-band-90-94)"
-    for key, value in EQ_3_1.items():
-        rows.append(check(f"eq. 3.1 {key}", src, "-", value, linear[key], 0.3, True))
-    first = identified(band, "first-linear")
+    published_lag = 2.0 * EQ_3_1["zeta"] / EQ_3_1["omega_n"]
+    rows += [
+        explained(f"eq. 3.1 {key}", src, "-", EQ_3_1[key], linear[key], ONE_SLOW_POLE)
+        for key in ("omega_n", "zeta")
+    ]
+    rows += [
+        check("eq. 3.1 lag 2 zeta / omega_n (s)", src, "-", published_lag, _lag(linear),
+              LAG_TOL, True, predicted=first["tau"],
+              note="predicted: tau of the first-order fit (appendix B) on the same record"),
+        check("eq. 3.1 K", src, "-", EQ_3_1["K"], linear["K"], 0.3, True),
+    ]  # fmt: skip
     src = "appendix B (sil identify --order first-linear on thesis-3.1-band-90-94)"
     for key, value in APPENDIX_B.items():
         rows.append(check(f"appendix B {key}", src, "-", value, first[key], 0.2, True))
+    lin = linearised(BAND_CENTRE_PCT)
+    src = f"the plant linearised at {BAND_CENTRE_PCT:g} %N (plant.linearise)"
+    rows += [
+        info("plant slow pole (1/s)", src, "-", float(lin.poles[0].real), ONE_SLOW_POLE),
+        info("plant next pole |s| (1/s)", src, "-", float(abs(lin.poles[1])), ONE_SLOW_POLE),
+    ]
     return rows
 
 
@@ -172,20 +228,33 @@ ADAPTIVE = {
 
 def adaptive_rows(section: str, seconds: float | None = None) -> list[Row]:
     """Sec. 4.3 or 5.3: the estimator or the MRAC on the aero-thermal engine, the firmware's
-    fixed-point kernels handed its true state, in the reproducing reading, 1 ms step."""
-    rows = []
-    for tag, preset_name, published, src in (ADAPTIVE[section],):
-        secs = 300.0 if seconds is None else seconds
-        plant = AeroTruth(1.0 / ADAPTIVE_RATE_HZ)
-        p = preset(preset_name, reading="reproducing", rate_hz=ADAPTIVE_RATE_HZ,
-                   trim_v=plant.trim_v)  # fmt: skip
-        e = run_core(p, secs, plant).estimates
-        where = f"{src} ({secs:g} s, ECU at {ADAPTIVE_RATE_HZ} Hz)"
-        for key, value in published.items():
-            note = "published negative; eq. 5.15-5.16 drive it positive" if key == "kr" else ""
-            rows.append(
-                check(f"{tag} {key}", where, "reproducing", value, e[key], 0.05, True, note=note)
+    fixed-point kernels handed its true state, in the reproducing reading, 1 ms step. The
+    estimates are explained (DRIFT); sec. 4.3's gain -Lambda-hat / A_p-hat[2][1] is checked
+    against the plant linearised at the trim."""
+    tag, preset_name, published, src = ADAPTIVE[section]
+    secs = 300.0 if seconds is None else seconds
+    plant = AeroTruth(1.0 / ADAPTIVE_RATE_HZ)
+    p = preset(preset_name, reading="reproducing", rate_hz=ADAPTIVE_RATE_HZ, trim_v=plant.trim_v)
+    e = run_core(p, secs, plant).estimates
+    where = f"{src} ({secs:g} s, ECU at {ADAPTIVE_RATE_HZ} Hz)"
+    rows = [
+        explained(f"{tag} {key}", where, "reproducing", value, e[key], DRIFT)
+        for key, value in published.items()
+    ]
+    if section == "sec4.3":
+        rows.append(
+            check(
+                f"{tag} gain -Lambda / A_p21 (%N/V)",
+                where,
+                "reproducing",
+                -published["lam"] / published["ap21"],
+                -e["lam"] / e["ap21"],
+                GAIN_TOL,
+                True,
+                predicted=linearised().gain_pct_per_v,
+                note="predicted: dN/dV of the plant linearised at the trim (plant.linearise)",
             )
+        )
     return rows
 
 

@@ -1,5 +1,10 @@
 """The rows of `sil verify`: one published number each, with its source, the reading it was run
-in, the published, predicted and reached values, the tolerance and ok."""
+in, the published, predicted and reached values, the tolerance and ok.
+
+A row is checked (ok: within its tolerance of the published or predicted value), a claim in
+words checked as a figure, a figure shown for understanding, or explained: a published number
+that no engine with the plant's structure can give, shown next to what the run reached, with the
+reason in its note; the figures that the reason rests on are checked in rows of their own."""
 
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ class Row:
     ok: bool
     predicted: float | None = None
     note: str = ""
+    explained: bool = False
 
 
 def check(
@@ -62,6 +68,13 @@ def info(name: str, source: str, reading: str, reached: float, note: str) -> Row
     return Row(name, source, reading, None, reached, None, True, None, note)
 
 
+def explained(
+    name: str, source: str, reading: str, published: float, reached: float, note: str
+) -> Row:
+    """A published number this engine cannot give, for the reason in ``note``: not checked."""
+    return Row(name, source, reading, published, reached, None, True, None, note, True)
+
+
 def rel(a: float, b: float) -> float:
     """|a - b| relative to |b|."""
     return abs(a - b) / max(abs(b), 1e-12)
@@ -69,6 +82,14 @@ def rel(a: float, b: float) -> float:
 
 def as_dicts(rows: list[Row]) -> list[dict]:
     return [asdict(r) for r in rows]
+
+
+def _verdict(r: Row) -> str:
+    if r.explained:
+        return "explained"
+    if r.tolerance is None:
+        return "-"  # shown for understanding
+    return "yes" if r.ok else "NO"
 
 
 def format_table(rows: list[Row]) -> str:
@@ -92,8 +113,13 @@ def format_table(rows: list[Row]) -> str:
             mark = f" [{notes.index(r.note) + 1}]"
         lines.append(
             f"{r.name:<{width}}  {r.reading:<11}  {num(r.published):>10}  {num(r.predicted):>10}  "
-            f"{num(r.reached):>10}  {num(r.tolerance):>9}  {'yes' if r.ok else 'NO'}{mark}"
+            f"{num(r.reached):>10}  {num(r.tolerance):>9}  {_verdict(r)}{mark}"
         )
+    failing = sum(not r.ok for r in rows)
+    expl = sum(r.explained for r in rows)
+    lines.append(
+        f"{len(rows)} rows: {len(rows) - failing - expl} ok, {expl} explained, {failing} failing"
+    )
     lines.append("")
     lines.extend(f"[{k}] {n}" for k, n in enumerate(notes, 1))
     sources = sorted({r.source for r in rows})

@@ -11,6 +11,7 @@ import pytest
 from ecu import faults as F
 from ecu.modes import RUN
 from ecu.node import EcuNode
+from ecu.params import EcuParams
 from plant.fast_model import FastEngine
 from protocol.codec import Codec
 from protocol.node import InProcessBus
@@ -59,7 +60,7 @@ class FakePlant:
         out = self.ecu_node.ecu.out
         self.demand_q24.append(self.ecu_node.ecu.s.demand_q24)
         self.faults.append(out.fault_word)
-        self.plant.step(mv / 1000.0 - 11.56 if enable else 0.0, 0.01)
+        self.plant.step(mv / 1000.0 - EcuParams().trim_v if enable else 0.0, 0.01)
         self.k += 1
         if self.k >= self.ticks:
             self.finished = True

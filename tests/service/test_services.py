@@ -79,7 +79,7 @@ def test_write_needs_the_unlock_and_is_range_checked(rig):
     ):
         c.set("pid_kp", 25.0)
     with pytest.raises(ServiceRequestError, match="INVALID: v_max: .*trim_v"):
-        c.set("v_max", 10.0)  # below the trim voltage 11.56 V: the set's own check names it
+        c.set("v_max", 10.0)  # below the trim voltage 12.41 V: the set's own check names it
     with pytest.raises(ServiceRequestError, match="BAD_REQUEST: field 'raw' must be a int"):
         c.request(Service.PARAM_WRITE, {"name": "pid_kp", "raw": 1.5})
     r = c.set("pid_kp", 3.25)
