@@ -8,7 +8,8 @@ and the firmware path uses integers only. Order of computation, top to bottom:
 1. frame freshness (E2E status per frame kind): latch fresh values, age the others;
 2. sensor checks (speed range / rate / stuck, EGT open circuit), substitution of speed by the
    fast-model observer when the sensor or its frame is lost;
-3. speed history and central-difference rate; demand hold / idle / shutdown on demand loss;
+3. speed history, central-difference rate and the filtered rate (ecu.rate_filter); demand
+   hold / idle / shutdown on demand loss;
 4. protection trips (overspeed, flameout, EGT over maximum, pump current) and mode transition;
 5. in RUN: estimator (eq. 4.7/4.31), speed controller (MRAC eq. 5.4/5.16, PID or open loop),
    reference model (eq. 5.18-5.19), min/max selection with limit loops, voltage limits and slew,
@@ -35,6 +36,7 @@ from ecu.params import (
 )
 from ecu.pid import pid_control, pid_track
 from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv
+from ecu.rate_filter import rate_filter_start, rate_filter_step
 from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, N_THETA, PID_I, TH1, TH2, EcuState
 
 # E2E receiver status per frame, as passed in by the node (AUTOSAR Profile 1/11 states)
@@ -228,6 +230,13 @@ class Ecu:
             rate = self._rate_q24(m)
         else:
             rate = 0
+        if s.speed_seen == 1:
+            rate_filter_start(s, dn)
+        else:  # with the voltage applied over the last tick (0 outside RUN)
+            u_last = s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - 1) % RATE_BUF_LEN]
+            rate_filter_step(s, p, dn, u_last, speed_ok)
+        # the control laws' and limit loops' rate: filtered while the sensor is valid
+        ctrl_rate = s.rf_v_q24 if (p.rate_filter_on and speed_ok) else rate
 
         # 4. protection trips and mode
         running = 1 if (mode == M.ARMED or mode == M.RUN) else 0
@@ -292,20 +301,20 @@ class Ecu:
                 )
             r = sub_sat(demand, p.trim_n_q24)
             if p.controller == CTRL_MRAC:
-                u = mrac_control(s, p, dn, rate, r)
+                u = mrac_control(s, p, dn, ctrl_rate, r)
                 mrac_gain_update(s, p)
             elif p.controller == CTRL_PID:
-                u = pid_control(s, p, sat32(demand - n_q24), rate)
+                u = pid_control(s, p, sat32(demand - n_q24), ctrl_rate)
             else:
                 u = sat32(s.open_loop_q24 - p.trim_v_q24)
             reference_model_step(s, p, r)
             e_dk = clamp(p.egt_limit_dk - (s.egt_lead_q12 >> 12), -1000, 1000)
             v = select_voltage(
-                s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, rate
+                s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, ctrl_rate
             )
             u_applied = sub_sat(v, p.trim_v_q24)
             if p.controller == CTRL_PID:
-                pid_track(s, p, sat32(demand - n_q24), rate, u_applied)
+                pid_track(s, p, sat32(demand - n_q24), ctrl_rate, u_applied)
             observer_step(s, p, u_applied, dn, speed_ok)
             s.u_hist_q24[s.hist_idx] = u_applied
             pump_mv = volts_q24_to_mv(v)

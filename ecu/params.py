@@ -176,6 +176,14 @@ class EcuParams:
     egt_fault_time_s: float = 0.1
     egt_fail_demand_max_pct: float = 90.0
     observer_l: tuple[float, float] = (18.0, 57.0)
+    # the speed rate the control laws and limit loops use: the central difference over
+    # rate_window_s, as the document differentiates, or (on) a tracking filter on the measured
+    # speed told the pump's input (ecu.rate_filter), triple pole at rate_filter_bw. The filter
+    # keeps the speed noise off the pump; the PID gains from it in tracking too, but the MRAC's
+    # rate gain K_x2 loses margin to it on engines unlike the commissioned one (off by default).
+    # The estimator always takes central differences (its interval is delayed anyway)
+    rate_filter_on: bool = False
+    rate_filter_bw: float = 8.0  # rad/s
 
     # communication timeouts
     demand_hold_s: float = 0.1
@@ -434,6 +442,13 @@ def validate(p: EcuParams) -> None:
     ):
         _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
     _check(min(p.observer_l) >= 0.0, "observer_l", p.observer_l, "must be >= 0")
+    # bw dt <= 0.3: a discrete filter well inside its rate, and its gains inside Q7.24
+    _check(
+        2.0 <= p.rate_filter_bw <= min(50.0, 0.3 * p.rate_hz),
+        "rate_filter_bw",
+        p.rate_filter_bw,
+        "must be in [2, min(50, 0.3 rate_hz)] rad/s",
+    )
 
 
 class FirmwareParams:
@@ -465,6 +480,7 @@ class FirmwareParams:
         "speed_valid_max_rpm", "speed_step_max_rpm", "speed_fault_ticks", "speed_stuck_ticks",
         "speed_stuck_dv_q24", "egt_open_high_dk", "egt_open_low_dk", "egt_fault_ticks",
         "egt_fail_demand_q24", "obs_l1_dt_q24", "obs_l2_dt_q24",
+        "rate_filter_on", "rf_k1_q24", "rf_k2_q24", "rf_k3_q24",
         "demand_hold_ticks", "demand_shutdown_ticks", "sensor_loss_ticks", "analog_loss_ticks",
         "run_entry_rpm", "shutdown_done_rpm",
     )  # fmt: skip
@@ -495,6 +511,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
     ref_a21, ref_a22 = -(p.ref_wn**2), -2.0 * p.ref_zeta * p.ref_wn
     refm, refh = _tustin(ref_a21, ref_a22, dt)
     m = max(1, round(p.rate_window_s * hz / 2.0))  # half window of the central difference
+    c = 1.0 - math.exp(-p.rate_filter_bw * dt)  # rate filter: triple pole at z = 1 - c
     if 2 * m + 1 > RATE_BUF_LEN:
         raise ParamError(f"rate_window_s={p.rate_window_s!r}: window too long for the buffer")
     pct_per_rpm = 100.0 / N_MAX_RPM
@@ -628,6 +645,10 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         egt_fail_demand_q24=_q(p.egt_fail_demand_max_pct, Q24, "egt_fail_demand_max_pct"),
         obs_l1_dt_q24=_q(p.observer_l[0] * dt, Q24, "observer_l"),
         obs_l2_dt_q24=_q(p.observer_l[1] * dt, Q24, "observer_l"),
+        rate_filter_on=int(p.rate_filter_on),
+        rf_k1_q24=_q(3.0 * c, Q24, "rate_filter_bw"),
+        rf_k2_q24=_q(3.0 * c * c / dt, Q24, "rate_filter_bw"),
+        rf_k3_q24=_q(c**3 / (dt * dt), Q24, "rate_filter_bw"),
         demand_hold_ticks=ticks(p.demand_hold_s),
         demand_shutdown_ticks=ticks(p.demand_shutdown_s),
         sensor_loss_ticks=ticks(p.sensor_loss_s),

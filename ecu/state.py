@@ -38,6 +38,8 @@ class EcuState:
         "xh1_q24", "xh2_q24", "e2_q24",
         # fast-model observer (eq. 3.5) state, deviations from trim
         "obs_n_q24", "obs_v_q24",
+        # speed-rate filter (ecu.rate_filter): speed and rate deviations, acceleration (Q15.16)
+        "rf_n_q24", "rf_v_q24", "rf_a_q16",
         # reference model (eq. 5.18-5.19) state, deviations from trim
         "xm1_q24", "xm2_q24",
         # limit loops: previous errors (velocity form) and the applied pump voltage

@@ -166,6 +166,30 @@ target = "SPEED_STUCK"
 value = 1
 """
 
+_RATE_FILTER = """
+description = "PID and limit loops on the filtered speed rate: steps, speed noise, speed stuck"
+duration_s = 30
+[plant]
+model = "aero"
+[controller]
+kind = "pid"
+params = { rate_filter_on = 1, accel_max_pct_s = 5 }
+[command]
+base = 0
+[[command.component]]
+kind = "staircase"
+levels = [90, 95, 85]
+step_s = 5
+[[fault]]
+time_s = 8
+target = "SPEED_NOISE"
+value = 200
+[[fault]]
+time_s = 20
+target = "SPEED_STUCK"
+value = 1
+"""
+
 _EGT_OPEN = """
 description = "PID, the EGT thermocouple opens (reads its upscale burnout value) at 3 s"
 duration_s = 20
@@ -237,6 +261,7 @@ SOURCES: dict[str, Source] = {
     "mrac-reproducing": _scenario("mrac-reproducing", "thesis-5.2-mrac-fast-reproducing", 2500),
     "limiters-hot": _scenario("limiters-hot", _HOT_LIMITS, 2500),
     "faults": _scenario("faults", _FAULTS, 2500),
+    "rate-filter": _scenario("rate-filter", _RATE_FILTER, 2500),
     "egt-open": _scenario("egt-open", _EGT_OPEN, 1000),
     "egt-overtemp": _scenario("egt-overtemp", _EGT_OVERTEMP, 1000),
     "overspeed": _scenario("overspeed", _OVERSPEED, 1000),

@@ -478,6 +478,35 @@ static void observer_step(ecu_t *e, int32_t u, int32_t dn_meas, int valid)
                                 ((p->obs_l2_dt_q24 * innov) >> 24));
 }
 
+/* ---- ecu/rate_filter.py (the control laws' speed rate) ------------------------------------- */
+
+static void rate_filter_start(ecu_state_t *s, int32_t dn)
+{
+    s->rf_n_q24 = dn;
+    s->rf_v_q24 = 0;
+    s->rf_a_q16 = 0;
+}
+
+static void rate_filter_step(ecu_t *e, int32_t dn, int32_t u, int valid)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    const int32_t *th = s->theta_q24;
+    int32_t n = s->rf_n_q24;
+    int32_t v = s->rf_v_q24;
+    int32_t a = s->rf_a_q16;
+    int64_t err = valid ? sat32(e, (int64_t)dn - n) : 0;
+    int64_t th2_n = ((int64_t)th[ECU_TH2] * n) >> 24;
+    int32_t acc_q16 = sat32(e, (int64_t)a + (((int64_t)th[ECU_LAM] * u) >> 32) +
+                                   mul_wide_shr(((int64_t)th[ECU_TH1] * n) >> 24, u, 32) +
+                                   mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32));
+    s->rf_n_q24 = sat32(e, (int64_t)n + (((int64_t)p->dt_q24 * v) >> 24) +
+                               ((p->rf_k1_q24 * err) >> 24));
+    s->rf_v_q24 = sat32(e, (int64_t)v + (((int64_t)p->dt_q24 * acc_q16) >> 16) +
+                               ((p->rf_k2_q24 * err) >> 24));
+    s->rf_a_q16 = sat32(e, (int64_t)a + ((p->rf_k3_q24 * err) >> 32));
+}
+
 /* ---- ecu/modes.py -------------------------------------------------------------------------- */
 
 static int32_t next_mode(int32_t mode, int arm, int stop, int running, int demand_fresh,
@@ -569,7 +598,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     int32_t faults = s->faults & ~F_TRANSIENT;
     int32_t mode = s->mode;
     int32_t m = p->rate_half_window;
-    int32_t n_rpm, n_q24, dn, rate, demand, new_mode, pump_mv, duty, enable, health;
+    int32_t n_rpm, n_q24, dn, rate, ctrl_rate, demand, new_mode, pump_mv, duty, enable, health;
     int speed_ok, egt_ok, analog_fresh, running, trip_fault, trip_shutdown;
     int64_t pending;
 
@@ -653,6 +682,13 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     } else {
         rate = 0;
     }
+    if (s->speed_seen == 1) {
+        rate_filter_start(s, dn);
+    } else {
+        rate_filter_step(e, dn, s->u_hist_q24[ring(s->hist_idx - 1)], speed_ok);
+    }
+    /* the control laws' and limit loops' rate: filtered while the sensor is valid */
+    ctrl_rate = p->rate_filter_on && speed_ok ? s->rf_v_q24 : rate;
 
     /* 4. protection trips and mode */
     running = mode == ECU_ARMED || mode == ECU_RUN;
@@ -707,20 +743,20 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         }
         r = sat32(e, (int64_t)demand - p->trim_n_q24);
         if (p->controller == ECU_CTRL_MRAC) {
-            u = mrac_control(e, dn, rate, r);
+            u = mrac_control(e, dn, ctrl_rate, r);
             mrac_gain_update(e);
         } else if (p->controller == ECU_CTRL_PID) {
-            u = pid_control(e, sat32(e, (int64_t)demand - n_q24), rate);
+            u = pid_control(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate);
         } else {
             u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
         }
         reference_model_step(e, r);
         e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - (s->egt_lead_q12 >> 12), -1000, 1000);
         v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
-                           div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, rate);
+                           div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, ctrl_rate);
         u_applied = sat32(e, (int64_t)v - p->trim_v_q24);
         if (p->controller == ECU_CTRL_PID) {
-            pid_track(e, sat32(e, (int64_t)demand - n_q24), rate, u_applied);
+            pid_track(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate, u_applied);
         }
         observer_step(e, u_applied, dn, speed_ok);
         s->u_hist_q24[s->hist_idx] = u_applied;

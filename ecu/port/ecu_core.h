@@ -96,6 +96,7 @@ enum {
     X(pump_dry_ticks) X(speed_valid_max_rpm) X(speed_step_max_rpm) X(speed_fault_ticks) \
     X(speed_stuck_ticks) X(speed_stuck_dv_q24) X(egt_open_high_dk) X(egt_open_low_dk) \
     X(egt_fault_ticks) X(egt_fail_demand_q24) X(obs_l1_dt_q24) X(obs_l2_dt_q24) \
+    X(rate_filter_on) X(rf_k1_q24) X(rf_k2_q24) X(rf_k3_q24) \
     X(demand_hold_ticks) X(demand_shutdown_ticks) X(sensor_loss_ticks) X(analog_loss_ticks) \
     X(run_entry_rpm) X(shutdown_done_rpm)
 
@@ -103,7 +104,8 @@ enum {
 #define ECU_STATE_FIELDS(X, A) \
     A(theta_q24, ECU_N_THETA) A(theta_ext, ECU_N_THETA) \
     A(n_hist_rpm, ECU_RATE_BUF_LEN) A(u_hist_q24, ECU_RATE_BUF_LEN) X(hist_idx) X(hist_fill) \
-    X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) X(xm1_q24) X(xm2_q24) \
+    X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) \
+    X(rf_n_q24) X(rf_v_q24) X(rf_a_q16) X(xm1_q24) X(xm2_q24) \
     X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q12) \
     X(v_applied_q24) X(owner) X(v_saturated) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \

@@ -1,6 +1,7 @@
 """Float64 twin of the firmware's speed loop in RUN (document reproduction: no limiters, no
-robustness): central-difference rate (or the true rate, as the document's simulation had),
-delayed estimator interval, MRAC / open loop, reference model. Used by sil.verify and tests."""
+robustness): central-difference rate (or the true rate, as the document's simulation had), or
+the tracking filter's rate for the control law (rate_filter_on), delayed estimator interval,
+MRAC / PID / open loop, reference model. Used by sil.verify and tests."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from ecu.params import CONTROLLERS, CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PID, EcuPara
 from ecu.reference.estimator import FloatEstimator
 from ecu.reference.mrac import FloatMrac
 from ecu.reference.pid import FloatPid
+from ecu.reference.rate_filter import FloatRateFilter
 
 
 class FloatLoop:
@@ -21,6 +23,7 @@ class FloatLoop:
         self.est = FloatEstimator(params)
         self.mrac = FloatMrac(params)
         self.pid = FloatPid(params)
+        self.rate_filter = FloatRateFilter(params)
         self.m = max(1, round(params.rate_window_s * params.rate_hz / 2.0))
         self.n_hist: deque[float] = deque(maxlen=2 * self.m + 2)  # newest last
         self.v_hist: deque[float] = deque(maxlen=self.m + 2)  # given true rates
@@ -45,8 +48,14 @@ class FloatLoop:
         filled = len(self.n_hist) > 2 * m
         if self.first:
             self.mrac.xm1 = dn
+            self.rate_filter.start(dn)
             self.first = False
+        else:
+            e = self.est
+            self.rate_filter.step(dn, self.u_hist[-2], (e.lam, e.th1, e.th2))
         rate = true_rate if use_true else (self._rate(m, False) if filled else 0.0)
+        if p.rate_filter_on:
+            rate = self.rate_filter.v
         if len(self.n_hist) == 2 * m + 2 and len(self.u_hist) == m + 2:
             h = self.n_hist
             self.est.step(

@@ -103,6 +103,8 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("ref_wn", "rad/s", Q24, 0.5, 20.0, False),
     _s("ref_zeta", "-", Q24, 0.3, 2.0, False),
     _s("limiters_on", "bool", 0, 0, 1, False),
+    _s("rate_filter_on", "bool", 0, 0, 1, False),
+    _s("rate_filter_bw", "rad/s", Q24, 2.0, 50.0, False),
 )
 BY_NAME = {spec.name: spec for spec in TABLE}
 
