@@ -11,7 +11,8 @@ and the firmware path uses integers only. Order of computation, top to bottom:
 3. speed history, central-difference rate and the filtered rate (ecu.rate_filter); demand
    hold / idle / shutdown on demand loss;
 4. protection trips (overspeed, flameout, EGT over maximum, pump current) and mode transition;
-5. in RUN: estimator (eq. 4.7/4.31), speed controller (MRAC eq. 5.4/5.16, PID or open loop),
+5. in RUN: estimator (eq. 4.7/4.31), speed controller (MRAC eq. 5.4/5.16, PID, scheduled PI
+   or open loop),
    reference model (eq. 5.18-5.19), min/max selection with limit loops, voltage limits and slew,
    observer (eq. 3.5), pump driver (PWM duty from the measured supply);
 6. telemetry and fault word.
@@ -28,12 +29,14 @@ from ecu.limiters import OWNER_SPEED, egt_lead_step, reset_loops, select_voltage
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import (
     CTRL_MRAC,
+    CTRL_PI,
     CTRL_PID,
     RATE_BUF_LEN,
     EcuParams,
     FirmwareParams,
     compile_params,
 )
+from ecu.pi import pi_control, pi_track
 from ecu.pid import pid_control, pid_track
 from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv
 from ecu.rate_filter import rate_filter_start, rate_filter_step
@@ -305,6 +308,8 @@ class Ecu:
                 mrac_gain_update(s, p)
             elif p.controller == CTRL_PID:
                 u = pid_control(s, p, sat32(demand - n_q24), ctrl_rate)
+            elif p.controller == CTRL_PI:
+                u = pi_control(s, p, sat32(demand - n_q24), n_q24)
             else:
                 u = sat32(s.open_loop_q24 - p.trim_v_q24)
             reference_model_step(s, p, r)
@@ -315,6 +320,8 @@ class Ecu:
             u_applied = sub_sat(v, p.trim_v_q24)
             if p.controller == CTRL_PID:
                 pid_track(s, p, sat32(demand - n_q24), ctrl_rate, u_applied)
+            elif p.controller == CTRL_PI:
+                pi_track(s, p, sat32(demand - n_q24), n_q24, u_applied)
             observer_step(s, p, u_applied, dn, speed_ok)
             s.u_hist_q24[s.hist_idx] = u_applied
             pump_mv = volts_q24_to_mv(v)

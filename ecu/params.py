@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, fields, replace
 
 from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q16, Q24, Q28
+from ecu.pi_design import PI_N0_PCT, PI_STEP_PCT, PiDesignError, PiPoint, design_schedule
 
 N_MAX_RPM = 112_500  # 100 %N
 RATE_MIN_HZ = 50
@@ -26,7 +27,7 @@ RATE_MAX_HZ = 1000
 RATE_WINDOW_MAX_S = 0.05
 RATE_BUF_LEN = RATE_MAX_HZ // 20 + 2  # central-difference ring: 0.05 s at 1000 Hz, +2 samples
 
-CONTROLLERS = ("mrac", "pid", "open_loop")
+CONTROLLERS = ("mrac", "pid", "open_loop", "pi")
 # how the document's printed gains are read (shared/reference/thesis_errata.md, docs/errata.md):
 # "printed": f = [dN dV, dN^2 dV] and an absolute Lambda, as eq. 3.11 and 4.7 print them;
 # "reproducing": f in the order of eq. 3.10, [dN^2 dV, dN dV], and Lambda a factor of
@@ -38,6 +39,7 @@ EGT_FULL_SCALE_K = 1638.3
 CTRL_MRAC = 0
 CTRL_PID = 1
 CTRL_OPEN_LOOP = 2
+CTRL_PI = 3
 
 # eq. 3.23: fast-model parameters identified offline on the aero-thermal model
 AP_ROW2_EQ_3_23 = (-1.8054, -2.3360)
@@ -114,6 +116,11 @@ class EcuParams:
     pid_kp: float = 2.0
     pid_ki: float = 1.0
     pid_kd: float = 0.5
+
+    # gain-scheduled PI baseline (ecu.pi_design): designed from the commissioned fast model
+    # (init_ap_row2, init_lambda, init_theta_row2) for this crossover and phase margin
+    pi_bandwidth: float = 1.75  # rad/s
+    pi_phase_margin: float = 50.0  # degrees, at least 50
 
     # demand
     idle_pct: float = 35.0
@@ -442,6 +449,15 @@ def validate(p: EcuParams) -> None:
     ):
         _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
     _check(min(p.observer_l) >= 0.0, "observer_l", p.observer_l, "must be >= 0")
+    _check(
+        0.2 <= p.pi_bandwidth <= 10.0, "pi_bandwidth", p.pi_bandwidth, "must be in [0.2, 10] rad/s"
+    )
+    _check(
+        50.0 <= p.pi_phase_margin <= 80.0,
+        "pi_phase_margin",
+        p.pi_phase_margin,
+        "must be in [50, 80] degrees",
+    )
     # bw dt <= 0.3: a discrete filter well inside its rate, and its gains inside Q7.24
     _check(
         2.0 <= p.rate_filter_bw <= min(50.0, 0.3 * p.rate_hz),
@@ -468,6 +484,7 @@ class FirmwareParams:
         "refm11_q24", "refm12_q24", "refm21_q24", "refm22_q24", "refh1_q24", "refh2_q24",
         "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
         "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
+        "pi_n0_q24", "pi_step_q24", "pi_kp_q24", "pi_ki_dt_q28",
         "idle_q24", "demand_max_q24",
         "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
         "egt_kp_q24", "egt_ki_dt_q24", "egt_lead_cf_q16", "egt_lead_ctc_q16", "egt_max_dk",
@@ -491,6 +508,23 @@ class FirmwareParams:
             raise ParamError(f"FirmwareParams: missing {sorted(missing)}")
         for k, v in values.items():
             setattr(self, k, v)
+
+
+def pi_schedule(p: EcuParams) -> tuple[PiPoint, ...]:
+    """The PI baseline's gains at its scheduling speeds (ecu.pi_design), from the commissioned
+    model in the firmware's convention; a model that admits none is refused, naming the field."""
+    q = firmware_convention(p)
+    try:
+        return design_schedule(
+            q.trim_n_pct,
+            q.init_ap_row2,
+            q.init_lambda,
+            q.init_theta_row2,
+            q.pi_bandwidth,
+            q.pi_phase_margin,
+        )
+    except PiDesignError as exc:
+        raise ParamError(f"pi_bandwidth={p.pi_bandwidth!r}: {exc}") from None
 
 
 def compile_params(p: EcuParams) -> FirmwareParams:
@@ -524,6 +558,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
     v0_pump = p.trim_v - p.pump_dead_v  # pump voltage at trim above the dead voltage
     kb0 = v0_pump * (p.lambda_commissioned / p.init_lambda - 1.0) if p.pump_scaling_on else 0.0
     th_scale = p.init_lambda / p.lambda_commissioned if p.pump_scaling_on else 1.0
+    pi = pi_schedule(p)
     return FirmwareParams(
         rate_hz=hz,
         controller=CONTROLLERS.index(p.controller),
@@ -597,6 +632,10 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         pid_kp_q24=_q(p.pid_kp, Q24, "pid_kp"),
         pid_ki_dt_q28=_q(p.pid_ki * dt, Q28, "pid_ki"),
         pid_kd_q24=_q(p.pid_kd, Q24, "pid_kd"),
+        pi_n0_q24=_q(PI_N0_PCT, Q24, "pi_bandwidth"),
+        pi_step_q24=_q(PI_STEP_PCT, Q24, "pi_bandwidth"),
+        pi_kp_q24=tuple(_q(pt.kp, Q24, "pi_bandwidth") for pt in pi),
+        pi_ki_dt_q28=tuple(_q(pt.ki * dt, Q28, "pi_bandwidth") for pt in pi),
         idle_q24=_q(p.idle_pct, Q24, "idle_pct"),
         demand_max_q24=_q(p.demand_max_pct, Q24, "demand_max_pct"),
         limiters_on=int(p.limiters_on),

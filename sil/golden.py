@@ -254,6 +254,7 @@ SOURCES: dict[str, Source] = {
     "mrac-aero": _scenario("mrac-aero", "thesis-5.3-mrac-aero", 2500),
     "mrac-staircase": _scenario("mrac-staircase", "thesis-5.4-staircase", 2500),
     "pid-staircase": _scenario("pid-staircase", "thesis-6.2-staircase-pid", 2500),
+    "pi-staircase": _scenario("pi-staircase", "staircase-pi", 2500),
     "open-loop-estimator": _scenario("open-loop-estimator", "thesis-4.3-estimator-aero", 2500),
     "estimator-reproducing": _scenario(
         "estimator-reproducing", "thesis-4.2-estimator-fast-reproducing", 2500

@@ -67,14 +67,13 @@ from typing import Any
 
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
-from ecu.params import PRESETS, READINGS, EcuParams
+from ecu.params import CONTROLLERS, PRESETS, READINGS, EcuParams
 from protocol.dbc import load_database
 from sil import profiles
 from sil.busfault.spec import KINDS, RATED, BusFault, Expectation
 
 SCENARIO_DIR = Path(__file__).with_name("scenarios")
 PLANT_MODELS = ("aero", "fast")
-CONTROLLERS = ("mrac", "pid", "open_loop")
 
 
 class ScenarioError(ValueError):

@@ -353,6 +353,44 @@ static void pid_track(ecu_t *e, int32_t err, int32_t dv, int32_t u_applied)
     s->theta_ext[ECU_PID_I] = 0;
 }
 
+/* ---- ecu/pi.py ----------------------------------------------------------------------------- */
+
+static int32_t scheduled(ecu_t *e, const int32_t *table, int32_t n_q24)
+{
+    const ecu_params_t *p = e->p;
+    int64_t x = (int64_t)n_q24 - p->pi_n0_q24;
+    int64_t k, f;
+    if (x <= 0) {
+        return table[0];
+    }
+    k = x / p->pi_step_q24;
+    if (k >= ECU_PI_POINTS - 1) {
+        return table[ECU_PI_POINTS - 1];
+    }
+    f = x - k * p->pi_step_q24;
+    return sat32(e, (int64_t)table[k] +
+                        div_trunc(e, ((int64_t)table[k + 1] - table[k]) * f, p->pi_step_q24));
+}
+
+static int32_t pi_control(ecu_t *e, int32_t err, int32_t n_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    acc_q40(e, &s->theta_q24[ECU_PID_I], &s->theta_ext[ECU_PID_I],
+            ((int64_t)err * scheduled(e, p->pi_ki_dt_q28, n_q24)) >> 12);
+    return sat32(e, (((int64_t)scheduled(e, p->pi_kp_q24, n_q24) * err) >> 24) +
+                        s->theta_q24[ECU_PID_I]);
+}
+
+static void pi_track(ecu_t *e, int32_t err, int32_t n_q24, int32_t u_applied)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    s->theta_q24[ECU_PID_I] =
+        sat32(e, (int64_t)u_applied - (((int64_t)scheduled(e, p->pi_kp_q24, n_q24) * err) >> 24));
+    s->theta_ext[ECU_PID_I] = 0;
+}
+
 /* ---- ecu/limiters.py ----------------------------------------------------------------------- */
 
 enum { OWNER_SPEED, OWNER_EGT, OWNER_ACCEL, OWNER_NLIMIT, OWNER_DECEL };
@@ -747,6 +785,8 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             mrac_gain_update(e);
         } else if (p->controller == ECU_CTRL_PID) {
             u = pid_control(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate);
+        } else if (p->controller == ECU_CTRL_PI) {
+            u = pi_control(e, sat32(e, (int64_t)demand - n_q24), n_q24);
         } else {
             u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
         }
@@ -757,6 +797,8 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         u_applied = sat32(e, (int64_t)v - p->trim_v_q24);
         if (p->controller == ECU_CTRL_PID) {
             pid_track(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate, u_applied);
+        } else if (p->controller == ECU_CTRL_PI) {
+            pi_track(e, sat32(e, (int64_t)demand - n_q24), n_q24, u_applied);
         }
         observer_step(e, u_applied, dn, speed_ok);
         s->u_hist_q24[s->hist_idx] = u_applied;
@@ -840,11 +882,14 @@ int ecu_params_load(ecu_params_t *p, const int32_t *words, size_t n)
     if (p->rate_hz < 1 || p->rate_hz > 1000) {
         return (int)(&p->rate_hz - dst);
     }
-    if (p->controller < ECU_CTRL_MRAC || p->controller > ECU_CTRL_OPEN_LOOP) {
+    if (p->controller < ECU_CTRL_MRAC || p->controller > ECU_CTRL_PI) {
         return (int)(&p->controller - dst);
     }
     if (p->rate_half_window < 1 || 2 * p->rate_half_window + 1 >= ECU_RATE_BUF_LEN) {
         return (int)(&p->rate_half_window - dst);
+    }
+    if (p->pi_step_q24 < 1) {
+        return (int)(&p->pi_step_q24 - dst);
     }
     return -1;
 }

@@ -43,6 +43,7 @@ extern "C" {
 #endif
 
 #define ECU_N_THETA 12     /* adaptive parameters and slow integrators (ecu/state.py) */
+#define ECU_PI_POINTS 9    /* scheduling speeds of the PI baseline (ecu/pi_design.py) */
 #define ECU_RATE_BUF_LEN 52 /* speed history ring: 0.05 s at 1000 Hz, +2 samples */
 
 /* slots of theta_q24 / theta_ext (ecu/state.py) */
@@ -55,7 +56,7 @@ enum {
 enum { ECU_OFF, ECU_ARMED, ECU_RUN, ECU_SHUTDOWN, ECU_FAULT };
 
 /* controllers (ecu/params.py) */
-enum { ECU_CTRL_MRAC, ECU_CTRL_PID, ECU_CTRL_OPEN_LOOP };
+enum { ECU_CTRL_MRAC, ECU_CTRL_PID, ECU_CTRL_OPEN_LOOP, ECU_CTRL_PI };
 
 /* E2E receiver status per frame kind, as the CAN layer reports what arrived since last tick */
 enum {
@@ -84,7 +85,8 @@ enum {
     X(ref_am21_q24) X(ref_am22_q24) X(ref_bm2_q24) \
     X(refm11_q24) X(refm12_q24) X(refm21_q24) X(refm22_q24) X(refh1_q24) X(refh2_q24) \
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
-    X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) X(idle_q24) X(demand_max_q24) \
+    X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) \
+    X(pi_n0_q24) X(pi_step_q24) A(pi_kp_q24, ECU_PI_POINTS) A(pi_ki_dt_q28, ECU_PI_POINTS) X(idle_q24) X(demand_max_q24) \
     X(limiters_on) X(egt_limit_dk) X(egt_engage_q24) X(rate_engage_q24) \
     X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_lead_cf_q16) X(egt_lead_ctc_q16) \
     X(egt_max_dk) X(egt_max_ticks) \

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from collections import deque
 
-from ecu.params import CONTROLLERS, CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PID, EcuParams
+from ecu.params import CONTROLLERS, CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PI, CTRL_PID, EcuParams
 from ecu.reference.estimator import FloatEstimator
 from ecu.reference.mrac import FloatMrac
+from ecu.reference.pi import FloatPi
 from ecu.reference.pid import FloatPid
 from ecu.reference.rate_filter import FloatRateFilter
 
@@ -23,6 +24,7 @@ class FloatLoop:
         self.est = FloatEstimator(params)
         self.mrac = FloatMrac(params)
         self.pid = FloatPid(params)
+        self.pi = FloatPi(params)
         self.rate_filter = FloatRateFilter(params)
         self.m = max(1, round(params.rate_window_s * params.rate_hz / 2.0))
         self.n_hist: deque[float] = deque(maxlen=2 * self.m + 2)  # newest last
@@ -72,6 +74,8 @@ class FloatLoop:
             self.mrac.gain_update(self.est)
         elif self.ctrl == CTRL_PID:
             u = self.pid.control(demand_pct - n_pct, rate)
+        elif self.ctrl == CTRL_PI:
+            u = self.pi.control(demand_pct - n_pct, n_pct)
         else:
             assert self.ctrl == CTRL_OPEN_LOOP
             u = open_loop_v - p.trim_v

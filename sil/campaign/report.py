@@ -227,7 +227,7 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
 
 def _targets(track: dict) -> list[str]:
     """The issue's two targets, said plainly whichever way they come out."""
-    mrac, pid = track.get("mrac"), track.get("pid")
+    mrac = track.get("mrac")
     if mrac is None or not mrac["runs"]:
         return []
     out = []
@@ -245,8 +245,11 @@ def _targets(track: dict) -> list[str]:
             f" over the other {n - held} the 95th percentile is {_fmt(mrac['p95_free'])} %N,"
             f" {_fmt(free, '.2f')}x the nominal's."
         )
-    if pid is not None and pid["runs"]:
-        better = mrac["p50"] < pid["p50"]
-        out.append(f"- MRAC median {_fmt(mrac['p50'])} %N against PID median {_fmt(pid['p50'])} "
-                   f"%N: target (MRAC better) {'met' if better else 'NOT met'}.")  # fmt: skip
+    for kind, name in (("pid", "PID"), ("pi", "scheduled PI")):
+        base = track.get(kind)
+        if base is not None and base["runs"]:
+            better = mrac["p50"] < base["p50"]
+            out.append(f"- MRAC median {_fmt(mrac['p50'])} %N against {name} median "
+                       f"{_fmt(base['p50'])} %N: target (MRAC better) "
+                       f"{'met' if better else 'NOT met'}.")  # fmt: skip
     return out

@@ -9,6 +9,8 @@ import sys
 import threading
 from pathlib import Path
 
+from ecu.params import CONTROLLERS
+
 NAME = "ecu"
 HELP = "run the ECU firmware as a CAN node on a bus (lockstep: one tick per sensor frame)"
 
@@ -30,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--preset", default="default", help="parameter preset (ecu.params)")
     parser.add_argument(
         "--controller",
-        choices=("mrac", "pid", "open_loop"),
+        choices=CONTROLLERS,
         help="override the preset's controller",
     )
     parser.add_argument(

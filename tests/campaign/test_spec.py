@@ -33,7 +33,7 @@ def test_shipped_campaigns_load():
     shipped = sorted(Path("sil/campaigns").glob("*.toml"))
     assert {p.stem for p in shipped} >= {"engine-variation", "bus-faults"}
     sizes = {p.stem: len(load(p).cases) for p in shipped}
-    assert sizes["engine-variation"] == 1000
+    assert sizes["engine-variation"] == 1500
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ import pytest
 
 from ecu import faults as F
 from ecu import golden
-from ecu.params import CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PID
+from ecu.params import CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PI, CTRL_PID
 from ecu.port import build
 from sil import golden as sources
 
@@ -47,7 +47,7 @@ def test_no_undefined_behaviour_on_any_vector(vectors):
 
 def test_vectors_cover_controllers_modes_limiters_and_faults(vectors):
     gs = [g for _, g in vectors.values()]
-    assert {g.params.controller for g in gs} == {CTRL_MRAC, CTRL_PID, CTRL_OPEN_LOOP}
+    assert {g.params.controller for g in gs} == {CTRL_MRAC, CTRL_PID, CTRL_OPEN_LOOP, CTRL_PI}
     modes = Counter(m for g in gs for m in _column(g, OUT["mode"]))
     assert set(modes) == {0, 1, 2, 3, 4}  # OFF ARMED RUN SHUTDOWN FAULT
     owners = {o for g in gs for o in _column(g, OUT["owner"])}
