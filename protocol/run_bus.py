@@ -34,7 +34,11 @@ class RunBus(can.BusABC):
     """The frames of run ``tag`` on ``bus`` (which it owns: :meth:`shutdown` shuts it down)."""
 
     def __init__(self, bus: can.BusABC, tag: int = 0) -> None:
-        wire_id(tag, 0)  # refuses a bad tag
+        try:
+            wire_id(tag, 0)  # refuses a bad tag
+        except ValueError:
+            bus.shutdown()
+            raise
         self.bus = bus
         self.tag = tag
         self.foreign_frames = 0

@@ -90,6 +90,13 @@ def test_a_node_with_filters_still_counts_other_runs_frames_of_its_ids():
         other.shutdown()
 
 
+def test_a_bad_tag_is_refused_and_the_bus_closed():
+    bus = open_bus(unique_udp_spec())
+    with pytest.raises(ValueError, match="tag 256"):
+        RunBus(bus, 256)
+    assert bus.socket.fileno() == -1
+
+
 class _Echo:
     """Answers each sensor frame with an actuator frame, for ``ticks`` ticks."""
 
