@@ -109,11 +109,14 @@ class RunBus(can.BusABC):
             frame_id, data, extended = got[0], got[1], False
         else:
             if got.is_error_frame or got.is_remote_frame or got.is_fd:
-                return got if self.tag == 0 else None  # the driver counts it (protocol.node)
+                return got  # of no run: the driver counts it (protocol.node)
             frame_id, data, extended = got.arbitration_id, got.data, got.is_extended_id
         split = split_id(frame_id, extended)
-        if split is None:  # an extended ID of no run: the primary run's driver counts it
-            return got if self.tag == 0 else None
+        if split is None:  # an extended ID no run sends: the primary run's driver counts it
+            if self.tag == 0:
+                return got
+            self.foreign_frames += 1
+            return None
         tag, dbc_id = split
         if tag != self.tag:
             self.foreign_frames += 1
@@ -131,8 +134,8 @@ class RunBus(can.BusABC):
 
     # -- filters and the rest -------------------------------------------------------------------
     def _apply_filters(self, filters: can.typechecking.CanFilters | None) -> None:
-        """The wrapped bus lets through every run's frames of the IDs asked for (to count the
-        foreign ones) and the beacons; the IDs themselves are checked on the DBC IDs."""
+        """The wrapped bus lets through every run's frames of the IDs asked for (it checks the
+        11 bits of the DBC ID, so that the other runs' frames are counted) and the beacons."""
         if not filters:
             self.bus.set_filters(None)
             return

@@ -90,6 +90,21 @@ def test_a_node_with_filters_still_counts_other_runs_frames_of_its_ids():
         other.shutdown()
 
 
+def test_frames_of_no_run_are_left_to_the_driver_or_counted_as_foreign():
+    spec = f"virtual:run-bus-{random.randrange(1 << 30)}"
+    with (
+        open_bus(spec) as raw,
+        RunBus(open_bus(spec), 0) as primary,
+        RunBus(open_bus(spec), 1) as other,
+    ):
+        raw.send(can.Message(arbitration_id=0x100, is_extended_id=True, data=bytes(8)))
+        raw.send(can.Message(is_error_frame=True))
+        heard = [primary.recv_frame(0.2), primary.recv_frame(0.2)]
+        assert heard[0].is_extended_id and heard[1].is_error_frame  # the driver counts them
+        assert other.recv_frame(0.2).is_error_frame and other.recv_frame(0.2) is None
+        assert (primary.foreign_frames, other.foreign_frames) == (0, 1)
+
+
 def test_a_bad_tag_is_refused_and_the_bus_closed():
     bus = open_bus(unique_udp_spec())
     with pytest.raises(ValueError, match="tag 256"):
