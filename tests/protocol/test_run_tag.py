@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from protocol.run_tag import DBC_ID_MASK, MAX_TAG, claim_tag, split_id, wire_id
+from protocol.run_tag import DBC_ID_MASK, MAX_TAG, claim_tag, split_id, tag_dir, wire_id
 
 tags = st.integers(0, MAX_TAG)
 dbc_ids = st.integers(0, DBC_ID_MASK)
@@ -58,6 +58,16 @@ def test_runs_on_one_bus_get_different_tags_and_give_them_back(runtime_dir):
             assert other_bus.tag == 0
     with claim_tag("udp:239.255.1.2@43113") as again:
         assert again.tag == 0
+    assert list(tag_dir().iterdir()) == []  # a run that ends removes its file
+
+
+def test_buses_whose_names_differ_only_in_punctuation_have_their_own_tags(runtime_dir):
+    with (
+        claim_tag("virtual:a_b") as a,
+        claim_tag("virtual:a/b") as b,
+        claim_tag("virtual:a:b") as c,
+    ):
+        assert (a.tag, b.tag, c.tag) == (0, 0, 0)
 
 
 def test_a_killed_process_gives_its_tag_back(runtime_dir):
