@@ -10,6 +10,10 @@ bus and this process bridges the two through the injector (:mod:`sil.busfault.br
 time by the plant's sensor frames in lockstep and by the wall clock in real time. The recorder
 listens on the plant's side.
 
+On a bus the run claims a tag (:mod:`protocol.run_tag`) for the run's time and every node reads
+the bus through :class:`protocol.run_bus.RunBus`, so runs sharing a bus keep apart; the summary
+counts the other runs' frames that were dropped.
+
 If a node process dies, or on Ctrl-C, the run keeps recording for a short grace period (to capture
 the other node's reaction), stops the rest, writes everything recorded so far and marks the
 summary aborted with the reason.
