@@ -108,7 +108,7 @@ def test_a_killed_run_gives_its_tag_back(tmp_path, env):
         assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
         time.sleep(0.05)
     with claim_tag(spec) as claim:
-        assert claim.tag == 1
+        assert claim.tag == 1, (proc.poll(), (tmp_path / "killed" / "summary.json").read_text())
     proc.send_signal(signal.SIGKILL)
     proc.wait(10)
     with claim_tag(spec) as claim:
