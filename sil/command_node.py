@@ -6,6 +6,10 @@ are on the bus before the ECU can answer tick k + L. It hears every frame and ha
 frames it sends itself, to the :class:`~sil.recorder.Recorder` (or, in process and in lockstep,
 to the :class:`~sil.recorder_process.RecorderProcess`). It is finished once the ECU has answered
 the last tick.
+
+On a bus it also sends its run's SimRun beacon (:mod:`protocol.run_bus`) about once a second of
+simulated time, with the demand of that tick; the beacon is not the run's traffic, so it is not
+recorded.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import numpy as np
 from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, demand_lead_ticks, every_ticks
 from protocol.node import SendFn
+from protocol.run_bus import SIMRUN_ID, simrun_payload
 from sil.recorder import SENSORS, Recorder
 from sil.recorder_process import RecorderProcess
 from sil.scenario import Fault, fault_targets
@@ -35,6 +40,7 @@ class CommandNode:
         faults: tuple[Fault, ...] = (),
         progress=None,
         realtime: bool = False,
+        run_id: int | None = None,
     ) -> None:
         self.codec = codec
         self.recorder = recorder
@@ -45,6 +51,8 @@ class CommandNode:
         self.fault_msg = codec["FaultInject"]
         self.every = every_ticks(self.demand.cycle_time_ms, ecu_rate_hz)
         self.lead = demand_lead_ticks(self.every)
+        self.run_id = run_id  # None: no beacon (no bus)
+        self.beacon_every = self.every * max(1, round(ecu_rate_hz / self.every))
         targets = {name: i for i, name in enumerate(fault_targets())}
         # each fault at the first demand tick at or after its time (see the module docstring)
         self.faults: dict[int, list[tuple[int, float]]] = {}
@@ -63,7 +71,9 @@ class CommandNode:
         self.recorder.record(frame_id, data, self._wall_s)
 
     def _play(self, tick: int, send: SendFn) -> None:
-        """Send what is due at ``tick``: fault injections first, then the demand."""
+        """Send what is due at ``tick``: the beacon, fault injections, then the demand."""
+        if self.run_id is not None and tick % self.beacon_every == 0:
+            send(SIMRUN_ID, simrun_payload(self.run_id, tick))
         for frame_id, data in self.frames_at(tick):
             self._sent(send, frame_id, data)
         self.injected += self.injections_at(tick)

@@ -152,6 +152,7 @@ class Recorder:
         self.bits = BitCounter()
         self.frames = 0
         self._unknown_ids: Counter[int] = Counter()
+        self._wrong_length: Counter[int] = Counter()
         self._sensor_ticks = TickTracker()
         self._actuator_ticks = TickTracker()
         self.latest_sensor_tick = -1  # full tick of the newest PlantSensors heard
@@ -475,9 +476,15 @@ class Recorder:
 
     @property
     def unknown_ids(self) -> Counter[int]:
-        """Frames of IDs not in the contract, or of the wrong length, per ID."""
+        """Frames of IDs not in the contract, per ID."""
         self._check_heard()
         return self._unknown_ids
+
+    @property
+    def wrong_length(self) -> Counter[int]:
+        """Frames of IDs in the contract but of another length, per ID."""
+        self._check_heard()
+        return self._wrong_length
 
     @property
     def sensor_ticks(self) -> TickTracker:
@@ -501,7 +508,8 @@ class Recorder:
 
     def totals(self) -> dict:
         """The run's figures: ticks written, frames heard, bits (all of them after close),
-        ticks missed, E2E verdicts per message and frames of unknown IDs per ID."""
+        ticks missed, E2E verdicts per message, frames of unknown IDs and of the wrong length
+        per ID."""
         return {
             "tick": self.tick,
             "frames": self.frames,
@@ -509,6 +517,7 @@ class Recorder:
             "missed_ticks": self.missed_ticks,
             "e2e": {m: dict(c) for m, c in self.e2e.items()},
             "unknown_ids": dict(self.unknown_ids),
+            "wrong_length": dict(self.wrong_length),
         }
 
     def close(self) -> None:
@@ -559,7 +568,8 @@ class Recorder:
         self, ids: np.ndarray, payload: np.ndarray, lengths: np.ndarray
     ) -> np.ndarray:
         """E2E and tick-sequence checks of frames heard one after the other (after those checked
-        before), unknown IDs counted; returns the indices of the frames with a bad CRC."""
+        before), unknown IDs and wrong lengths counted; returns the indices of the frames with a
+        bad CRC."""
         inside = (ids >= 0) & (ids < 0x800)
         if inside.all():  # known ID, right length, E2E not WRONGCRC
             good = self._length_of[ids] == lengths
@@ -571,7 +581,8 @@ class Recorder:
                     good |= (ids == frame_id) & (lengths == length)
         if not good.all():
             for frame_id in ids[~good].tolist():
-                self._unknown_ids[frame_id] += 1
+                known = frame_id in self._known
+                (self._wrong_length if known else self._unknown_ids)[frame_id] += 1
         present = set(np.unique(ids[good]).tolist())
         seen: list[tuple[int, str, int]] = []
         bad: list[np.ndarray] = []

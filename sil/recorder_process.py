@@ -192,6 +192,7 @@ class RecorderProcess(InOrderTicks):
             "missed_ticks": 0,
             "e2e": {},
             "unknown_ids": {},
+            "wrong_length": {},
         }
         try:
             if self._ids:

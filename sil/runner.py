@@ -10,6 +10,10 @@ bus and this process bridges the two through the injector (:mod:`sil.busfault.br
 time by the plant's sensor frames in lockstep and by the wall clock in real time. The recorder
 listens on the plant's side.
 
+On a bus the run claims a tag (:mod:`protocol.run_tag`) for the run's time and every node reads
+the bus through :class:`protocol.run_bus.RunBus`, so runs sharing a bus keep apart; the summary
+counts the other runs' frames that were dropped.
+
 If a node process dies, or on Ctrl-C, the run keeps recording for a short grace period (to capture
 the other node's reaction), stops the rest, writes everything recorded so far and marks the
 summary aborted with the reason.
@@ -47,6 +51,8 @@ from protocol.bus import BusSpec, BusSpecError, default_spec, open_bus, parse_sp
 from protocol.busload import bus_load_pct
 from protocol.codec import Codec
 from protocol.node import DriverStats, InProcessBus, bus_batch_receiver, bus_sender, unusable
+from protocol.run_bus import RunBus
+from protocol.run_tag import TagClaim, claim_tag
 from sil import metrics, profiles, results
 from sil.busfault.bridge import Bridge, SensorTicks, WallTicks
 from sil.busfault.injector import Injector
@@ -107,6 +113,14 @@ class RunState:
     ecu_heard: dict[int, float] | None = None  # the fault bridge's ECU side: ID -> when heard
     started: float = 0.0  # perf_counter when the run began
     nodes_up: float | None = None  # perf_counter when the node processes were up, at tick 0
+    run_id: int | None = None  # on a bus: this run's RunId (its SimRun beacons carry it)
+    claims: list[TagClaim] = field(default_factory=list)  # the run's tags: run bus, ECU bus
+    run_bus: RunBus | None = None  # the command node's bus: its foreign-frame counts
+
+    def release(self) -> None:
+        """Give back the run's tags (once the node processes are stopped)."""
+        for claim in self.claims:
+            claim.release()
 
 
 def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfig:
@@ -223,6 +237,7 @@ def run(opts: RunOptions) -> dict:
     except BaseException as exc:
         results.mark(opts.out_dir, "failed", s.name, _failure(exc, state))
         _stop(state.children)
+        state.release()
         if state.recorder is not None:
             state.recorder.discard()
         for name in state.children:  # refused in set-up: a process stopped before it said a word
@@ -252,11 +267,15 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
         state.bus = str(spec)
         state.ecu_bus = str(ecu_spec) if s.bus_faults else None
+        state.run_id = int.from_bytes(os.urandom(4), "little")
+        state.claims = [claim_tag(str(spec))]
+        if s.bus_faults:
+            state.claims.append(claim_tag(str(ecu_spec)))
         for path in _handshake_files(opts.out_dir):
             path.unlink(missing_ok=True)
         ticks = profiles.tick_count(s.duration_s, s.ecu_rate_hz) + 1  # 0 .. last: len(commands)
         state.children["plant"] = _spawn(
-            "plant", _plant_args(opts, s, seed, spec, ticks), opts.out_dir
+            "plant", _plant_args(opts, s, seed, spec, state.claims[0].tag, ticks), opts.out_dir
         )
     plant = build_plant(s, seed)
     params = ecu_params(s, ecu_trim_voltage(s, plant))
@@ -264,7 +283,8 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         params = commissioning.apply(params, commissioning.load(opts.commission))
     compile_params(params)  # refuse bad overrides before anything starts
     if ecu_spec is not None:
-        state.children["ecu"] = _spawn("ecu", _ecu_args(opts, s, params, ecu_spec), opts.out_dir)
+        ecu_args = _ecu_args(opts, s, params, ecu_spec, state.claims[-1].tag)
+        state.children["ecu"] = _spawn("ecu", ecu_args, opts.out_dir)
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
@@ -297,6 +317,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         faults=s.faults,
         progress=progress,
         realtime=opts.mode == "realtime",
+        run_id=state.run_id,
     )
     # What exists now (numba, the codec, the nodes...) lives through the run: frozen, it is
     # skipped by the collector's full passes, each of which would stall the run for 0.1 s.
@@ -322,6 +343,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         state.status, state.abort_reason = "aborted", str(exc)
     finally:
         _stop(state.children)
+        state.release()
         progress.close()
         try:
             recorder.close()
@@ -376,12 +398,16 @@ def _guard_s(opts: RunOptions, s: Scenario) -> float:
     return BRIDGED_GUARD_S if s.bus_faults and opts.mode == "lockstep" else NODE_GUARD_S
 
 
-def _plant_args(opts: RunOptions, s: Scenario, seed: int, spec: BusSpec, ticks: int) -> list[str]:
+def _plant_args(
+    opts: RunOptions, s: Scenario, seed: int, spec: BusSpec, tag: int, ticks: int
+) -> list[str]:
     p = s.plant
     args = [
         "plant",
         "--bus",
         str(spec),
+        "--run-tag",
+        str(tag),
         "--model",
         p.model,
         "--rate-hz",
@@ -412,11 +438,15 @@ def _plant_args(opts: RunOptions, s: Scenario, seed: int, spec: BusSpec, ticks: 
     return args
 
 
-def _ecu_args(opts: RunOptions, s: Scenario, params: EcuParams, ecu_spec: BusSpec) -> list[str]:
+def _ecu_args(
+    opts: RunOptions, s: Scenario, params: EcuParams, ecu_spec: BusSpec, tag: int
+) -> list[str]:
     args = [
         "ecu",
         "--bus",
         str(ecu_spec),
+        "--run-tag",
+        str(tag),
         "--mode",
         opts.mode,
         "--preset",
@@ -456,13 +486,15 @@ def _run_on_bus(
     """The node processes are starting (see ``_run``): wait until both are ready, then play.
     ``specs``: the run's bus and the ECU's (the same bus unless there are bus faults)."""
     spec, ecu_spec = specs
-    with open_bus(spec) as bus, ExitStack() as stack:
+    tags = [claim.tag for claim in state.claims]
+    with RunBus(open_bus(spec), tags[0]) as bus, ExitStack() as stack:
+        state.run_bus = bus
         if s.bus_faults:
             injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, command.codec)
             state.bus_fault_events = injector.events
             clock = WallTicks(s.ecu_rate_hz) if opts.mode == "realtime" else SensorTicks()
-            plant_side = stack.enter_context(open_bus(spec))
-            ecu_side = stack.enter_context(open_bus(ecu_spec))
+            plant_side = stack.enter_context(RunBus(open_bus(spec), tags[0]))
+            ecu_side = stack.enter_context(RunBus(open_bus(ecu_spec), tags[-1]))
             bridge = stack.enter_context(Bridge(plant_side, ecu_side, injector, ticks=clock))
             state.bridge_errors = bridge.errors
             state.ecu_heard = bridge.ecu_side_heard  # the ECU's frames before the injector
@@ -605,6 +637,13 @@ def _silent(dog: Watchdog, seen: dict[int, float], state: RunState, now: float) 
     return dog.silent(seen, now)
 
 
+def _isolation(state: RunState) -> dict:
+    """On a bus: the run's RunId and tag, and the other runs' frames it heard and dropped."""
+    if state.run_bus is None:
+        return {}
+    return {"run_id": state.run_id, **state.run_bus.stats()}
+
+
 def _finish(
     opts: RunOptions,
     s: Scenario,
@@ -629,6 +668,7 @@ def _finish(
         "scenario": s.name,
         "mode": opts.mode,
         "bus": state.bus,
+        **_isolation(state),
         **({"inproc_loop": state.loop} if state.loop else {}),
         **({"ecu_bus": state.ecu_bus} if state.ecu_bus else {}),
         "seed": seed,
@@ -647,6 +687,7 @@ def _finish(
         "e2e": {m: c for m, c in totals["e2e"].items() if set(c) - {"OK"}},
         **({"nodes": nodes} if (nodes := _node_stats(opts.out_dir)) else {}),
         "unknown_ids": {f"0x{k:X}": v for k, v in totals["unknown_ids"].items()},
+        "wrong_length": {f"0x{k:X}": v for k, v in totals["wrong_length"].items()},
     }
     if state.status == "completed" and totals["tick"] < len(command.commands):
         summary["status"] = "aborted"

@@ -87,6 +87,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="emulated flash image holding the stored parameter set (created when missing)",
     )
     parser.add_argument(
+        "--run-tag",
+        type=int,
+        default=0,
+        metavar="TAG",
+        help="the run's tag on a shared bus (protocol.run_tag; sil run claims it): 0 sends "
+        "the DBC IDs as they are; frames of other tags are dropped and counted",
+    )
+    parser.add_argument(
         "--stats-file",
         type=Path,
         metavar="PATH",
@@ -112,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
     from ecu.params import ParamError, compile_params, preset
     from protocol.bus import BusSpecError, open_bus
     from protocol.node import run_lockstep, run_realtime
+    from protocol.run_bus import RunBus
 
     try:
         overrides: dict[str, object] = dict(_param(p) for p in args.param)
@@ -161,8 +170,8 @@ def run(args: argparse.Namespace) -> int:
             return 2
         print(f"service port: {node.service.transport.name}", file=sys.stderr, flush=True)
     try:
-        bus = open_bus(args.bus)
-    except BusSpecError as exc:
+        bus = RunBus(open_bus(args.bus), args.run_tag)
+    except (BusSpecError, ValueError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
     if args.ready_file:
@@ -186,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
         "fault_word": o.fault_word,
         "sat_events": o.sat_events,
         **stats.summary(),
+        **bus.stats(),
         "ticks_without_due_demand": node.demand_waits,
     }
     if node.service is not None:

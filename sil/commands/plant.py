@@ -90,6 +90,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "listens)",
     )
     parser.add_argument(
+        "--run-tag",
+        type=int,
+        default=0,
+        metavar="TAG",
+        help="the run's tag on a shared bus (protocol.run_tag; sil run claims it): 0 sends "
+        "the DBC IDs as they are; frames of other tags are dropped and counted",
+    )
+    parser.add_argument(
         "--stats-file",
         type=Path,
         metavar="PATH",
@@ -151,6 +159,7 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
 def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
     from protocol.node import run_lockstep, run_realtime
+    from protocol.run_bus import RunBus
 
     _skip_blas_probe()
     try:
@@ -177,8 +186,8 @@ def run(args: argparse.Namespace) -> int:
         while not args.start_file.exists() and not stop.is_set():
             time.sleep(START_POLL_S)
     try:
-        bus = open_bus(spec)
-    except BusSpecError as exc:
+        bus = RunBus(open_bus(spec), args.run_tag)
+    except (BusSpecError, ValueError) as exc:
         print(f"sil plant: error: {exc}", file=sys.stderr)
         return 2
     try:
@@ -203,6 +212,7 @@ def run(args: argparse.Namespace) -> int:
             "watchdog_trips": node.watchdog_trips,
             "actuator_rejected": node.actuator_rejected,
             **stats.summary(),
+            **bus.stats(),
         }
         args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
     return 0

@@ -80,6 +80,8 @@ def print_summary(summary: dict, out: Path) -> None:
         "abort_reason",
         "mode",
         "bus",
+        "run_tag",
+        "foreign_frames",
         "sim_time_s",
         "wall_time_s",
         "realtime_factor",

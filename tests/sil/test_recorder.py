@@ -88,6 +88,18 @@ def test_lost_ticks_bad_crc_and_unknown_ids_are_counted(tmp_path):
     assert len(list(can.CanutilsLogReader(str(tmp_path / "can.log")))) == 17
 
 
+def test_a_known_id_of_the_wrong_length_is_counted_apart_from_unknown_ids(tmp_path):
+    codec = Codec()
+    rec = Recorder(tmp_path, Codec(), period_s=0.01)
+    _tick(codec, rec, 0, rpm=100_000, ref=90.0)
+    rec.record(0x100, bytes(5))  # PlantSensors is 8 bytes long
+    rec.record(0x555, bytes(8))
+    rec.close()
+    assert rec.wrong_length == {0x100: 1}
+    assert rec.unknown_ids == {0x555: 1}
+    assert rec.totals()["wrong_length"] == {0x100: 1}
+
+
 def test_frames_arriving_out_of_order_are_logged_in_canonical_order(tmp_path):
     """The ECU's answer may reach the recorder before the frame it answers: same log anyway."""
     codec = Codec()

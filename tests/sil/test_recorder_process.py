@@ -80,7 +80,7 @@ def test_the_files_are_those_of_the_recorder_in_process(tmp_path, monkeypatch, m
         assert a == (tmp_path / "local" / name).read_bytes(), name
     for summary in (offloaded, local):  # (on a bus, the node processes' own counts end when
         # they are stopped: an ECU left 2 s without sensor frames ticks once on its own clock)
-        for key in ("wall_time_s", "realtime_factor", "startup_s", "bus", "nodes"):
+        for key in ("wall_time_s", "realtime_factor", "startup_s", "bus", "run_id", "nodes"):
             summary.pop(key, None)
     assert offloaded == local
     assert offloaded["status"] == "completed" and offloaded["frames"] > 3000

@@ -1,0 +1,163 @@
+"""A node's view of a bus shared by several runs: its own run's frames, with DBC IDs.
+
+:class:`RunBus` wraps a python-can bus for the run of a tag (:mod:`protocol.run_tag`): it sends
+each frame with the run's wire ID and hands on only the frames of its run, with their DBC IDs;
+frames of other runs are dropped and counted (``foreign_frames``). The SimRun beacon (the
+command node sends it with its run's RunId) is never handed on: a foreign one tells the runs
+apart (``foreign_runs``), so a run that ended and a later one with the same tag count as two.
+
+It offers what the node drivers use (:mod:`protocol.node`: ``send_frame``, ``recv_frame``,
+``recv_frames`` where the wrapped bus has them) and the plain ``send``/``recv`` of any bus.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+
+import can
+
+from protocol.run_tag import DBC_ID_MASK, split_id, wire_id
+
+SIMRUN_ID = 2032  # the DBC's SimRun: RunId u32, RunTick u32, little-endian
+_SIMRUN = struct.Struct("<II")
+
+Frame = tuple[int, bytes] | can.Message
+
+
+def simrun_payload(run_id: int, run_tick: int) -> bytes:
+    """The SimRun beacon's data."""
+    return _SIMRUN.pack(run_id & 0xFFFFFFFF, run_tick & 0xFFFFFFFF)
+
+
+class RunBus(can.BusABC):
+    """The frames of run ``tag`` on ``bus`` (which it owns: :meth:`shutdown` shuts it down)."""
+
+    def __init__(self, bus: can.BusABC, tag: int = 0) -> None:
+        try:
+            wire_id(tag, 0)  # refuses a bad tag
+        except ValueError:
+            bus.shutdown()
+            raise
+        self.bus = bus
+        self.tag = tag
+        self.foreign_frames = 0
+        self._foreign: dict[int, set[int]] = {}  # foreign tag -> RunIds of its beacons
+        self._recv_frames = getattr(bus, "recv_frames", None)
+        self.channel_info = f"run tag {tag} on {bus.channel_info}"
+        super().__init__(channel=getattr(bus, "channel", None))
+        if self._recv_frames is None:  # the drivers then read one frame at a time
+            self.recv_frames = None  # type: ignore[method-assign,assignment]
+
+    @property
+    def foreign_runs(self) -> int:
+        """Other runs heard: one per RunId of their beacons (one per tag without a beacon)."""
+        return sum(max(1, len(ids)) for ids in self._foreign.values())
+
+    def stats(self) -> dict:
+        return {
+            "run_tag": self.tag,
+            "foreign_frames": self.foreign_frames,
+            "foreign_runs": self.foreign_runs,
+        }
+
+    # -- sending --------------------------------------------------------------------------------
+    def send_frame(self, frame_id: int, data: bytes | bytearray) -> None:
+        if self.tag == 0 and (send_frame := getattr(self.bus, "send_frame", None)) is not None:
+            send_frame(frame_id, data)
+            return
+        wire, extended = wire_id(self.tag, frame_id)
+        self.bus.send(can.Message(arbitration_id=wire, data=bytes(data), is_extended_id=extended))
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if msg.is_extended_id or msg.is_error_frame:
+            raise can.CanOperationError("a run sends only frames with DBC (standard) IDs")
+        wire, extended = wire_id(self.tag, msg.arbitration_id)
+        out = msg if not extended else _with_id(msg, wire, extended)
+        self.bus.send(out, timeout)
+
+    # -- receiving ------------------------------------------------------------------------------
+    def recv_frame(self, timeout: float | None) -> Frame | None:
+        """The next frame of this run (as the wrapped bus's ``recv_frame`` or ``recv`` gives
+        it, with its DBC ID), or None after ``timeout`` seconds (None: wait for ever)."""
+        receive = getattr(self.bus, "recv_frame", self.bus.recv)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while (got := receive(timeout)) is not None:
+            own = self._own(got)
+            if own is not None:
+                return own
+            if deadline is not None:
+                timeout = max(0.0, deadline - time.monotonic())
+        return None
+
+    def recv_frames(self, timeout: float | None) -> list[Frame]:
+        """Every frame of this run queued, as the wrapped bus's ``recv_frames`` gives them."""
+        own = self._own
+        return [f for got in self._recv_frames(timeout) if (f := own(got)) is not None]
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        msg = self.bus.recv(timeout)
+        if msg is None:
+            return None, False
+        own = self._own(msg)
+        assert own is None or isinstance(own, can.Message)
+        return own, False
+
+    def _own(self, got: Frame) -> Frame | None:
+        """The frame as this run's node sees it, or None (another run's, or a beacon)."""
+        if type(got) is tuple:
+            frame_id, data, extended = got[0], got[1], False
+        else:
+            if got.is_error_frame or got.is_remote_frame or got.is_fd:
+                return got  # of no run: the driver counts it (protocol.node)
+            frame_id, data, extended = got.arbitration_id, got.data, got.is_extended_id
+        split = split_id(frame_id, extended)
+        if split is None:  # an extended ID no run sends: the primary run's driver counts it
+            if self.tag == 0:
+                return got
+            self.foreign_frames += 1
+            return None
+        tag, dbc_id = split
+        if tag != self.tag:
+            self.foreign_frames += 1
+            runs = self._foreign.setdefault(tag, set())
+            if dbc_id == SIMRUN_ID and len(data) == _SIMRUN.size:
+                runs.add(_SIMRUN.unpack(bytes(data))[0])
+            return None
+        if dbc_id == SIMRUN_ID:
+            return None
+        if not extended:
+            return got
+        if type(got) is tuple:
+            return dbc_id, data
+        return _with_id(got, dbc_id, False)
+
+    # -- filters and the rest -------------------------------------------------------------------
+    def _apply_filters(self, filters: can.typechecking.CanFilters | None) -> None:
+        """The wrapped bus lets through every run's frames of the IDs asked for (it checks the
+        11 bits of the DBC ID, so that the other runs' frames are counted) and the beacons."""
+        if not filters:
+            self.bus.set_filters(None)
+            return
+        ids = {(f["can_id"] & DBC_ID_MASK, f["can_mask"] & DBC_ID_MASK) for f in filters}
+        ids.add((SIMRUN_ID, DBC_ID_MASK))
+        self.bus.set_filters([{"can_id": i, "can_mask": m} for i, m in sorted(ids)])
+
+    def fileno(self) -> int:
+        return self.bus.fileno()
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.bus.shutdown()
+
+
+def _with_id(msg: can.Message, arbitration_id: int, extended: bool) -> can.Message:
+    return can.Message(
+        timestamp=msg.timestamp,
+        arbitration_id=arbitration_id,
+        is_extended_id=extended,
+        dlc=msg.dlc,
+        data=msg.data,
+        channel=msg.channel,
+        is_rx=msg.is_rx,
+    )
