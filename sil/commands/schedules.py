@@ -1,0 +1,112 @@
+"""`sil schedules [--out DIR]`: the fuel schedules the plant allows, against shaft speed."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+NAME = "schedules"
+HELP = (
+    "fuel schedules from the plant: acceleration line, steady line and deceleration floor against "
+    "speed (fuel and pump voltage), with margins: CSV, JSON and a plot"
+)
+
+
+def _fraction(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and 0.0 <= value < 1.0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a fraction in [0, 1)")
+    return value
+
+
+def _speeds(text: str) -> tuple[float, ...]:
+    try:
+        speeds = tuple(float(s) for s in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list") from None
+    if not speeds or not all(math.isfinite(n) and 40.0 <= n <= 105.0 for n in speeds):
+        raise argparse.ArgumentTypeError(f"{text!r}: speeds must lie in 40-105 %N")
+    return speeds
+
+
+def _egt(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and 900.0 <= value <= 1500.0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an EGT limit in 900-1500 K")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from plant import schedules as s
+
+    parser.add_argument(
+        "--out", type=Path, default=Path("out/schedules"), metavar="DIR",
+        help="output folder (default out/schedules)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--speeds", type=_speeds, default=s.SPEEDS_PCT, metavar="N,N,...",
+        help=f"speeds in %%N (default {s.SPEEDS_PCT[0]:g} to {s.SPEEDS_PCT[-1]:g} by 5)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--egt-limit", type=_egt, default=s.EGT_LIMIT_K, metavar="K",
+        help=f"EGT the acceleration line keeps to (default {s.EGT_LIMIT_K:g} K, the ECU's limit)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--surge-margin", type=_fraction, default=s.SURGE_MARGIN, metavar="F",
+        help=f"least surge margin on the acceleration line (default {s.SURGE_MARGIN:g})",
+    )  # fmt: skip
+    parser.add_argument(
+        "--lean-margin", type=_fraction, default=s.LEAN_MARGIN, metavar="F",
+        help=f"lean blow-out margin of the deceleration floor (default {s.LEAN_MARGIN:g})",
+    )  # fmt: skip
+    parser.add_argument("--json", action="store_true", help="print the table as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    from plant import schedules as s
+    from plant.aerothermal import make_model
+
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"sil schedules: cannot write to {args.out}: {exc.strerror}", file=sys.stderr)
+        return 2
+    settings = {
+        "egt_limit_k": args.egt_limit,
+        "surge_margin": args.surge_margin,
+        "lean_margin": args.lean_margin,
+        "far_lean": None,
+    }
+    model = make_model()
+    settings["far_lean"] = model.params.far_lean
+
+    def progress(done: int, total: int) -> None:
+        print(f"\rsil schedules: {done}/{total} speeds", end="", file=sys.stderr, flush=True)
+
+    try:
+        points = s.schedule(
+            model, args.speeds, args.egt_limit, args.surge_margin, args.lean_margin, progress
+        )
+    except s.ScheduleError as exc:
+        print(f"\nsil schedules: {exc}", file=sys.stderr)
+        return 1
+    print(file=sys.stderr)
+    paths = {"csv": args.out / "schedules.csv", "json": args.out / "schedules.json"}
+    s.write_csv(points, paths["csv"])
+    s.write_json(points, settings, paths["json"])
+    paths["png"] = args.out / "schedules.png"
+    s.plot(points, settings, paths["png"])
+    if args.json:
+        print(paths["json"].read_text(), end="")
+        return 0
+    print(f"{'N %':>6} {'steady V':>9} {'accel V':>8} {'by':>6} {'SM':>6} {'dN/dt':>7} "
+          f"{'decel V':>8} {'dN/dt':>7}")  # fmt: skip
+    for p in points:
+        print(f"{p.n_pct:6.1f} {p.steady_v:9.2f} {p.accel_v:8.2f} {p.accel_limited_by:>6} "
+              f"{p.accel_surge_margin:6.1%} {p.accel_rate_pct_s:7.2f} {p.decel_v:8.2f} "
+              f"{p.decel_rate_pct_s:7.2f}")  # fmt: skip
+    for kind, path in paths.items():
+        print(f"{kind}: {path}")
+    return 0

@@ -1,0 +1,116 @@
+"""Fuel schedules from the plant (plant.schedules, `sil schedules`): each line's point is what it
+says it is, checked on the gas path's own balances and the component maps."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from plant.aerothermal import make_model
+from plant.engine import engine_rates, pump_fuel_flow, stations
+from plant.schedules import (
+    LEAN_MARGIN,
+    SURGE_MARGIN,
+    frozen_state,
+    schedule_point,
+    steady_at_speed,
+)
+from plant.steady_line import running_line
+from plant.trim import SCALE
+from sil.cli import main
+
+SPEEDS = (60.0, 90.0, 100.0)
+
+
+@pytest.fixture(scope="module")
+def model_and_points():
+    model = make_model()
+    line = running_line(model)
+    return model, {n: schedule_point(model, n, line) for n in SPEEDS}
+
+
+def _rates(model, x, g):
+    dxdt = np.empty(4)
+    engine_rates(x, g, 1.0, model, dxdt)
+    return dxdt
+
+
+def _frozen(model, pt, g):
+    """The frozen-speed state at fuel g, from the steady state of the point's speed."""
+    _, steady = steady_at_speed(model, pt.n_pct, running_line(model))
+    return steady.x, frozen_state(model, steady.x, g)
+
+
+def test_steady_line_is_steady_at_its_speed(model_and_points):
+    model, points = model_and_points
+    for n, pt in points.items():
+        x, _ = _frozen(model, pt, pt.steady_fuel_kg_s)
+        assert x[3] == n
+        assert np.max(np.abs(_rates(model, x, pt.steady_fuel_kg_s) / SCALE)) < 1e-8
+        g, _ = pump_fuel_flow(x, pt.steady_v, model)
+        assert abs(g / pt.steady_fuel_kg_s - 1.0) < 1e-6  # the pump delivers it at its voltage
+
+
+def test_acceleration_line_sits_on_its_limit_with_the_gas_path_balanced(model_and_points):
+    model, points = model_and_points
+    p = model.params
+    for pt in points.values():
+        _, x = _frozen(model, pt, pt.accel_fuel_kg_s)
+        g = pt.accel_fuel_kg_s
+        st = stations(x, g, model)
+        g2, g3, g4, g6, t5 = st[0], st[1], st[2], st[3], st[6]
+        # frozen speed: both plenums and the burner in balance, the shaft accelerating
+        assert abs(g2 - g3) < 1e-6 * g2 and abs(g4 - g6) < 1e-6 * g4
+        assert abs(g4 - g3 - g) < 1e-12
+        rates = _rates(model, x, g)
+        assert np.max(np.abs(rates[:3] / SCALE[:3])) < 1e-8
+        assert rates[3] == pytest.approx(pt.accel_rate_pct_s) and rates[3] > 0.0
+        # the limit it names is the one it sits on; the others hold
+        surge_beta = np.interp(x[3], model.compressor.n_cor_pct, model.compressor.surge_beta)
+        margin = surge_beta / (x[0] / p.p0_pa) - 1.0
+        assert margin == pytest.approx(pt.accel_surge_margin, rel=1e-9)
+        if pt.accel_limited_by == "egt":
+            assert t5 == pytest.approx(1280.0, abs=1e-3) and margin >= SURGE_MARGIN
+        else:
+            assert pt.accel_limited_by == "surge" and t5 <= 1280.0
+            assert margin == pytest.approx(SURGE_MARGIN, abs=1e-6)
+        assert pump_fuel_flow(x, pt.accel_v, model)[0] == pytest.approx(g, rel=1e-6)
+
+
+def test_deceleration_floor_keeps_the_lean_margin(model_and_points):
+    model, points = model_and_points
+    for pt in points.values():
+        _, x = _frozen(model, pt, pt.decel_fuel_kg_s)
+        g = pt.decel_fuel_kg_s
+        g3 = stations(x, g, model)[1]
+        assert g / g3 == pytest.approx((1.0 + LEAN_MARGIN) * model.params.far_lean, rel=1e-6)
+        assert pt.decel_far == pytest.approx(g / g3)
+        rate = _rates(model, x, g)[3]
+        assert rate == pytest.approx(pt.decel_rate_pct_s) and rate < 0.0
+
+
+def test_lines_are_ordered_and_rise_with_speed(model_and_points):
+    _, points = model_and_points
+    for pt in points.values():
+        assert pt.decel_fuel_kg_s < pt.steady_fuel_kg_s < pt.accel_fuel_kg_s
+        assert pt.decel_v < pt.steady_v < pt.accel_v
+    lines = [[getattr(points[n], k) for n in SPEEDS] for k in ("accel_v", "steady_v", "decel_v")]
+    assert all(np.all(np.diff(v) > 0) for v in lines)
+
+
+def test_command_writes_its_table_and_refuses_bad_options(tmp_path, capsys):
+    out = tmp_path / "sched"
+    assert main(["schedules", "--speeds", "70,95", "--out", str(out), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [p["n_pct"] for p in data["points"]] == [70.0, 95.0]
+    assert data["settings"]["egt_limit_k"] == 1280.0
+    assert {f.name for f in out.iterdir()} == {"schedules.csv", "schedules.json", "schedules.png"}
+    for bad in (["--surge-margin", "1.5"], ["--speeds", "20"], ["--egt-limit", "nan"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["schedules", "--out", str(out), *bad])
+        assert exc.value.code == 2
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["schedules", "--speeds", "70", "--out", str(blocker / "sub")]) == 2
