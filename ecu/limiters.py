@@ -1,6 +1,12 @@
-"""Limit protection: limit loops combined with the speed loop by min/max selection.
+"""Limit protection: limit loops and fuel schedules combined with the speed loop by min/max
+selection.
 
-    V = max( V_decel, min( V_speed, V_egt, V_accel, V_nlimit ) ),  then [V_min, V_max] and slew.
+    V = max( V_floor(Nc), V_decel, min( V_speed, V_egt, V_accel, V_nlimit, V_line(Nc) ) ),
+    then [V_min, V_max] and slew.
+
+V_line and V_floor are the fuel schedules (acceleration line, deceleration floor) against
+corrected speed Nc, moved with the estimated pump (ecu.params: accel_line_v, decel_floor_v);
+they own the command as the acceleration and deceleration limits do (OWNER_ACCEL, OWNER_DECEL).
 
 Each limit loop is a PI in velocity (incremental) form on its own error (margin to its limit),
 started from the voltage applied last tick:  V_loop = V_applied[k-1] + Kp (e[k] - e[k-1]) +
@@ -13,9 +19,10 @@ loop's own tracking is done by the controller (PID back-calculation; MRAC has no
 
 from __future__ import annotations
 
-from ecu.fixedpoint import add_sat, clamp, sat32, sub_sat
+from ecu.fixedpoint import add_sat, clamp, div_trunc, sat32, sub_sat
 from ecu.params import FirmwareParams
-from ecu.state import EcuState
+from ecu.state import LAM, EcuState
+from ecu.tables import interp_uniform
 
 OWNER_SPEED = 0
 OWNER_EGT = 1
@@ -37,6 +44,17 @@ def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
         return
     y += (p.egt_lead_cf_q16 * (x_q12 - y)) >> 16
     s.egt_lead_q12 = sat32(y + ((p.egt_lead_ctc_q16 * (egt_dk - s.egt_dk)) >> 4))
+
+
+def schedule_v(s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
+    """A fuel schedule's pump voltage at speed n_q24 (Q7.24): the table at corrected speed, for
+    the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel."""
+    n_cor = sat32((n_q24 * p.ncor_k_q24) >> 24)
+    v = interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
+    lam = s.theta_q24[LAM]
+    if not p.pump_scaling_on or lam <= 0:
+        return v
+    return sat32(p.pump_dead_q24 + div_trunc((v - p.pump_dead_q24) * p.lambda_comm_q24, lam))
 
 
 def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:
@@ -83,6 +101,11 @@ def select_voltage(
             v = v_nl
             owner = OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
+    if p.fuel_schedules_on:
+        v_line = schedule_v(s, p, p.accel_line_q24, n_q24)
+        if v_line < v:
+            v = v_line
+            owner = OWNER_ACCEL
     e = add_sat(rate_q24, p.decel_max_q24)  # margin above the deceleration limit
     if e < p.rate_engage_q24:
         v_dec = _loop(v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
@@ -90,6 +113,11 @@ def select_voltage(
             v = v_dec
             owner = OWNER_DECEL
     s.dec_e_prev_q24 = e
+    if p.fuel_schedules_on:
+        v_floor = schedule_v(s, p, p.decel_floor_q24, n_q24)
+        if v_floor > v:
+            v = v_floor
+            owner = OWNER_DECEL
     v_lim = clamp(v, p.v_min_q24, p.v_max_q24)
     s.v_saturated = 1 if v_lim != v else 0  # at a voltage limit (the slew alone is not)
     v_lim = clamp(v_lim, v_prev - p.v_slew_q24, v_prev + p.v_slew_q24)

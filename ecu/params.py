@@ -15,6 +15,7 @@ Discretisation (all stated here, computed for the configured rate):
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, fields, replace
 
@@ -40,6 +41,10 @@ CTRL_MRAC = 0
 CTRL_PID = 1
 CTRL_OPEN_LOOP = 2
 CTRL_PI = 3
+SCHED_POINTS = 12  # fuel schedule breakpoints: 45, 50, ..., 100 %N corrected
+SCHED_N0_PCT = 45.0
+SCHED_STEP_PCT = 5.0
+T_STD_K = 288.15
 
 # eq. 3.23: fast-model parameters identified offline on the aero-thermal model
 AP_ROW2_EQ_3_23 = (-1.8054, -2.3360)
@@ -156,6 +161,20 @@ class EcuParams:
     v_min: float = 1.0
     v_max: float = 20.0  # within 95 % duty of a sagging 6S pack (22.2 V nominal)
     v_slew_v_s: float = 20.0
+    # fuel schedules against corrected speed N / sqrt(inlet_temp_k / 288.15), at SCHED_N0_PCT +
+    # k SCHED_STEP_PCT, as the pump voltage of a commissioned pump (`sil schedules` on our plant:
+    # EGT 1280 K, surge margin 10 %, lean blow-out margin 30 %); with pump_scaling_on the ECU
+    # moves them with its pump: V_d + (V - V_d) Lambda_c / Lambda-hat, the same fuel. Within the
+    # limit loops (limiters_on): the acceleration line caps the pump voltage from the first tick,
+    # the deceleration floor holds it up against every other loop
+    fuel_schedules_on: bool = True
+    accel_line_v: tuple[float, ...] = (
+        6.17, 7.34, 8.29, 9.29, 10.31, 11.37, 12.46, 13.57, 14.7, 15.85, 17.01, 18.18,
+    )  # fmt: skip
+    decel_floor_v: tuple[float, ...] = (
+        2.78, 2.99, 3.22, 3.46, 3.71, 3.97, 4.25, 4.54, 4.83, 5.14, 5.46, 5.78,
+    )  # fmt: skip
+    inlet_temp_k: float = 288.15  # no inlet sensor: the day's temperature, set by the operator
 
     # pump driver
     duty_min: float = 0.0
@@ -202,7 +221,8 @@ class EcuParams:
 
 
 def _doc_common(**kw: object) -> EcuParams:
-    """Document reproduction: limiters and robustness off, rate over +-1 tick at 100 Hz."""
+    """Document reproduction: limiters, fuel schedules and robustness off, rate over +-1 tick
+    at 100 Hz."""
     base = EcuParams(
         lambda_floor_on=False,
         dead_zone_on=False,
@@ -211,6 +231,7 @@ def _doc_common(**kw: object) -> EcuParams:
         p12=0.0,
         limiters_on=False,
         rate_window_s=0.02,
+        fuel_schedules_on=False,
     )
     return replace(base, **kw)  # type: ignore[arg-type]
 
@@ -449,6 +470,18 @@ def validate(p: EcuParams) -> None:
     ):
         _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
     _check(min(p.observer_l) >= 0.0, "observer_l", p.observer_l, "must be >= 0")
+    for name in ("accel_line_v", "decel_floor_v"):
+        table = getattr(p, name)
+        _check(len(table) == SCHED_POINTS, name, table, f"needs {SCHED_POINTS} values")
+        _check(all(0.0 <= v <= 30.0 for v in table), name, table, "every value in 0-30 V")
+        _check(all(b >= a for a, b in itertools.pairwise(table)), name, table, "must not fall")
+    _check(
+        all(d < a for d, a in zip(p.decel_floor_v, p.accel_line_v, strict=True)),
+        "decel_floor_v",
+        p.decel_floor_v,
+        "must lie under accel_line_v at every speed",
+    )
+    _check(223.0 <= p.inlet_temp_k <= 333.0, "inlet_temp_k", p.inlet_temp_k, "must be in 223-333 K")
     _check(
         0.2 <= p.pi_bandwidth <= 10.0, "pi_bandwidth", p.pi_bandwidth, "must be in [0.2, 10] rad/s"
     )
@@ -485,6 +518,8 @@ class FirmwareParams:
         "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
         "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
         "pi_n0_q24", "pi_step_q24", "pi_kp_q24", "pi_ki_dt_q28",
+        "fuel_schedules_on", "sched_n0_q24", "sched_step_q24", "ncor_k_q24",
+        "accel_line_q24", "decel_floor_q24", "pump_dead_q24",
         "idle_q24", "demand_max_q24",
         "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
         "egt_kp_q24", "egt_ki_dt_q24", "egt_lead_cf_q16", "egt_lead_ctc_q16", "egt_max_dk",
@@ -636,6 +671,13 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         pi_step_q24=_q(PI_STEP_PCT, Q24, "pi_bandwidth"),
         pi_kp_q24=tuple(_q(pt.kp, Q24, "pi_bandwidth") for pt in pi),
         pi_ki_dt_q28=tuple(_q(pt.ki * dt, Q28, "pi_bandwidth") for pt in pi),
+        fuel_schedules_on=int(p.fuel_schedules_on),
+        sched_n0_q24=_q(SCHED_N0_PCT, Q24, "accel_line_v"),
+        sched_step_q24=_q(SCHED_STEP_PCT, Q24, "accel_line_v"),
+        ncor_k_q24=_q(math.sqrt(T_STD_K / p.inlet_temp_k), Q24, "inlet_temp_k"),
+        accel_line_q24=tuple(_q(v, Q24, "accel_line_v") for v in p.accel_line_v),
+        decel_floor_q24=tuple(_q(v, Q24, "decel_floor_v") for v in p.decel_floor_v),
+        pump_dead_q24=_q(p.pump_dead_v, Q24, "pump_dead_v"),
         idle_q24=_q(p.idle_pct, Q24, "idle_pct"),
         demand_max_q24=_q(p.demand_max_pct, Q24, "demand_max_pct"),
         limiters_on=int(p.limiters_on),

@@ -10,22 +10,15 @@ I = u_applied - Kp e, so the loop resumes bumplessly when a limit loop lets go.
 
 from __future__ import annotations
 
-from ecu.fixedpoint import acc_q40, div_trunc, sat32
+from ecu.fixedpoint import acc_q40, sat32
 from ecu.params import FirmwareParams
-from ecu.pi_design import PI_POINTS
 from ecu.state import PID_I, EcuState
+from ecu.tables import interp_uniform
 
 
 def scheduled(p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
     """table at speed n_q24 (Q7.24 %N), linear between the scheduling speeds."""
-    x = n_q24 - p.pi_n0_q24
-    if x <= 0:
-        return table[0]
-    k = x // p.pi_step_q24
-    if k >= PI_POINTS - 1:
-        return table[PI_POINTS - 1]
-    f = x - k * p.pi_step_q24
-    return sat32(table[k] + div_trunc((table[k + 1] - table[k]) * f, p.pi_step_q24))
+    return interp_uniform(table, p.pi_n0_q24, p.pi_step_q24, n_q24)
 
 
 def pi_control(s: EcuState, p: FirmwareParams, e: int, n_q24: int) -> int:

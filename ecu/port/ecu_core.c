@@ -353,23 +353,30 @@ static void pid_track(ecu_t *e, int32_t err, int32_t dv, int32_t u_applied)
     s->theta_ext[ECU_PID_I] = 0;
 }
 
-/* ---- ecu/pi.py ----------------------------------------------------------------------------- */
+/* ---- ecu/tables.py ------------------------------------------------------------------------- */
 
-static int32_t scheduled(ecu_t *e, const int32_t *table, int32_t n_q24)
+static int32_t interp_uniform(ecu_t *e, const int32_t *table, int32_t n, int32_t x0_q24,
+                              int32_t step_q24, int32_t x_q24)
 {
-    const ecu_params_t *p = e->p;
-    int64_t x = (int64_t)n_q24 - p->pi_n0_q24;
+    int64_t x = (int64_t)x_q24 - x0_q24;
     int64_t k, f;
     if (x <= 0) {
         return table[0];
     }
-    k = x / p->pi_step_q24;
-    if (k >= ECU_PI_POINTS - 1) {
-        return table[ECU_PI_POINTS - 1];
+    k = x / step_q24;
+    if (k >= n - 1) {
+        return table[n - 1];
     }
-    f = x - k * p->pi_step_q24;
+    f = x - k * step_q24;
     return sat32(e, (int64_t)table[k] +
-                        div_trunc(e, ((int64_t)table[k + 1] - table[k]) * f, p->pi_step_q24));
+                        div_trunc(e, ((int64_t)table[k + 1] - table[k]) * f, step_q24));
+}
+
+/* ---- ecu/pi.py ----------------------------------------------------------------------------- */
+
+static int32_t scheduled(ecu_t *e, const int32_t *table, int32_t n_q24)
+{
+    return interp_uniform(e, table, ECU_PI_POINTS, e->p->pi_n0_q24, e->p->pi_step_q24, n_q24);
 }
 
 static int32_t pi_control(ecu_t *e, int32_t err, int32_t n_q24)
@@ -418,6 +425,20 @@ static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_pre
     return sat32(e, v_prev + ((kp_q24 * (err - err_prev)) >> 24) + ((ki_dt_q24 * err) >> 24));
 }
 
+static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24)
+{
+    const ecu_params_t *p = e->p;
+    int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
+    int32_t v = interp_uniform(e, table, ECU_SCHED_POINTS, p->sched_n0_q24, p->sched_step_q24,
+                               n_cor);
+    int32_t lam = e->s.theta_q24[ECU_LAM];
+    if (!p->pump_scaling_on || lam <= 0) {
+        return v;
+    }
+    return sat32(e, (int64_t)p->pump_dead_q24 +
+                        div_trunc(e, ((int64_t)v - p->pump_dead_q24) * p->lambda_comm_q24, lam));
+}
+
 static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, int egt_ok,
                               int32_t n_q24, int32_t rate_q24)
 {
@@ -463,6 +484,13 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         }
     }
     s->nlim_e_prev_q24 = err;
+    if (p->fuel_schedules_on) {
+        v_loop = schedule_v(e, p->accel_line_q24, n_q24);
+        if (v_loop < v) {
+            v = v_loop;
+            owner = OWNER_ACCEL;
+        }
+    }
     err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above the decel limit */
     if (err < p->rate_engage_q24) {
         v_loop = limit_loop(e, v_prev, -(int64_t)err, -(int64_t)s->dec_e_prev_q24, p->rate_kp_q24,
@@ -473,6 +501,13 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         }
     }
     s->dec_e_prev_q24 = err;
+    if (p->fuel_schedules_on) {
+        v_loop = schedule_v(e, p->decel_floor_q24, n_q24);
+        if (v_loop > v) {
+            v = v_loop;
+            owner = OWNER_DECEL;
+        }
+    }
     v_lim = (int32_t)clamp(v, p->v_min_q24, p->v_max_q24);
     s->v_saturated = v_lim != v ? 1 : 0;
     v_lim = (int32_t)clamp(v_lim, (int64_t)v_prev - p->v_slew_q24, (int64_t)v_prev + p->v_slew_q24);
@@ -890,6 +925,9 @@ int ecu_params_load(ecu_params_t *p, const int32_t *words, size_t n)
     }
     if (p->pi_step_q24 < 1) {
         return (int)(&p->pi_step_q24 - dst);
+    }
+    if (p->sched_step_q24 < 1) {
+        return (int)(&p->sched_step_q24 - dst);
     }
     return -1;
 }

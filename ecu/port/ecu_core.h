@@ -44,6 +44,7 @@ extern "C" {
 
 #define ECU_N_THETA 12     /* adaptive parameters and slow integrators (ecu/state.py) */
 #define ECU_PI_POINTS 9    /* scheduling speeds of the PI baseline (ecu/pi_design.py) */
+#define ECU_SCHED_POINTS 12 /* fuel schedule breakpoints (ecu/params.py SCHED_POINTS) */
 #define ECU_RATE_BUF_LEN 52 /* speed history ring: 0.05 s at 1000 Hz, +2 samples */
 
 /* slots of theta_q24 / theta_ext (ecu/state.py) */
@@ -86,7 +87,9 @@ enum {
     X(refm11_q24) X(refm12_q24) X(refm21_q24) X(refm22_q24) X(refh1_q24) X(refh2_q24) \
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
     X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) \
-    X(pi_n0_q24) X(pi_step_q24) A(pi_kp_q24, ECU_PI_POINTS) A(pi_ki_dt_q28, ECU_PI_POINTS) X(idle_q24) X(demand_max_q24) \
+    X(pi_n0_q24) X(pi_step_q24) A(pi_kp_q24, ECU_PI_POINTS) A(pi_ki_dt_q28, ECU_PI_POINTS) \
+    X(fuel_schedules_on) X(sched_n0_q24) X(sched_step_q24) X(ncor_k_q24) \
+    A(accel_line_q24, ECU_SCHED_POINTS) A(decel_floor_q24, ECU_SCHED_POINTS) X(pump_dead_q24) X(idle_q24) X(demand_max_q24) \
     X(limiters_on) X(egt_limit_dk) X(egt_engage_q24) X(rate_engage_q24) \
     X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_lead_cf_q16) X(egt_lead_ctc_q16) \
     X(egt_max_dk) X(egt_max_ticks) \

@@ -1,0 +1,112 @@
+"""The fuel schedules in the firmware: the acceleration line caps the pump command from the first
+tick, the deceleration floor holds it up, both move with the estimated pump and the inlet
+temperature; their defaults are what `sil schedules` derives from the plant."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from ecu.limiters import OWNER_ACCEL, OWNER_DECEL, schedule_v
+from ecu.params import (
+    SCHED_N0_PCT,
+    SCHED_POINTS,
+    SCHED_STEP_PCT,
+    EcuParams,
+    ParamError,
+    compile_params,
+    preset,
+)
+from ecu.state import LAM, EcuState
+from plant.aerothermal import make_model
+from plant.schedules import schedule_point
+from plant.steady_line import running_line
+
+Q = float(1 << 24)
+SPEEDS = SCHED_N0_PCT + SCHED_STEP_PCT * np.arange(SCHED_POINTS)
+
+
+def _expected(p: EcuParams, table: tuple[float, ...], n: float, lam: float) -> float:
+    """The schedule's voltage by its definition, in floats."""
+    v = float(np.interp(n * math.sqrt(288.15 / p.inlet_temp_k), SPEEDS, table))
+    return p.pump_dead_v + (v - p.pump_dead_v) * p.lambda_commissioned / lam
+
+
+def test_defaults_are_what_the_plant_allows() -> None:
+    p = EcuParams()
+    model = make_model()
+    line = running_line(model)
+    for k in (1, 6, 11):  # 50, 75 and 100 %N
+        pt = schedule_point(model, float(SPEEDS[k]), line, egt_limit_k=p.egt_limit_k)
+        assert abs(pt.accel_v - p.accel_line_v[k]) < 0.006
+        assert abs(pt.decel_v - p.decel_floor_v[k]) < 0.006
+
+
+@pytest.mark.parametrize(("inlet_k", "lam_ratio"), [(288.15, 1.0), (318.0, 0.8), (253.0, 1.2)])
+def test_schedule_voltage_follows_its_definition(inlet_k: float, lam_ratio: float) -> None:
+    p = preset("default", inlet_temp_k=inlet_k)
+    fw = compile_params(p)
+    s = EcuState()
+    s.theta_q24[LAM] = round(p.lambda_commissioned * lam_ratio * Q)
+    lam = s.theta_q24[LAM] / Q
+    for n in np.linspace(30.0, 110.0, 81):
+        for table, raw in (
+            (p.accel_line_v, fw.accel_line_q24),
+            (p.decel_floor_v, fw.decel_floor_q24),
+        ):
+            got = schedule_v(s, fw, raw, round(n * Q)) / Q
+            assert abs(got - _expected(p, table, n, lam)) < 1e-5, (n, table is p.accel_line_v)
+
+
+def _step_run(make_rig: Any, schedules: bool, demand_cpct: int, ticks: int) -> list[tuple]:
+    p = preset("default", fuel_schedules_on=schedules, accel_max_pct_s=100.0, decel_max_pct_s=100.0)
+    rig = make_rig(params=p)
+    rig.step(2)
+    rows = []
+    for _ in range(ticks):
+        n = rig.plant.n_pct  # the speed the ECU sees this tick (to within an rpm)
+        o = rig.step(1, demand_cpct=demand_cpct)
+        lam = rig.ecu.s.theta_q24[LAM] / Q
+        rows.append((n, o.pump_mv / 1000.0, o.owner, lam))
+    return rows
+
+
+def test_acceleration_line_caps_a_large_step_from_the_first_tick(make_rig: Any) -> None:
+    p = EcuParams()
+    capped = _step_run(make_rig, True, 10000, 300)
+    free = _step_run(make_rig, False, 10000, 300)
+    over = [v - _expected(p, p.accel_line_v, n, lam) for n, v, _, lam in capped]
+    assert max(over) < 0.002  # V: the line holds on every tick (the slew may keep it lower)
+    assert any(o == OWNER_ACCEL for _, _, o, _ in capped[:5])  # from the first ticks
+    assert max(v - _expected(p, p.accel_line_v, n, lam) for n, v, _, lam in free) > 1.0
+
+
+def test_deceleration_floor_holds_a_large_cut(make_rig: Any) -> None:
+    p = EcuParams()
+    held = _step_run(make_rig, True, 3500, 300)
+    free = _step_run(make_rig, False, 3500, 300)
+    under = [_expected(p, p.decel_floor_v, n, lam) - v for n, v, _, lam in held]
+    assert max(under) < 0.002
+    assert any(o == OWNER_DECEL for _, _, o, _ in held)
+    assert max(_expected(p, p.decel_floor_v, n, lam) - v for n, v, _, lam in free) > 1.0
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "why"),
+    [
+        ("accel_line_v", (10.0,) * 11, "needs 12 values"),
+        ("accel_line_v", (10.0,) * 11 + (9.0,), "must not fall"),
+        ("decel_floor_v", (11.0,) * 12, "under accel_line_v"),
+        ("accel_line_v", (10.0,) * 11 + (math.nan,), "not finite"),
+        ("inlet_temp_k", 400.0, "223-333 K"),
+    ],
+)
+def test_bad_schedules_are_refused_naming_the_field(field: str, value: Any, why: str) -> None:
+    p = replace(EcuParams(), accel_line_v=(10.0,) * 12, decel_floor_v=(3.0,) * 12)
+    with pytest.raises(ParamError, match=field) as exc:
+        compile_params(replace(p, **{field: value}))
+    assert why in str(exc.value)
