@@ -16,13 +16,13 @@ from dataclasses import dataclass, replace
 
 import msgpack
 
-from ecu.params import EcuParams, FirmwareParams, compile_params
+from ecu.params import SCHED_POINTS, EcuParams, FirmwareParams, compile_params
 from ecu.service.crc import crc16
 
 
 @dataclass(frozen=True)
 class ParamSpec:
-    name: str  # field, or field[index] for an element of a pair
+    name: str  # field, or field[index] for an element of a pair or table
     unit: str
     frac_bits: int  # Q format: value = raw / 2**frac_bits
     lo: float  # limits in engineering units
@@ -105,6 +105,12 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("limiters_on", "bool", 0, 0, 1, False),
     _s("rate_filter_on", "bool", 0, 0, 1, False),
     _s("rate_filter_bw", "rad/s", Q24, 2.0, 50.0, False),
+    # fuel schedules: breakpoints at 45, 50, ..., 100 %N corrected (ecu.params.SCHED_POINTS);
+    # a set whose tables fall or cross is refused whole (ecu.params.validate)
+    _s("fuel_schedules_on", "bool", 0, 0, 1, False),
+    _s("inlet_temp_k", "K", Q16, 223.0, 333.0, False),
+    *(_s(f"accel_line_v[{k}]", "V", Q24, 0.0, 30.0, False) for k in range(SCHED_POINTS)),
+    *(_s(f"decel_floor_v[{k}]", "V", Q24, 0.0, 30.0, False) for k in range(SCHED_POINTS)),
 )
 BY_NAME = {spec.name: spec for spec in TABLE}
 

@@ -89,6 +89,19 @@ def test_write_needs_the_unlock_and_is_range_checked(rig):
     assert c.identify()["param_crc"] == _expected_set_crc(EcuParams(pid_kp=3.25))
 
 
+def test_a_fuel_schedule_breakpoint_is_written_and_checked_with_its_table(rig):
+    c = rig.client
+    c.unlock()
+    with pytest.raises(ServiceRequestError, match=r"INVALID: accel_line_v\[3\]: .*must not fall"):
+        c.set("accel_line_v[3]", 12.0)  # above the next breakpoint (10.31 V)
+    with pytest.raises(
+        ServiceRequestError, match=r"INVALID: decel_floor_v\[11\]: .*under accel_line_v"
+    ):
+        c.set("decel_floor_v[11]", 18.5)  # above the acceleration line there (18.18 V)
+    assert c.set("accel_line_v[3]", 9.5)["value"] == pytest.approx(9.5)
+    assert rig.ecu.p.accel_line_q24[3] == round(9.5 * 2**24)  # the firmware flies it
+
+
 def test_unsafe_parameters_are_refused_in_run(rig):
     rig.engine_running()
     rig.ticks(3)
