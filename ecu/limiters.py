@@ -48,12 +48,13 @@ def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
 
 def schedule_v(s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
     """A fuel schedule's pump voltage at speed n_q24 (Q7.24): the table at corrected speed, for
-    the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel."""
+    the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel
+    (Lambda-hat within the schedule's pump range)."""
     n_cor = sat32((n_q24 * p.ncor_k_q24) >> 24)
     v = interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
-    lam = s.theta_q24[LAM]
-    if not p.pump_scaling_on or lam <= 0:
+    if not p.pump_scaling_on:
         return v
+    lam = clamp(s.theta_q24[LAM], p.sched_lam_lo_q24, p.sched_lam_hi_q24)
     return sat32(p.pump_dead_q24 + div_trunc((v - p.pump_dead_q24) * p.lambda_comm_q24, lam))
 
 

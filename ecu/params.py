@@ -164,10 +164,12 @@ class EcuParams:
     # fuel schedules against corrected speed N / sqrt(inlet_temp_k / 288.15), at SCHED_N0_PCT +
     # k SCHED_STEP_PCT, as the pump voltage of a commissioned pump (`sil schedules` on our plant:
     # EGT 1280 K, surge margin 10 %, lean blow-out margin 30 %); with pump_scaling_on the ECU
-    # moves them with its pump: V_d + (V - V_d) Lambda_c / Lambda-hat, the same fuel. Within the
-    # limit loops (limiters_on): the acceleration line caps the pump voltage from the first tick,
-    # the deceleration floor holds it up against every other loop
+    # moves them with its pump: V_d + (V - V_d) Lambda_c / Lambda-hat, the same fuel, Lambda-hat
+    # taken within schedule_pump_range of Lambda_c (an estimate in a transient must not raise the
+    # floor into an over-temperature). Within the limit loops (limiters_on): the acceleration
+    # line caps the pump voltage from the first tick, the floor holds it up against every other
     fuel_schedules_on: bool = True
+    schedule_pump_range: tuple[float, float] = (0.7, 1.3)
     accel_line_v: tuple[float, ...] = (
         6.17, 7.34, 8.29, 9.29, 10.31, 11.37, 12.46, 13.57, 14.7, 15.85, 17.01, 18.18,
     )  # fmt: skip
@@ -481,6 +483,9 @@ def validate(p: EcuParams) -> None:
         p.decel_floor_v,
         "must lie under accel_line_v at every speed",
     )
+    lo, hi = p.schedule_pump_range
+    _check(0.3 <= lo <= 1.0 <= hi <= 3.0, "schedule_pump_range", p.schedule_pump_range,
+           "needs 0.3 <= low <= 1 <= high <= 3")  # fmt: skip
     _check(223.0 <= p.inlet_temp_k <= 333.0, "inlet_temp_k", p.inlet_temp_k, "must be in 223-333 K")
     _check(
         0.2 <= p.pi_bandwidth <= 10.0, "pi_bandwidth", p.pi_bandwidth, "must be in [0.2, 10] rad/s"
@@ -519,7 +524,8 @@ class FirmwareParams:
         "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
         "pi_n0_q24", "pi_step_q24", "pi_kp_q24", "pi_ki_dt_q28",
         "fuel_schedules_on", "sched_n0_q24", "sched_step_q24", "ncor_k_q24",
-        "accel_line_q24", "decel_floor_q24", "pump_dead_q24",
+        "accel_line_q24", "decel_floor_q24", "pump_dead_q24", "sched_lam_lo_q24",
+        "sched_lam_hi_q24",
         "idle_q24", "demand_max_q24",
         "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
         "egt_kp_q24", "egt_ki_dt_q24", "egt_lead_cf_q16", "egt_lead_ctc_q16", "egt_max_dk",
@@ -678,6 +684,12 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         accel_line_q24=tuple(_q(v, Q24, "accel_line_v") for v in p.accel_line_v),
         decel_floor_q24=tuple(_q(v, Q24, "decel_floor_v") for v in p.decel_floor_v),
         pump_dead_q24=_q(p.pump_dead_v, Q24, "pump_dead_v"),
+        sched_lam_lo_q24=_q(
+            p.schedule_pump_range[0] * p.lambda_commissioned, Q24, "schedule_pump_range"
+        ),
+        sched_lam_hi_q24=_q(
+            p.schedule_pump_range[1] * p.lambda_commissioned, Q24, "schedule_pump_range"
+        ),
         idle_q24=_q(p.idle_pct, Q24, "idle_pct"),
         demand_max_q24=_q(p.demand_max_pct, Q24, "demand_max_pct"),
         limiters_on=int(p.limiters_on),

@@ -431,10 +431,11 @@ static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24)
     int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
     int32_t v = interp_uniform(e, table, ECU_SCHED_POINTS, p->sched_n0_q24, p->sched_step_q24,
                                n_cor);
-    int32_t lam = e->s.theta_q24[ECU_LAM];
-    if (!p->pump_scaling_on || lam <= 0) {
+    int32_t lam;
+    if (!p->pump_scaling_on) {
         return v;
     }
+    lam = (int32_t)clamp(e->s.theta_q24[ECU_LAM], p->sched_lam_lo_q24, p->sched_lam_hi_q24);
     return sat32(e, (int64_t)p->pump_dead_q24 +
                         div_trunc(e, ((int64_t)v - p->pump_dead_q24) * p->lambda_comm_q24, lam));
 }

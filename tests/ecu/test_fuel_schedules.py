@@ -33,7 +33,8 @@ SPEEDS = SCHED_N0_PCT + SCHED_STEP_PCT * np.arange(SCHED_POINTS)
 def _expected(p: EcuParams, table: tuple[float, ...], n: float, lam: float) -> float:
     """The schedule's voltage by its definition, in floats."""
     v = float(np.interp(n * math.sqrt(288.15 / p.inlet_temp_k), SPEEDS, table))
-    return p.pump_dead_v + (v - p.pump_dead_v) * p.lambda_commissioned / lam
+    lo, hi = (r * p.lambda_commissioned for r in p.schedule_pump_range)
+    return p.pump_dead_v + (v - p.pump_dead_v) * p.lambda_commissioned / min(max(lam, lo), hi)
 
 
 def test_defaults_are_what_the_plant_allows() -> None:
@@ -46,7 +47,9 @@ def test_defaults_are_what_the_plant_allows() -> None:
         assert abs(pt.decel_v - p.decel_floor_v[k]) < 0.006
 
 
-@pytest.mark.parametrize(("inlet_k", "lam_ratio"), [(288.15, 1.0), (318.0, 0.8), (253.0, 1.2)])
+@pytest.mark.parametrize(
+    ("inlet_k", "lam_ratio"), [(288.15, 1.0), (318.0, 0.8), (253.0, 1.2), (288.15, 0.2)]
+)
 def test_schedule_voltage_follows_its_definition(inlet_k: float, lam_ratio: float) -> None:
     p = preset("default", inlet_temp_k=inlet_k)
     fw = compile_params(p)
@@ -103,6 +106,7 @@ def test_deceleration_floor_holds_a_large_cut(make_rig: Any) -> None:
         ("decel_floor_v", (11.0,) * 12, "under accel_line_v"),
         ("accel_line_v", (10.0,) * 11 + (math.nan,), "not finite"),
         ("inlet_temp_k", 400.0, "223-333 K"),
+        ("schedule_pump_range", (1.1, 1.3), "low <= 1"),
     ],
 )
 def test_bad_schedules_are_refused_naming_the_field(field: str, value: Any, why: str) -> None:
