@@ -19,6 +19,7 @@ TARGETS = {
     "sil": "sil.bench",
     "service": "sil.console.bench",
     "port": "sil.port_bench",
+    "realtime": "sil.realtime_bench",
 }
 
 

@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
     from ecu.node import EcuNode
     from ecu.params import ParamError, compile_params, preset
     from protocol.bus import BusSpecError, open_bus
-    from protocol.node import run_lockstep, run_realtime
+    from protocol.node import realtime_scheduling, run_lockstep, run_realtime
     from protocol.run_bus import RunBus
 
     try:
@@ -183,7 +183,9 @@ def run(args: argparse.Namespace) -> int:
         if args.mode == "lockstep":
             stats = run_lockstep(node, bus, guard_s=args.guard, should_stop=stop.is_set)
         else:
+            policy = realtime_scheduling()
             stats = run_realtime(node, bus, 1.0 / params.rate_hz, should_stop=stop.is_set)
+            stats.scheduling = policy
     finally:
         bus.shutdown()
         if node.service is not None:

@@ -158,7 +158,7 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
 
 def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
-    from protocol.node import run_lockstep, run_realtime
+    from protocol.node import realtime_scheduling, run_lockstep, run_realtime
     from protocol.run_bus import RunBus
 
     _skip_blas_probe()
@@ -192,7 +192,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         if args.realtime:
+            policy = realtime_scheduling()
             stats = run_realtime(node, bus, node.plant.config.ecu_period_s, should_stop=stop.is_set)
+            stats.scheduling = policy
         else:
             stats = run_lockstep(node, bus, guard_s=args.guard_s, should_stop=stop.is_set)
     except KeyboardInterrupt:

@@ -1,0 +1,87 @@
+"""`sil bench realtime`: how well the nodes keep their periods in real time, at 100 Hz and 1 kHz.
+
+Each case is ``sil run SCENARIO --mode realtime`` in a process of its own, as a user runs it: the
+plant and the ECU as separate processes on the run's loopback bus, both at the case's ECU rate
+(the plant steps its 1 ms steps within a period), the recorder writing beside them. From each
+node's summary: the lateness of its period starts against their absolute deadlines (p50, p99,
+max), its overruns (periods started more than a period late) and the scheduling it had. The
+machine's load before the runs is given: the figures are of the machine as it was.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from sil import scenario
+from sil.bench import BenchError
+
+SCENARIO = "thesis-5.4-staircase"
+RATES_HZ = (100, 1000)
+DURATION_S = 30.0
+QUICK_S = 10.0
+TARGETS_MS = {"p50": 0.05, "p99": 0.3}  # period-start lateness, at most; and no overrun
+NODES = ("plant", "ecu")
+
+
+def _case_file(tmp: Path, rate_hz: int, seconds: float) -> Path:
+    s = scenario.load(SCENARIO)
+    assert s.path is not None
+    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {seconds:g}", s.path.read_text())
+    if cut != 1:
+        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to set")
+    path = tmp / f"realtime-{rate_hz}.toml"
+    path.write_text(f"ecu_rate_hz = {rate_hz}\n{text}")
+    return path
+
+
+def _run_case(path: Path, out: Path) -> dict:
+    cmd = [sys.executable, "-m", "sil.cli", "run", str(path), "--mode", "realtime"]
+    proc = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True, text=True)
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        summary = None
+    if summary is None or summary.get("status") != "completed":
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
+        raise BenchError(f"sil run {path.name} --mode realtime (exit {proc.returncode}): {tail}")
+    return summary
+
+
+def run(quick: bool = False) -> dict:
+    seconds = QUICK_S if quick else DURATION_S
+    figures: dict = {
+        "scenario": SCENARIO,
+        "seconds_per_case": seconds,
+        "cpus": os.cpu_count(),
+        "load_average_1min_before": round(os.getloadavg()[0], 2),
+    }
+    met = True
+    with tempfile.TemporaryDirectory() as tmp:
+        for rate in RATES_HZ:
+            summary = _run_case(_case_file(Path(tmp), rate, seconds), Path(tmp) / f"out-{rate}")
+            figures[f"missed_ticks_{rate}hz"] = summary.get("missed_ticks")
+            for node in NODES:
+                stats = summary.get("nodes", {}).get(node, {})
+                late = stats.get("jitter_ms")
+                if late is None:
+                    raise BenchError(f"{rate} Hz: the {node} node reported no period lateness")
+                key = f"{node}_{rate}hz"
+                for q in ("p50", "p99", "max"):
+                    figures[f"{key}_lateness_{q}_ms"] = round(late[q], 4)
+                figures[f"{key}_periods"] = stats.get("periods")
+                figures[f"{key}_overruns"] = stats.get("overruns")
+                figures[f"{key}_scheduling"] = stats.get("scheduling")
+                met = met and all(late[q] <= TARGETS_MS[q] for q in TARGETS_MS)
+                met = met and stats.get("overruns") == 0
+    figures["targets"] = (
+        f"period-start lateness p50 <= {TARGETS_MS['p50']} ms, p99 <= {TARGETS_MS['p99']} ms, "
+        "no overrun, each node at each rate"
+    )
+    figures["targets_met"] = met
+    return figures
