@@ -5,6 +5,8 @@ Specs:
     udp                        loopback multicast with a group and port of this run's own
     udp:239.x.y.z[@PORT]       loopback multicast on a named group (default port 43113)
     virtual:NAME               python-can's in-process virtual bus
+    slcan-device:PATH          be a USB-CAN adapter: a pseudo-terminal speaking slcan, linked
+                               at PATH for the host (slcan:PATH; protocol.slcan_device)
     INTERFACE:CHANNEL          any other python-can interface (pcan:PCAN_USBBUS1, kvaser:0,
                                slcan:/dev/ttyACM0, ...) for hardware in the loop
 
@@ -77,6 +79,8 @@ def parse_spec(spec: str) -> BusSpec:
         raise BusSpecError(
             f"bus spec '{spec}': use udp:GROUP[@PORT] (kept on this host) for udp_multicast"
         )
+    if interface == "slcan-device":
+        return BusSpec(interface, channel)
     if interface not in _known_interfaces():
         known = ", ".join(sorted((_known_interfaces() - {"udp_multicast"}) | {"udp"}))
         raise BusSpecError(f"bus spec '{spec}': unknown interface '{interface}' (known: {known})")
@@ -110,6 +114,10 @@ def open_bus(spec: str | BusSpec, **kwargs) -> can.BusABC:
             return LoopbackUdpMulticastBus(
                 parsed.channel, parsed.port or UDP_DEFAULT_PORT, **kwargs
             )
+        if parsed.interface == "slcan-device":
+            from protocol.slcan_device import SlcanDeviceBus
+
+            return SlcanDeviceBus(parsed.channel, **kwargs)
         if parsed.interface == "socketcan" and not socketcan_is_up(parsed.channel):
             raise BusSpecError(
                 f"bus {parsed}: network interface '{parsed.channel}' does not exist or is down "
