@@ -19,9 +19,10 @@ rate_filter_bw): det(zI - A + K C) = (z - 1 + c)^3.
 
 from __future__ import annotations
 
+from ecu.fast_model import input_accel_q16
 from ecu.fixedpoint import sat32
 from ecu.params import FirmwareParams
-from ecu.state import LAM, TH1, TH2, EcuState
+from ecu.state import EcuState
 
 
 def rate_filter_start(s: EcuState, dn: int) -> None:
@@ -34,18 +35,11 @@ def rate_filter_start(s: EcuState, dn: int) -> None:
 def rate_filter_step(s: EcuState, p: FirmwareParams, dn: int, u: int, valid: int) -> None:
     """Advance one tick with the speed deviation dn and the voltage deviation u applied over
     the last tick (Q7.24); without a valid sample, predict."""
-    th = s.theta_q24
     n = s.rf_n_q24
     v = s.rf_v_q24
     a = s.rf_a_q16
     e = sat32(dn - n) if valid else 0
-    th2_n = (th[TH2] * n) >> 24
-    acc_q16 = sat32(
-        a
-        + ((th[LAM] * u) >> 32)
-        + ((((th[TH1] * n) >> 24) * u) >> 32)
-        + ((((th2_n * n) >> 24) * u) >> 32)
-    )
+    acc_q16 = sat32(a + input_accel_q16(s.theta_q24, n, u))
     s.rf_n_q24 = sat32(n + ((p.dt_q24 * v) >> 24) + ((p.rf_k1_q24 * e) >> 24))
     s.rf_v_q24 = sat32(v + ((p.dt_q24 * acc_q16) >> 16) + ((p.rf_k2_q24 * e) >> 24))
     s.rf_a_q16 = sat32(a + ((p.rf_k3_q24 * e) >> 32))

@@ -530,6 +530,15 @@ static void reset_loops(ecu_state_t *s, int32_t v_q24)
 
 /* ---- ecu/fast_model.py (eq. 3.5 as an observer) ------------------------------------------- */
 
+/* the input's acceleration (Lambda + Th1 dN + Th2 dN^2) dV, %N/s^2 in Q15.16, not saturated */
+static int64_t input_accel_q16(const int32_t *th, int32_t n, int32_t u)
+{
+    int64_t th2_n = ((int64_t)th[ECU_TH2] * n) >> 24;
+    return (((int64_t)th[ECU_LAM] * u) >> 32) +
+           mul_wide_shr(((int64_t)th[ECU_TH1] * n) >> 24, u, 32) +
+           mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32);
+}
+
 static void observer_step(ecu_t *e, int32_t u, int32_t dn_meas, int valid)
 {
     const ecu_params_t *p = e->p;
@@ -538,12 +547,8 @@ static void observer_step(ecu_t *e, int32_t u, int32_t dn_meas, int valid)
     int32_t n = s->obs_n_q24;
     int32_t v = s->obs_v_q24;
     int64_t innov = valid ? sat32(e, (int64_t)dn_meas - n) : 0;
-    int64_t th2_n = ((int64_t)th[ECU_TH2] * n) >> 24;
     int32_t acc_q16 = sat32(e, (((int64_t)th[ECU_AP21] * n) >> 32) +
-                                   (((int64_t)th[ECU_AP22] * v) >> 32) +
-                                   (((int64_t)th[ECU_LAM] * u) >> 32) +
-                                   mul_wide_shr(((int64_t)th[ECU_TH1] * n) >> 24, u, 32) +
-                                   mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32) +
+                                   (((int64_t)th[ECU_AP22] * v) >> 32) + input_accel_q16(th, n, u) +
                                    (((int64_t)pump_bias_q16(e) *
                                      fuel_shape_q24(e, n, ((int64_t)n * n) >> 32)) >> 24));
     s->obs_n_q24 = sat32(e, (int64_t)n + (((int64_t)p->dt_q24 * v) >> 24) +
@@ -565,15 +570,11 @@ static void rate_filter_step(ecu_t *e, int32_t dn, int32_t u, int valid)
 {
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
-    const int32_t *th = s->theta_q24;
     int32_t n = s->rf_n_q24;
     int32_t v = s->rf_v_q24;
     int32_t a = s->rf_a_q16;
     int64_t err = valid ? sat32(e, (int64_t)dn - n) : 0;
-    int64_t th2_n = ((int64_t)th[ECU_TH2] * n) >> 24;
-    int32_t acc_q16 = sat32(e, (int64_t)a + (((int64_t)th[ECU_LAM] * u) >> 32) +
-                                   mul_wide_shr(((int64_t)th[ECU_TH1] * n) >> 24, u, 32) +
-                                   mul_wide_shr(mul_wide_shr(th2_n, n, 24), u, 32));
+    int32_t acc_q16 = sat32(e, (int64_t)a + input_accel_q16(s->theta_q24, n, u));
     s->rf_n_q24 = sat32(e, (int64_t)n + (((int64_t)p->dt_q24 * v) >> 24) +
                                ((p->rf_k1_q24 * err) >> 24));
     s->rf_v_q24 = sat32(e, (int64_t)v + (((int64_t)p->dt_q24 * acc_q16) >> 16) +
