@@ -1,0 +1,102 @@
+"""Property: damaged scenario files and option values give exit 0, 1 or 2 and no traceback.
+
+The number of examples is ``SIL_ROBUSTNESS_EXAMPLES`` (default 200) for a longer run.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from sil import cli
+
+EXAMPLES = int(os.environ.get("SIL_ROBUSTNESS_EXAMPLES", "200"))
+SETTINGS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+
+VALID = """name = "t"
+duration_s = 1
+ecu_rate_hz = 100
+seed = 1
+[plant]
+model = "aero"
+[controller]
+kind = "mrac"
+[command]
+base = "trim"
+[[command.component]]
+kind = "step"
+time_s = 0.5
+value = 1.0
+"""
+
+odd_numbers = st.sampled_from(["nan", "inf", "-inf", "-1", "0", "1e308", '"x"', "true", "[]"])
+lines = VALID.splitlines()
+
+
+def _damage(data: st.DataObject) -> str:
+    kind = data.draw(st.sampled_from(["value", "drop", "unknown", "truncate", "garbage"]))
+    out = list(lines)
+    numeric = [i for i, line in enumerate(out) if "=" in line and not line.startswith("[")]
+    i = data.draw(st.sampled_from(numeric))
+    if kind == "value":
+        out[i] = f"{out[i].split('=')[0].strip()} = {data.draw(odd_numbers)}"
+    elif kind == "drop":
+        del out[i]
+    elif kind == "unknown":
+        out.insert(i + 1, "bogus_field = 1")
+    elif kind == "truncate":
+        text = "\n".join(out)
+        return text[: data.draw(st.integers(0, len(text)))]
+    else:
+        return data.draw(st.binary(max_size=200)).decode("latin-1")
+    return "\n".join(out) + "\n"
+
+
+def _main(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    try:
+        code = cli.main(argv)
+    except SystemExit as exc:  # argparse's usage errors
+        code = int(exc.code or 0)
+    captured = capsys.readouterr()
+    return code, captured.out + captured.err
+
+
+def test_the_valid_scenario_passes_the_check(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(VALID)
+    assert _main(["scenarios", "--check", str(path)], capsys)[0] == 0
+
+
+@SETTINGS
+@given(data=st.data())
+def test_damaged_scenarios_are_refused_in_one_line(tmp_path: Path, capsys, data) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(_damage(data), encoding="latin-1")
+    code, output = _main(["scenarios", "--check", str(path)], capsys)
+    assert code in (0, 2)
+    assert "Traceback" not in output
+    if code == 2:
+        assert len(output.strip().splitlines()) == 1
+        assert str(path) in output
+
+
+@SETTINGS
+@given(speed=st.floats(allow_nan=True, allow_infinity=True))
+def test_replay_speed_must_be_positive_and_finite(tmp_path: Path, capsys, speed: float) -> None:
+    log = tmp_path / "can.log"
+    log.write_text("(0.000000) vcan0 100#00\n")
+    code, output = _main(["replay", str(log), "--dry-run", f"--speed={speed}"], capsys)
+    assert "Traceback" not in output
+    if not math.isfinite(speed) or not 0 < speed <= 1000:
+        assert code == 2
+    else:
+        assert code in (0, 1)
