@@ -100,3 +100,15 @@ def test_replay_speed_must_be_positive_and_finite(tmp_path: Path, capsys, speed:
         assert code == 2
     else:
         assert code in (0, 1)
+
+
+@pytest.mark.parametrize("fuel", ["0.1", "1", "-1", "nan", "inf", "0"])
+def test_trim_refuses_fuel_outside_the_envelope(capsys, fuel: str) -> None:
+    code, output = _main(["trim", f"--fuel={fuel}"], capsys)
+    assert code == 2
+    assert "Traceback" not in output
+    assert len(output.strip().splitlines()) == 1
+
+
+def test_trim_answers_at_the_documents_trim(capsys) -> None:
+    assert _main(["trim", "--fuel=0.008"], capsys)[0] == 0
