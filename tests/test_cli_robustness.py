@@ -112,3 +112,11 @@ def test_trim_refuses_fuel_outside_the_envelope(capsys, fuel: str) -> None:
 
 def test_trim_answers_at_the_documents_trim(capsys) -> None:
     assert _main(["trim", "--fuel=0.008"], capsys)[0] == 0
+
+
+@pytest.mark.parametrize("param", ["foo=1", "idle_pct=nan", "idle_pct", "=3"])
+def test_ecu_refuses_a_bad_param_in_one_line(capsys, param: str) -> None:
+    code, output = _main(["ecu", "--bus", "virtual:robustness", "--ticks", "1", "--param", param],
+                         capsys)  # fmt: skip
+    assert code == 2
+    assert output.strip().startswith("sil ecu: --param")
