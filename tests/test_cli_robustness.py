@@ -120,3 +120,29 @@ def test_ecu_refuses_a_bad_param_in_one_line(capsys, param: str) -> None:
                          capsys)  # fmt: skip
     assert code == 2
     assert output.strip().startswith("sil ecu: --param")
+
+
+def _trace(path: Path, speed: list[float], volts: list[float]) -> Path:
+    rows = [f"{0.01 * i},{n},{v}" for i, (n, v) in enumerate(zip(speed, volts, strict=True))]
+    path.write_text("time,speed_meas,PumpVoltageTarget\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("speed", "volts", "why"),
+    [
+        ([90.0] * 200, [10.0 + (i // 50) for i in range(200)], "speed (the output) is constant"),
+        ([90.0 + i % 7 for i in range(200)], [10.0] * 200, "voltage (the input) is constant"),
+        ([90.0, float("nan")] * 100, [10.0 + (i // 50) for i in range(200)], "NaN"),
+        ([90.0 + i for i in range(5)], [10.0 + i for i in range(5)], "only 5 usable samples"),
+    ],
+)
+def test_identify_refuses_data_that_identifies_nothing(
+    tmp_path: Path, capsys, speed: list[float], volts: list[float], why: str
+) -> None:
+    export = tmp_path / "commission.json"
+    trace = _trace(tmp_path / "trace.csv", speed, volts)
+    code, output = _main(["identify", str(trace), "--export", str(export)], capsys)
+    assert code == 2
+    assert why in output
+    assert not export.exists()
