@@ -146,3 +146,9 @@ def test_identify_refuses_data_that_identifies_nothing(
     assert code == 2
     assert why in output
     assert not export.exists()
+
+
+def test_console_without_a_terminal_is_refused(capsys) -> None:
+    code, output = _main(["console", "/nonexistent-port"], capsys)  # pytest's stdin is no tty
+    assert code == 2
+    assert "needs a terminal" in output
