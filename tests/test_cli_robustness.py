@@ -152,3 +152,13 @@ def test_console_without_a_terminal_is_refused(capsys) -> None:
     code, output = _main(["console", "/nonexistent-port"], capsys)  # pytest's stdin is no tty
     assert code == 2
     assert "needs a terminal" in output
+
+
+def test_run_into_a_file_is_refused_before_the_run(tmp_path: Path, capsys) -> None:
+    target = tmp_path / "a-file"
+    target.write_text("not a folder\n")
+    code, output = _main(["run", "thesis-6.1-pid", "--mode", "inproc", "--out", str(target)],
+                         capsys)  # fmt: skip
+    assert code == 2
+    assert "is not a folder" in output
+    assert target.read_text() == "not a folder\n"
