@@ -162,3 +162,19 @@ def test_run_into_a_file_is_refused_before_the_run(tmp_path: Path, capsys) -> No
     assert code == 2
     assert "is not a folder" in output
     assert target.read_text() == "not a folder\n"
+
+
+def test_a_closed_pipe_ends_quietly() -> None:
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "scenarios", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader goes away before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0
+    assert "Traceback" not in err
