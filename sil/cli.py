@@ -11,11 +11,13 @@ from __future__ import annotations
 import argparse
 import gc
 import importlib
+import os
 import pkgutil
 import sys
 from types import ModuleType
 
 from sil import commands
+from sil.validation import InputError
 
 
 def _command_modules(argv: list[str]) -> list[ModuleType]:
@@ -48,6 +50,21 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("sil: interrupted", file=sys.stderr)
         return 130
+    except InputError as exc:  # a user error no command caught: one line, exit 2
+        prefix = f"sil {args.command}"
+        print(exc if str(exc).startswith(prefix) else f"{prefix}: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # the reader went away (`sil scenarios | head -1`): not an error
+        _quiet_stdout()
+        return 0
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's final flush into the closed pipe
+    raises nothing."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 if __name__ == "__main__":  # how `sil run` starts its node processes

@@ -316,9 +316,19 @@ def _uniform(t: np.ndarray, n: np.ndarray, v: np.ndarray, source: str) -> Record
     keep = np.concatenate(([True], np.diff(t) > 0))
     t, n, v = t[keep], n[keep], v[keep]
     finite = np.isfinite(t) & np.isfinite(n) & np.isfinite(v)
-    t, n, v = t[finite], n[finite], v[finite]
+    if not finite.all():
+        first = float(t[~finite][0])
+        raise ValueError(
+            f"{source}: {int((~finite).sum())} samples hold NaN or inf (first at time {first:g}); "
+            "a model cannot be identified from them"
+        )
     if len(t) < 20:
         raise ValueError(f"{source}: only {len(t)} usable samples of time, speed and voltage")
+    for name, x in (("voltage (the input)", v), ("speed (the output)", n)):
+        if float(np.ptp(x)) == 0.0:
+            raise ValueError(
+                f"{source}: the {name} is constant ({x[0]:g}): no excitation to identify from"
+            )
     dt = float(np.median(np.diff(t)))
     grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
     # a zero-order hold for the voltage (a command), linear for the speed (a measurement)

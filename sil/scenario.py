@@ -59,6 +59,7 @@ Engine-to-engine variation, as built (all optional, nominal by default; ``sil ru
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field, fields
 from functools import lru_cache
@@ -69,14 +70,14 @@ from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
 from ecu.params import CONTROLLERS, PRESETS, READINGS, EcuParams
 from protocol.dbc import load_database
-from sil import profiles
+from sil import profiles, validation
 from sil.busfault.spec import KINDS, RATED, BusFault, Expectation
 
 SCENARIO_DIR = Path(__file__).with_name("scenarios")
 PLANT_MODELS = ("aero", "fast")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(validation.InputError):
     """A scenario file that cannot be used; the message names the file and the field."""
 
 
@@ -196,6 +197,8 @@ class _Reader:
         value = self.get(key, default, missing="a number")
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.fail(key, "a number", value)
+        if not math.isfinite(value):
+            raise self.fail(key, "a finite number", value)
         if positive and value <= 0:
             raise self.fail(key, "a positive number", value)
         if (lo is not None and value < lo) or (hi is not None and value > hi):
@@ -240,9 +243,12 @@ def _component(r: _Reader, base_dir: Path) -> profiles.Component:
         if (
             not isinstance(levels, list)
             or not levels
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in levels)
+            or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in levels
+            )
         ):
-            raise r.fail("levels", "a non-empty list of numbers", levels)
+            raise r.fail("levels", "a non-empty list of finite numbers", levels)
         c = profiles.Staircase(
             tuple(float(v) for v in levels),
             r.number("step_s", positive=True),
@@ -278,6 +284,14 @@ def _component(r: _Reader, base_dir: Path) -> profiles.Component:
             raise ScenarioError(f"{r.source}: field '{r.prefix}path': {exc}") from None
     r.done()
     return c
+
+
+def _ecu_rate(r: _Reader) -> float:
+    value = r.number("ecu_rate_hz", 100.0, lo=50, hi=1000)
+    try:
+        return validation.ecu_rate(r.source, "field 'ecu_rate_hz'", value)
+    except validation.InputError as exc:
+        raise ScenarioError(str(exc)) from None
 
 
 def _integer(r: _Reader, key: str, default: int, lo: int, hi: int) -> int:
@@ -365,7 +379,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
     name = top.text("name", Path(source).stem)
     description = top.text("description", "")
     duration = top.number("duration_s", positive=True, hi=86_400)
-    rate = top.number("ecu_rate_hz", 100.0, lo=50, hi=1000)
+    rate = _ecu_rate(top)
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise top.fail("seed", "a non-negative integer", seed)
@@ -408,8 +422,10 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
 
     cmd = top.sub("command", required=True)
     base = cmd.get("base", 0.0)
-    if base != "trim" and (isinstance(base, bool) or not isinstance(base, int | float)):
-        raise cmd.fail("base", 'a number or "trim"', base)
+    if base != "trim" and (
+        isinstance(base, bool) or not isinstance(base, int | float) or not math.isfinite(base)
+    ):
+        raise cmd.fail("base", 'a finite number or "trim"', base)
     components = tuple(_component(r, base_dir) for r in cmd.tables("component"))
     cmd.done()
 
@@ -458,7 +474,7 @@ def load_bridge_faults(path: Path) -> BridgeFaults:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
     top = _Reader(str(path), data)
-    rate = top.number("ecu_rate_hz", 100.0, lo=50, hi=1000)
+    rate = _ecu_rate(top)
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise top.fail("seed", "a non-negative integer", seed)

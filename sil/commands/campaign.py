@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ecu.port.core import IMPLEMENTATIONS
+from sil import validation
 from sil.commands.run import _interrupt_on_signals
 
 NAME = "campaign"
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil campaign: {exc}", file=sys.stderr)
         return 2
     out = args.out or Path("out") / f"campaign-{campaign.name}"
+    validation.output_folder("sil campaign", "--out", out)
     out.mkdir(parents=True, exist_ok=True)
     if args.file.resolve() != (out / "campaign.toml").resolve():
         shutil.copyfile(args.file, out / "campaign.toml")

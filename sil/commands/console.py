@@ -116,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
     if args.timeout <= 0 or args.rate <= 0:
         print("sil console: --timeout and --rate must be positive", file=sys.stderr)
         return 2
+    if args.action is None and not (sys.stdin.isatty() and sys.stdout.isatty()):
+        need = "the interactive screen needs a terminal; give an action to run one command"
+        print(f"sil console: {need}", file=sys.stderr)
+        return 2
     try:
         transport = open_transport(args.port)
     except TransportError as exc:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
@@ -105,13 +106,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _param(text: str) -> tuple[str, float]:
+    from dataclasses import fields
+
+    from ecu.params import EcuParams
+
     name, sep, value = text.partition("=")
     try:
         if not sep:
             raise ValueError
-        return name.strip(), float(value)
+        number = float(value)
     except ValueError:
         raise ValueError(f"--param {text!r}: expected NAME=NUMBER") from None
+    known = {f.name for f in fields(EcuParams)} - {"controller", "reading"}
+    if name.strip() not in known:
+        raise ValueError(f"--param {text!r}: {name.strip()!r} is not an ECU parameter")
+    if not math.isfinite(number):
+        raise ValueError(f"--param {text!r}: expected a finite number")
+    return name.strip(), number
 
 
 def run(args: argparse.Namespace) -> int:

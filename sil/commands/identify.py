@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from sil import identify as ident  # noqa: E402
+from sil import validation  # noqa: E402
 from sil.canlog import LogReadError  # noqa: E402
 
 NAME = "identify"
@@ -89,6 +90,11 @@ def run(args: argparse.Namespace) -> int:
         "voltage_column": args.voltage_column,
         "speed_unit": args.speed_unit,
     }
+    if args.out:
+        validation.output_folder("sil identify", "--out", args.out)
+    if args.export and args.export.is_dir():
+        print(f"sil identify: --export: {args.export} is a folder", file=sys.stderr)
+        return 2
     try:
         rec = ident.read_recording(args.file, **columns)
         if args.validate:

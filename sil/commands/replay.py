@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
-from sil import replay
+from sil import replay, validation
 from sil.canlog import LogReadError, read_frames
 
 NAME = "replay"
@@ -164,6 +164,13 @@ def run(args: argparse.Namespace) -> int:
         keep = replay.id_filter(args.ids)
     except ValueError as exc:
         print(f"sil replay: {exc}", file=sys.stderr)
+        return 2
+    try:
+        validation.number("sil replay", "--speed", args.speed, positive=True, hi=1000)
+        if args.skip_gaps is not None:
+            validation.number("sil replay", "--skip-gaps", args.skip_gaps, lo=0)
+    except validation.InputError as exc:
+        print(exc, file=sys.stderr)
         return 2
     if args.dry_run:
         return _dry_run(args, keep)

@@ -10,7 +10,7 @@ import threading
 from pathlib import Path
 
 from protocol.bus import BusSpecError
-from sil import results
+from sil import results, validation
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
 from sil.watchdog import Terminated, interrupt_reason
@@ -136,6 +136,11 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         _refused_into(out or args.out, scenario_ref, str(exc))
         return 2
     out = out or args.out or Path("out") / scenario.name
+    try:
+        validation.output_folder("sil run", "--out", out)
+    except validation.InputError as exc:
+        print(exc, file=sys.stderr)
+        return 2
     options = RunOptions(
         scenario,
         out,

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
+
+from sil import validation
 
 NAME = "trim"
 HELP = "steady state (P3, P5, T4, N, EGT, thrust, air flow) of the engine at a fuel flow"
+
+MAX_FUEL_AIR = 0.068  # stoichiometric kerosene: no steady state burns more fuel per air
+MAX_N_PCT = 110.0  # the ECU's overspeed ceiling (ecu.params)
 
 _UNITS = {
     "fuel_kg_s": "kg/s",
@@ -47,11 +53,26 @@ def run(args: argparse.Namespace) -> int:
     from plant.interface import Ambient
     from plant.trim import trim_summary
 
+    source = "sil trim"
+    validation.number(source, "--fuel (fuel flow, kg/s)", args.fuel, positive=True)
+    validation.number(source, "--t0", args.t0, lo=200, hi=350)
+    validation.number(source, "--p0", args.p0, lo=20_000, hi=110_000)
+    validation.number(source, "--flight-speed", args.flight_speed, lo=0, hi=300)
     try:
         ambient = Ambient(t0_k=args.t0, p0_pa=args.p0, flight_speed_m_s=args.flight_speed)
         summary = trim_summary(make_model(ambient), args.fuel)
     except (ValueError, RuntimeError) as exc:
         print(f"sil trim: error: {exc}", file=sys.stderr)
+        return 2
+    far = summary["fuel_kg_s"] / summary["air_kg_s"] if summary["air_kg_s"] > 0 else math.inf
+    n = summary["N_pct"]
+    if not (math.isfinite(far) and 0 < far <= MAX_FUEL_AIR and 0 < n <= MAX_N_PCT):
+        print(
+            f"sil trim: --fuel {args.fuel:g}: outside the model's envelope (fuel-air ratio "
+            f"{far:.3g}, N {n:.4g} %; the maps hold fuel-air ratios up to {MAX_FUEL_AIR} and "
+            f"speeds up to {MAX_N_PCT} %N)",
+            file=sys.stderr,
+        )
         return 2
     if args.json:
         print(json.dumps(summary, indent=2))

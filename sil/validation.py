@@ -1,0 +1,77 @@
+"""Checks of user input, shared by scenario files, campaign files and command-line options.
+
+Every refusal is an `InputError` whose message reads ``SOURCE: FIELD: what was expected``, where
+SOURCE is a file or ``sil COMMAND`` and FIELD a scenario field or an option. The CLI turns an
+`InputError` into exit code 2 and that one line on stderr.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+PLANT_RATE_HZ = 1000  # the plant's RK4 step is 1 ms (plant.interface.SUBSTEP_S)
+
+
+class InputError(ValueError):
+    """An input that cannot be used; the message names the source and the field."""
+
+    @classmethod
+    def at(cls, source: str, field: str, message: str) -> InputError:
+        return cls(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+
+
+def number(
+    source: str,
+    field: str,
+    value: Any,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    positive: bool = False,
+) -> float:
+    """A finite number (not a bool), optionally positive and within ``lo..hi``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError.at(source, field, f"expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise InputError.at(source, field, f"expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise InputError.at(source, field, f"expected a positive number, got {value!r}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        low = "" if lo is None else f"{lo:g}"
+        high = "" if hi is None else f"{hi:g}"
+        raise InputError.at(source, field, f"expected a number in {low}..{high}, got {value!r}")
+    return float(value)
+
+
+def ecu_rate(source: str, field: str, value: Any, *, lo: float = 50, hi: float = 1000) -> float:
+    """An ECU rate in ``lo..hi`` Hz whose period is a whole number of plant steps (1 ms)."""
+    rate = number(source, field, value, lo=lo, hi=hi)
+    steps = PLANT_RATE_HZ / rate
+    if abs(steps - round(steps)) > 1e-9:
+        raise InputError.at(
+            source,
+            field,
+            f"{rate:g} Hz does not divide the plant's {PLANT_RATE_HZ} Hz "
+            f"(use e.g. 50, 100, 125, 200, 250, 500 or 1000)",
+        )
+    return rate
+
+
+def output_folder(source: str, field: str, path: Path) -> Path:
+    """A folder that exists and is writable, or that can be made (its nearest existing parent is
+    a writable folder); nothing is created here."""
+    if path.exists():
+        if not path.is_dir():
+            raise InputError.at(source, field, f"{path} exists and is not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise InputError.at(source, field, f"{path} is not writable")
+        return path
+    parent = path.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError.at(source, field, f"cannot make {path}: {parent} is not a writable folder")
+    return path

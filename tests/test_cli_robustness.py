@@ -1,0 +1,180 @@
+"""Property: damaged scenario files and option values give exit 0, 1 or 2 and no traceback.
+
+The number of examples is ``SIL_ROBUSTNESS_EXAMPLES`` (default 200) for a longer run.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from sil import cli
+
+EXAMPLES = int(os.environ.get("SIL_ROBUSTNESS_EXAMPLES", "200"))
+SETTINGS = settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+
+VALID = """name = "t"
+duration_s = 1
+ecu_rate_hz = 100
+seed = 1
+[plant]
+model = "aero"
+[controller]
+kind = "mrac"
+[command]
+base = "trim"
+[[command.component]]
+kind = "step"
+time_s = 0.5
+value = 1.0
+"""
+
+odd_numbers = st.sampled_from(["nan", "inf", "-inf", "-1", "0", "1e308", '"x"', "true", "[]"])
+lines = VALID.splitlines()
+
+
+def _damage(data: st.DataObject) -> str:
+    kind = data.draw(st.sampled_from(["value", "drop", "unknown", "truncate", "garbage"]))
+    out = list(lines)
+    numeric = [i for i, line in enumerate(out) if "=" in line and not line.startswith("[")]
+    i = data.draw(st.sampled_from(numeric))
+    if kind == "value":
+        out[i] = f"{out[i].split('=')[0].strip()} = {data.draw(odd_numbers)}"
+    elif kind == "drop":
+        del out[i]
+    elif kind == "unknown":
+        out.insert(i + 1, "bogus_field = 1")
+    elif kind == "truncate":
+        text = "\n".join(out)
+        return text[: data.draw(st.integers(0, len(text)))]
+    else:
+        return data.draw(st.binary(max_size=200)).decode("latin-1")
+    return "\n".join(out) + "\n"
+
+
+def _main(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    try:
+        code = cli.main(argv)
+    except SystemExit as exc:  # argparse's usage errors
+        code = int(exc.code or 0)
+    captured = capsys.readouterr()
+    return code, captured.out + captured.err
+
+
+def test_the_valid_scenario_passes_the_check(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(VALID)
+    assert _main(["scenarios", "--check", str(path)], capsys)[0] == 0
+
+
+@SETTINGS
+@given(data=st.data())
+def test_damaged_scenarios_are_refused_in_one_line(tmp_path: Path, capsys, data) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(_damage(data), encoding="latin-1")
+    code, output = _main(["scenarios", "--check", str(path)], capsys)
+    assert code in (0, 2)
+    assert "Traceback" not in output
+    if code == 2:
+        assert len(output.strip().splitlines()) == 1
+        assert str(path) in output
+
+
+@SETTINGS
+@given(speed=st.floats(allow_nan=True, allow_infinity=True))
+def test_replay_speed_must_be_positive_and_finite(tmp_path: Path, capsys, speed: float) -> None:
+    log = tmp_path / "can.log"
+    log.write_text("(0.000000) vcan0 100#00\n")
+    code, output = _main(["replay", str(log), "--dry-run", f"--speed={speed}"], capsys)
+    assert "Traceback" not in output
+    if not math.isfinite(speed) or not 0 < speed <= 1000:
+        assert code == 2
+    else:
+        assert code in (0, 1)
+
+
+@pytest.mark.parametrize("fuel", ["0.1", "1", "-1", "nan", "inf", "0"])
+def test_trim_refuses_fuel_outside_the_envelope(capsys, fuel: str) -> None:
+    code, output = _main(["trim", f"--fuel={fuel}"], capsys)
+    assert code == 2
+    assert "Traceback" not in output
+    assert len(output.strip().splitlines()) == 1
+
+
+def test_trim_answers_at_the_documents_trim(capsys) -> None:
+    assert _main(["trim", "--fuel=0.008"], capsys)[0] == 0
+
+
+@pytest.mark.parametrize("param", ["foo=1", "idle_pct=nan", "idle_pct", "=3"])
+def test_ecu_refuses_a_bad_param_in_one_line(capsys, param: str) -> None:
+    code, output = _main(["ecu", "--bus", "virtual:robustness", "--ticks", "1", "--param", param],
+                         capsys)  # fmt: skip
+    assert code == 2
+    assert output.strip().startswith("sil ecu: --param")
+
+
+def _trace(path: Path, speed: list[float], volts: list[float]) -> Path:
+    rows = [f"{0.01 * i},{n},{v}" for i, (n, v) in enumerate(zip(speed, volts, strict=True))]
+    path.write_text("time,speed_meas,PumpVoltageTarget\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("speed", "volts", "why"),
+    [
+        ([90.0] * 200, [10.0 + (i // 50) for i in range(200)], "speed (the output) is constant"),
+        ([90.0 + i % 7 for i in range(200)], [10.0] * 200, "voltage (the input) is constant"),
+        ([90.0, float("nan")] * 100, [10.0 + (i // 50) for i in range(200)], "NaN"),
+        ([90.0 + i for i in range(5)], [10.0 + i for i in range(5)], "only 5 usable samples"),
+    ],
+)
+def test_identify_refuses_data_that_identifies_nothing(
+    tmp_path: Path, capsys, speed: list[float], volts: list[float], why: str
+) -> None:
+    export = tmp_path / "commission.json"
+    trace = _trace(tmp_path / "trace.csv", speed, volts)
+    code, output = _main(["identify", str(trace), "--export", str(export)], capsys)
+    assert code == 2
+    assert why in output
+    assert not export.exists()
+
+
+def test_console_without_a_terminal_is_refused(capsys) -> None:
+    code, output = _main(["console", "/nonexistent-port"], capsys)  # pytest's stdin is no tty
+    assert code == 2
+    assert "needs a terminal" in output
+
+
+def test_run_into_a_file_is_refused_before_the_run(tmp_path: Path, capsys) -> None:
+    target = tmp_path / "a-file"
+    target.write_text("not a folder\n")
+    code, output = _main(["run", "thesis-6.1-pid", "--mode", "inproc", "--out", str(target)],
+                         capsys)  # fmt: skip
+    assert code == 2
+    assert "is not a folder" in output
+    assert target.read_text() == "not a folder\n"
+
+
+def test_a_closed_pipe_ends_quietly() -> None:
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "scenarios", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader goes away before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0
+    assert "Traceback" not in err
