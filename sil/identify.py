@@ -311,6 +311,8 @@ N_MAX_RPM = 112_500.0
 
 def _uniform(t: np.ndarray, n: np.ndarray, v: np.ndarray, source: str) -> Recording:
     """Sort, drop repeated times and resample onto a uniform grid at the median step."""
+    if len(t) < 20:
+        raise ValueError(f"{source}: only {len(t)} usable samples of time, speed and voltage")
     order = np.argsort(t, kind="stable")
     t, n, v = t[order], n[order], v[order]
     keep = np.concatenate(([True], np.diff(t) > 0))
@@ -362,12 +364,18 @@ def read_csv(
             if not row:
                 continue
             try:
-                rows.append([float(row[i]) for i in columns])
+                values = [float(row[i]) for i in columns]
             except (ValueError, IndexError):
                 raise ValueError(
                     f"{path}, line {reader.line_num}: expected numbers in columns "
                     f"{time_column}, {speed_column}, {voltage_column}"
                 ) from None
+            if rows and not values[0] > rows[-1][0]:  # also NaN
+                raise ValueError(
+                    f"{path}, line {reader.line_num}: time {row[columns[0]]} does not follow "
+                    f"{rows[-1][0]:g}: a recording's time must increase"
+                )
+            rows.append(values)
     data = np.asarray(rows, dtype=float).reshape(-1, 3)
     speed = data[:, 1] * (100.0 / N_MAX_RPM if speed_unit == "rpm" else 1.0)
     return _uniform(data[:, 0], speed, data[:, 2], str(path))

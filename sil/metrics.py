@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,10 +25,16 @@ def load_trace(path: Path) -> dict[str, np.ndarray]:
         header = f.readline().strip().split(",")
     if not header or header == [""]:
         raise ValueError(f"{path}: empty trace")
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    with warnings.catch_warnings():  # an empty file is told apart below, not warned about
+        warnings.simplefilter("ignore", UserWarning)
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     names = [h.split("[", 1)[0] for h in header]
     if data.size == 0:
         data = np.zeros((0, len(names)))
+    if data.shape[1] != len(names):
+        raise ValueError(
+            f"{path}: {data.shape[1]} columns of data under {len(names)} in the header"
+        )
     return {name: data[:, i] for i, name in enumerate(names)}
 
 

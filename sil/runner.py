@@ -34,6 +34,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import can
+import numpy as np
 
 from ecu import commissioning
 from ecu import faults as ecu_faults
@@ -116,6 +117,7 @@ class RunState:
     run_id: int | None = None  # on a bus: this run's RunId (its SimRun beacons carry it)
     claims: list[TagClaim] = field(default_factory=list)  # the run's tags: run bus, ECU bus
     run_bus: RunBus | None = None  # the command node's bus: its foreign-frame counts
+    warnings: list[str] = field(default_factory=list)  # said on stderr and in the summary
 
     def release(self) -> None:
         """Give back the run's tags (once the node processes are stopped)."""
@@ -288,6 +290,10 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
+    if not open_loop:
+        state.warnings += demand_warnings(s, commands, params)
+    for warning in state.warnings:
+        print(f"sil run: warning: {warning}", file=sys.stderr)
     period = 1.0 / s.ecu_rate_hz
     # in process, the ECU and plant nodes are built before the clock starts, as the plant is
     built: list = []
@@ -644,6 +650,24 @@ def _isolation(state: RunState) -> dict:
     return {"run_id": state.run_id, **state.run_bus.stats()}
 
 
+def demand_warnings(s: Scenario, commands: np.ndarray, params: EcuParams) -> list[str]:
+    """What the ECU will not fly as asked: speed demands outside its idle..maximum range, which
+    it holds at the nearer end."""
+    out = []
+    top, bottom = float(np.max(commands)), float(np.min(commands))
+    if top > params.demand_max_pct + 1e-9:
+        out.append(
+            f"{s.name}: command: demand reaches {top:g} %N, over the ECU's demand_max_pct "
+            f"{params.demand_max_pct:g}: the ECU holds it there"
+        )
+    if bottom < params.idle_pct - 1e-9:
+        out.append(
+            f"{s.name}: command: demand falls to {bottom:g} %N, under the ECU's idle_pct "
+            f"{params.idle_pct:g}: the ECU holds it there"
+        )
+    return out
+
+
 def _finish(
     opts: RunOptions,
     s: Scenario,
@@ -672,6 +696,7 @@ def _finish(
         **({"inproc_loop": state.loop} if state.loop else {}),
         **({"ecu_bus": state.ecu_bus} if state.ecu_bus else {}),
         "seed": seed,
+        **({"warnings": state.warnings} if state.warnings else {}),
         "sim_time_s": sim_time,
         "wall_time_s": wall,
         "realtime_factor": sim_time / wall if wall > 0 else math.nan,

@@ -178,3 +178,127 @@ def test_a_closed_pipe_ends_quietly() -> None:
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 0
     assert "Traceback" not in err
+
+
+def test_identify_refuses_time_that_does_not_increase(tmp_path: Path, capsys) -> None:
+    trace = _trace(tmp_path / "trace.csv", [90.0 + i % 7 for i in range(200)],
+                   [10.0 + (i // 50) for i in range(200)])  # fmt: skip
+    lines = trace.read_text().splitlines()
+    lines[100], lines[101] = lines[101], lines[100]  # two samples swapped: time runs back
+    trace.write_text("\n".join(lines) + "\n")
+    export = tmp_path / "commission.json"
+    code, output = _main(["identify", str(trace), "--export", str(export)], capsys)
+    assert code == 2 and not export.exists()
+    assert f"{trace}, line 102: time" in output and "must increase" in output
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> Path:
+    """A short in-process run of the valid scenario: its can.log (and .asc, .blf) and summary."""
+    out = tmp_path_factory.mktemp("recorded")
+    scenario = out / "s.toml"
+    scenario.write_text(VALID.replace("duration_s = 1", "duration_s = 2"))
+    argv = ["run", str(scenario), "--mode", "inproc", "--out", str(out / "run"), "--no-plots"]
+    assert cli.main([*argv, "--log-format", "asc", "--log-format", "blf"]) == 0
+    return out / "run"
+
+
+def _damage_bytes(data: st.DataObject, raw: bytes) -> bytes:
+    kind = data.draw(st.sampled_from(["truncate", "flip", "insert", "duplicate", "garbage"]))
+    if kind == "truncate":
+        return raw[: data.draw(st.integers(0, len(raw)))]
+    if kind == "flip":
+        out = bytearray(raw)
+        for _ in range(data.draw(st.integers(1, 8))):
+            i = data.draw(st.integers(0, len(out) - 1))
+            out[i] ^= 1 << data.draw(st.integers(0, 7))
+        return bytes(out)
+    if kind == "insert":
+        i = data.draw(st.integers(0, len(raw)))
+        return raw[:i] + data.draw(st.binary(min_size=1, max_size=40)) + raw[i:]
+    if kind == "duplicate":
+        i = data.draw(st.integers(0, len(raw)))
+        j = data.draw(st.integers(i, min(len(raw), i + 200)))
+        return raw[:j] + raw[i:j] + raw[j:]
+    return data.draw(st.binary(max_size=300))
+
+
+@SETTINGS
+@given(data=st.data())
+def test_damaged_logs_are_read_or_refused_in_one_line(
+    recorded: Path, tmp_path: Path, capsys, data
+) -> None:
+    name = data.draw(st.sampled_from(["can.log", "can.asc", "can.blf"]))
+    log = tmp_path / name
+    log.write_bytes(_damage_bytes(data, (recorded / name).read_bytes()))
+    export = tmp_path / "commission.json"
+    export.unlink(missing_ok=True)
+    command = data.draw(st.sampled_from(["replay", "identify"]))
+    argv = (
+        ["replay", str(log), "--dry-run"]
+        if command == "replay"
+        else ["identify", str(log), "--export", str(export)]
+    )
+    code, output = _main(argv, capsys)
+    assert "Traceback" not in output
+    assert code in (0, 1, 2), output
+    if code == 2:
+        assert str(log) in output or "sil" in output.splitlines()[-1]
+        assert not export.exists()  # nothing half-written
+
+
+@SETTINGS
+@given(data=st.data())
+def test_compare_refuses_damaged_results_in_one_line(
+    recorded: Path, tmp_path: Path, capsys, data
+) -> None:
+    import shutil
+
+    other = tmp_path / "other"
+    shutil.rmtree(other, ignore_errors=True)
+    shutil.copytree(recorded, other)
+    target = other / data.draw(st.sampled_from(["summary.json", "trace.csv"]))
+    target.write_bytes(_damage_bytes(data, target.read_bytes()))
+    code, output = _main(["compare", str(recorded), str(other)], capsys)
+    assert "Traceback" not in output
+    assert code in (0, 1, 2), output
+
+
+@settings(max_examples=max(10, EXAMPLES // 20), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(data=st.data())
+def test_run_of_a_damaged_scenario_fails_cleanly(tmp_path: Path, capsys, data) -> None:
+    import shutil
+
+    path = tmp_path / "s.toml"
+    path.write_text(_damage(data), encoding="latin-1")
+    out = tmp_path / "out"
+    shutil.rmtree(out, ignore_errors=True)
+    argv = ["run", str(path), "--mode", "inproc", "--out", str(out), "--no-plots"]
+    code, output = _main(argv, capsys)
+    assert "Traceback" not in output
+    assert code in (0, 1, 2), output
+    if code != 0 and (out / "summary.json").exists():  # a run that ended badly says so
+        import json
+
+        assert json.loads((out / "summary.json").read_text())["status"] != "completed"
+    if code == 2:
+        assert not (out / "can.log").exists() and not (out / "trace.csv").exists()
+
+
+def test_a_demand_the_ecu_will_not_fly_is_warned_about(tmp_path: Path, capsys) -> None:
+    scenario = tmp_path / "over.toml"
+    scenario.write_text(
+        'duration_s = 1\n[plant]\nmodel = "fast"\n[controller]\nkind = "mrac"\n[command]\n'
+        'base = 0\n[[command.component]]\nkind = "staircase"\nlevels = [90, 104, 30]\n'
+        "step_s = 0.3\n"
+    )
+    out = tmp_path / "out"
+    code, output = _main(["run", str(scenario), "--mode", "inproc", "--out", str(out),
+                          "--no-plots"], capsys)  # fmt: skip
+    assert code == 0
+    assert "warning: over: command: demand reaches 104 %N, over the ECU's demand_max_pct" in output
+    assert "demand falls to 30 %N, under the ECU's idle_pct 35" in output
+    import json
+
+    assert len(json.loads((out / "summary.json").read_text())["warnings"]) == 2

@@ -51,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the table as JSON")
 
 
+TRACE_COLUMNS = ("time", "command", "ReferenceSpeed", "speed_true")  # what the plot draws
+
+
 def _fmt(value: object) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
@@ -70,6 +73,9 @@ def _load(run: Path, allow_incomplete: bool) -> tuple[dict, dict, str | None]:
         trace = load_trace(run / "trace.csv")
     except (OSError, ValueError) as exc:
         raise results.IncompleteRun(f"{run / 'trace.csv'}: cannot be read: {exc}") from None
+    missing = [c for c in TRACE_COLUMNS if c not in trace]
+    if missing:
+        raise results.IncompleteRun(f"{run / 'trace.csv'}: no column {', '.join(missing)}")
     return summary, trace, why
 
 

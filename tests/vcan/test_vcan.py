@@ -41,6 +41,7 @@ VM_TIMEOUT_S = 1200.0
 CANTOOLS = Path(sys.executable).with_name("cantools")
 SIL_SCENARIO = "thesis-5.2-mrac-fast"
 SIL_DURATION_S = 20
+PAIR_DURATION_S = 5  # two runs at once on vcan0, each kept apart by its run tag
 # The plant's numba code, compiled on the host for a CPU that the emulated guest also has.
 NUMBA_ENV = {"NUMBA_CPU_NAME": "generic"}
 
@@ -153,11 +154,11 @@ def _plan(folder: Path) -> tuple[list[dict], str, str]:
     return plan_frames, good, bad
 
 
-def _sil_scenario(folder: Path) -> Path:
+def _sil_scenario(folder: Path, seconds: int = SIL_DURATION_S) -> Path:
     text = (SCENARIO_DIR / f"{SIL_SCENARIO}.toml").read_text()
-    text, count = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {SIL_DURATION_S}", text)
+    text, count = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {seconds}", text)
     assert count == 1
-    path = folder / f"{SIL_SCENARIO}-{SIL_DURATION_S}s.toml"
+    path = folder / f"{SIL_SCENARIO}-{seconds}s.toml"
     path.write_text(text)
     return path
 
@@ -167,16 +168,21 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory) -> VmRun:
     folder = tmp_path_factory.mktemp("vcan")
     plan_frames, good, bad = _plan(folder)
     scenario = _sil_scenario(folder)
+    short = _sil_scenario(folder, PAIR_DURATION_S)
     env = {**NUMBA_ENV, "NUMBA_CACHE_DIR": str(folder / "numba")}
-    sil = [sys.executable, "-m", "sil.cli", "run", str(scenario), "--no-plots"]
-    # on the host, in one process: the reference can.log, and the numba cache for the guest
-    host = subprocess.run(
-        [*sil, "--mode", "inproc", "--out", str(folder / "host")],
-        env={**os.environ, **env},
-        capture_output=True,
-        text=True,
-    )
-    assert host.returncode == 0, host.stderr
+    run = [sys.executable, "-m", "sil.cli", "run"]
+    sil = [*run, str(scenario), "--no-plots"]
+    # on the host, in one process: the reference can.logs, and the numba cache for the guest
+    for path, out in ((scenario, "host"), (short, "host-short")):
+        host = subprocess.run(
+            [*run, str(path), "--no-plots", "--mode", "inproc", "--out", str(folder / out)],
+            env={**os.environ, **env},
+            capture_output=True,
+            text=True,
+        )
+        assert host.returncode == 0, host.stderr
+    env_words = " ".join(f"{k}={shlex.quote(v)}" for k, v in env.items())
+    pair = [*run, str(short), "--no-plots", "--bus", "socketcan:vcan0", "--out"]
     probe = [sys.executable, "-m", "tools.vcan_probe"]
     guest = " ".join(
         [
@@ -197,7 +203,13 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory) -> VmRun:
                 ]
             ),
             f"> {folder}/sil.out 2>&1;",
-            f"echo $? > {folder}/sil.status",
+            f"echo $? > {folder}/sil.status;",
+            *(
+                f"{env_words} {shlex.join([*pair, str(folder / f'pair-{x}')])}"
+                f" > {folder}/pair-{x}.out 2>&1 & {x}=$!;"
+                for x in "ab"
+            ),
+            f"wait $a; ra=$?; wait $b; rb=$?; echo $((ra | rb)) > {folder}/pair.status",
         ]
     )
     try:
@@ -297,3 +309,24 @@ def test_lockstep_sil_on_real_vcan0(vm_run: VmRun) -> None:
     from_log = sorted(decode_capture(run / "can.log"), key=key)
     assert len(from_capture) == len(recorded)
     assert from_capture == from_log
+
+
+@pytest.mark.vcan
+@pytest.mark.slow
+def test_two_runs_at_once_on_real_vcan0_keep_apart(vm_run: VmRun) -> None:
+    status = vm_run.folder / "pair.status"
+    logs = "".join(
+        (vm_run.folder / f"pair-{x}.out").read_text()
+        for x in "ab"
+        if (vm_run.folder / f"pair-{x}.out").exists()
+    )
+    assert status.exists() and status.read_text().strip() == "0", logs
+    host_log = (vm_run.folder / "host-short" / "can.log").read_text()
+    summaries = [
+        json.loads((vm_run.folder / f"pair-{x}" / "summary.json").read_text()) for x in "ab"
+    ]
+    for x, summary in zip("ab", summaries, strict=True):
+        assert summary["status"] == "completed" and summary["missed_ticks"] == 0, x
+        assert (vm_run.folder / f"pair-{x}" / "can.log").read_text() == host_log, x
+    assert sorted(s["run_tag"] for s in summaries) == [0, 1]
+    assert all(s["foreign_frames"] > 0 and s["foreign_runs"] == 1 for s in summaries)
