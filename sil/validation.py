@@ -7,8 +7,10 @@ SOURCE is a file or ``sil COMMAND`` and FIELD a scenario field or an option. The
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +48,35 @@ def number(
     return float(value)
 
 
+def option(
+    *,
+    integer: bool = False,
+    lo: float | None = None,
+    hi: float | None = None,
+    positive: bool = False,
+    ecu_rate_hz: bool = False,
+) -> Callable[[str], Any]:
+    """An argparse ``type`` checking an option's value as :func:`number` (or :func:`ecu_rate`)
+    does; argparse then names the option and exits with code 2."""
+
+    def parse(text: str) -> Any:
+        try:
+            value: float = int(text) if integer else float(text)
+        except ValueError:
+            kind = "an integer" if integer else "a number"
+            raise argparse.ArgumentTypeError(f"expected {kind}, got {text!r}") from None
+        try:
+            if ecu_rate_hz:
+                ecu_rate("", "", value)
+            else:
+                number("", "", value, lo=lo, hi=hi, positive=positive)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).lstrip(": ")) from None
+        return value
+
+    return parse
+
+
 def ecu_rate(source: str, field: str, value: Any, *, lo: float = 50, hi: float = 1000) -> float:
     """An ECU rate in ``lo..hi`` Hz whose period is a whole number of plant steps (1 ms)."""
     rate = number(source, field, value, lo=lo, hi=hi)
@@ -75,3 +106,11 @@ def output_folder(source: str, field: str, path: Path) -> Path:
     if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
         raise InputError.at(source, field, f"cannot make {path}: {parent} is not a writable folder")
     return path
+
+
+def folder_option(text: str) -> Path:
+    """An argparse ``type`` for an output folder (:func:`output_folder`)."""
+    try:
+        return output_folder("", "", Path(text))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).lstrip(": ")) from None

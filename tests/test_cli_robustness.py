@@ -302,3 +302,26 @@ def test_a_demand_the_ecu_will_not_fly_is_warned_about(tmp_path: Path, capsys) -
     import json
 
     assert len(json.loads((out / "summary.json").read_text())["warnings"]) == 2
+
+
+@pytest.mark.parametrize(
+    ("argv", "why"),
+    [
+        (["plant", "--bus", "virtual:r", "--ticks", "-5"], "argument --ticks: expected a positive"),
+        (
+            ["plant", "--bus", "virtual:r", "--rate-hz", "0"],
+            "argument --rate-hz: expected a number",
+        ),
+        (["plant", "--bus", "virtual:r", "--rate-hz", "300"], "does not divide the plant's 1000"),
+        (
+            ["plant", "--bus", "virtual:r", "--guard-s", "-1"],
+            "argument --guard-s: expected a posit",
+        ),
+        (["ecu", "--bus", "virtual:r", "--guard", "nan"], "argument --guard: expected a finite"),
+        (["ecu", "--bus", "virtual:r", "--rate", "7"], "argument --rate: expected a number in 50"),
+        (["steady-line", "--out", "/dev/null/x"], "argument --out: cannot make /dev/null/x"),
+    ],
+)
+def test_bad_option_values_are_refused_by_argparse(capsys, argv: list[str], why: str) -> None:
+    code, output = _main(argv, capsys)
+    assert code == 2 and why in output and "Traceback" not in output

@@ -12,7 +12,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from sil import results  # noqa: E402
+from sil import results, validation  # noqa: E402
 from sil.metrics import load_trace  # noqa: E402
 
 NAME = "compare"
@@ -41,7 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("run_a", type=Path, help="output folder of the first run")
     parser.add_argument("run_b", type=Path, help="output folder of the second run")
-    parser.add_argument("--out", type=Path, help="folder for compare.png (default: RUN_B)")
+    parser.add_argument(
+        "--out", type=validation.folder_option, help="folder for compare.png (default: RUN_B)"
+    )
     parser.add_argument(
         "--allow-incomplete",
         action="store_true",

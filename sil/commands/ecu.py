@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 from ecu.params import CONTROLLERS
+from sil.validation import option
 
 NAME = "ecu"
 HELP = "run the ECU firmware as a CAN node on a bus (lockstep: one tick per sensor frame)"
@@ -41,11 +42,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("printed", "reproducing"),
         help="how the document's gains are read (ecu.params.READINGS; default: the preset's)",
     )
-    parser.add_argument("--rate", type=int, metavar="HZ", help="override the tick rate (50-1000)")
-    parser.add_argument("--ticks", type=int, metavar="N", help="stop after answering N ticks")
+    parser.add_argument(
+        "--rate", type=option(integer=True, ecu_rate_hz=True), metavar="HZ",
+        help="override the tick rate (50-1000, a divisor of the plant's 1 kHz)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--ticks", type=option(integer=True, positive=True), metavar="N",
+        help="stop after answering N ticks",
+    )  # fmt: skip
     parser.add_argument(
         "--guard",
-        type=float,
+        type=option(positive=True, hi=3600.0),
         default=1.0,
         metavar="S",
         help="lockstep: wall-clock guard for a missing frame (default 1 s)",

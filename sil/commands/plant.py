@@ -13,6 +13,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from sil.validation import option
+
 NAME = "plant"
 HELP = "run the simulated engine (aero-thermal or fast model) as a CAN node"
 START_POLL_S = 0.002  # --start-file: how often to look for it
@@ -47,20 +49,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="aero",
         help="aero-thermal engine (ch. 2) or the fast model of eq. 3.24",
     )
-    parser.add_argument("--rate-hz", type=int, default=100, help="ECU rate (default 100 Hz)")
-    parser.add_argument("--ticks", type=int, default=None, help="stop after this many ECU periods")
+    parser.add_argument(
+        "--rate-hz", type=option(integer=True, ecu_rate_hz=True), default=100,
+        help="ECU rate (default 100 Hz; a divisor of the plant's 1 kHz)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--ticks", type=option(integer=True, positive=True), default=None,
+        help="stop after this many ECU periods",
+    )  # fmt: skip
     parser.add_argument(
         "--realtime", action="store_true", help="pace by the wall clock instead of lockstep"
     )
     parser.add_argument(
         "--guard-s",
-        type=float,
+        type=option(positive=True, hi=3600.0),
         default=1.0,
         help="lockstep: wall-clock wait for the ECU before holding its command",
     )
     parser.add_argument(
         "--watchdog-ticks",
-        type=int,
+        type=option(integer=True, positive=True),
         default=10,
         help="ticks without an actuator frame before pump power is removed",
     )

@@ -50,7 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME=VALUE",
         help="--into-ecu: change an ECU parameter (e.g. to check a change)",
     )
-    parser.add_argument("--out", type=Path, help="--into-ecu: folder for report.json and a plot")
+    parser.add_argument(
+        "--out", type=validation.folder_option, help="--into-ecu: folder for report.json and a plot"
+    )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
 
 

@@ -7,6 +7,8 @@ import math
 import sys
 from pathlib import Path
 
+from sil.validation import folder_option
+
 NAME = "schedules"
 HELP = (
     "fuel schedules from the plant: acceleration line, steady line and deceleration floor against "
@@ -42,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from plant import schedules as s
 
     parser.add_argument(
-        "--out", type=Path, default=Path("out/schedules"), metavar="DIR",
+        "--out", type=folder_option, default=Path("out/schedules"), metavar="DIR",
         help="output folder (default out/schedules)",
     )  # fmt: skip
     parser.add_argument(

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sil.validation import folder_option
+
 NAME = "steady-line"
 HELP = (
     "running line over the fuel range: CSV and PNG of P3, EGT, fuel and thrust vs speed, and the "
@@ -15,7 +17,7 @@ HELP = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out",
-        type=Path,
+        type=folder_option,
         default=Path("out/steady_line"),
         metavar="DIR",
         help="output folder (default out/steady_line)",

@@ -113,4 +113,6 @@ def test_command_writes_its_table_and_refuses_bad_options(tmp_path, capsys):
         assert exc.value.code == 2
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    assert main(["schedules", "--speeds", "70", "--out", str(blocker / "sub")]) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["schedules", "--speeds", "70", "--out", str(blocker / "sub")])
+    assert exc.value.code == 2
