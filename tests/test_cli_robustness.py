@@ -325,3 +325,27 @@ def test_a_demand_the_ecu_will_not_fly_is_warned_about(tmp_path: Path, capsys) -
 def test_bad_option_values_are_refused_by_argparse(capsys, argv: list[str], why: str) -> None:
     code, output = _main(argv, capsys)
     assert code == 2 and why in output and "Traceback" not in output
+
+
+numbers = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, -1.0, 1e-9, 0.002, 0.008, 0.012, 0.05, 230.0, 288.15, 101325.0, 5e4]),
+)
+
+
+@settings(max_examples=max(20, EXAMPLES // 4), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(fuel=numbers, t0=numbers, p0=numbers)
+def test_trim_answers_inside_its_envelope_or_refuses(capsys, fuel: float, t0: float, p0: float):
+    import json
+
+    argv = ["trim", f"--fuel={fuel}", f"--t0={t0}", f"--p0={p0}", "--json"]
+    code, output = _main(argv, capsys)
+    assert "Traceback" not in output
+    assert code in (0, 2), output
+    if code == 0:
+        state = json.loads(output)
+        assert 0.0 < state["N_pct"] <= 110.0
+        assert state["fuel_kg_s"] / state["air_kg_s"] <= 0.068 + 1e-9
+    else:
+        assert len(output.strip().splitlines()) == 1

@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         ambient = Ambient(t0_k=args.t0, p0_pa=args.p0, flight_speed_m_s=args.flight_speed)
         summary = trim_summary(make_model(ambient), args.fuel)
-    except (ValueError, RuntimeError) as exc:
-        print(f"sil trim: error: {exc}", file=sys.stderr)
+    except (ValueError, RuntimeError, FloatingPointError) as exc:  # (no state, or none finite)
+        print(f"sil trim: --fuel {args.fuel:g}: no steady state: {exc}", file=sys.stderr)
         return 2
     far = summary["fuel_kg_s"] / summary["air_kg_s"] if summary["air_kg_s"] > 0 else math.inf
     n = summary["N_pct"]
