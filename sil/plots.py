@@ -67,11 +67,15 @@ def speed_plot(trace: dict[str, np.ndarray], title: str, path: Path, open_loop: 
     return _save(fig, path)
 
 
-def egt_plot(trace: dict[str, np.ndarray], title: str, path: Path) -> Path:
+def egt_plot(
+    trace: dict[str, np.ndarray], title: str, path: Path, limit_k: float | None = None
+) -> Path:
     t = trace["time"]
     fig, ax = plt.subplots(figsize=(10, 4))
     ax.plot(t, trace["EGT"], color="tab:red", lw=1, label="EGT (thermocouple)")
     ax.plot(t, trace["T4"], color="tab:purple", lw=0.8, alpha=0.7, label="T4 (truth)")
+    if limit_k is not None:
+        ax.axhline(limit_k, color="black", ls="--", lw=1, label=f"ECU's EGT limit {limit_k:g} K")
     limited = trace["LoopOwner"] == 1
     if limited.any():
         ax.fill_between(
@@ -106,15 +110,19 @@ def panel_plot(trace: dict[str, np.ndarray], kind: str, title: str, path: Path) 
 
 
 def plot_run(
-    trace: dict[str, np.ndarray], out_dir: Path, title: str, controller: str
+    trace: dict[str, np.ndarray],
+    out_dir: Path,
+    title: str,
+    controller: str,
+    egt_limit_k: float | None = None,
 ) -> list[Path]:
-    """All plots of one run; returns the files written."""
+    """All plots of one run (the EGT with the ECU's limit, when given); the files written."""
     if len(trace["time"]) < 2:
         return []
     open_loop = controller == "open_loop"
     written = [
         speed_plot(trace, title, out_dir / "speed.png", open_loop),
-        egt_plot(trace, title, out_dir / "egt.png"),
+        egt_plot(trace, title, out_dir / "egt.png", egt_limit_k),
     ]
     if np.isfinite(trace["Est_Lambda"]).any():
         written.append(panel_plot(trace, "estimates", title, out_dir / "estimates.png"))

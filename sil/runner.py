@@ -727,8 +727,9 @@ def _finish(
         from sil import plots  # matplotlib: only when plotting (campaign runs do not)
 
         title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
+        limit = ecu_params(s, 0.0).egt_limit_k  # (the trim voltage plays no part in it)
         summary["plots"] = [
-            p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind)
+            p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind, limit)
         ]
     results.write_summary(opts.out_dir, summary)
     for path in _handshake_files(opts.out_dir):

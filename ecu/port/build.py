@@ -69,6 +69,7 @@ def _compile(cc: str, flags: tuple[str, ...], sources: tuple[str, ...], out_name
     if out.exists():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
+    print(f"ecu.port: compiling {out_name} with {cc} (once: kept in {out.parent})", file=sys.stderr)
     fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out_name}.")
     os.close(fd)
     cmd = [cc, *flags, f"-I{PORT_DIR}", *(str(PORT_DIR / s) for s in sources), "-o", tmp]

@@ -14,7 +14,7 @@ SCENARIOS = (("mrac", "thesis-5.4-staircase"), ("pid", "thesis-6.2-staircase-pid
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    run_command.add_run_options(parser)
+    run_command.add_run_options(parser, out_default="out/demo, a folder per controller inside")
     parser.set_defaults(out=Path("out") / "demo")
 
 

@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_run_options(parser)
 
 
-def add_run_options(parser: argparse.ArgumentParser) -> None:
+def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCENARIO") -> None:
     parser.add_argument(
         "--bus",
         metavar="SPEC",
@@ -43,7 +43,7 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         help="lockstep (default): the plant owns time; realtime: wall clock; "
         "inproc: all nodes in this process, no bus",
     )
-    parser.add_argument("--out", type=Path, help="output folder (default: out/SCENARIO)")
+    parser.add_argument("--out", type=Path, help=f"output folder (default: {out_default})")
     parser.add_argument("--seed", type=int, help="noise seed (default: the scenario's)")
     parser.add_argument(
         "--log-format",
