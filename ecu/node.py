@@ -44,6 +44,9 @@ def _ahead(tick: int, now: int) -> bool:
     return 0 < (tick - now) % TICK_MODULO < TICK_MODULO // 2
 
 
+SERVICE_IDLE_POLL_S = 0.02  # lockstep with no plant yet: the service port's poll period
+
+
 class EcuNode:
     """The firmware on the bus. ``lockstep`` selects the clocking (see the module docstring);
     ``max_ticks`` makes the node finish after answering that many ticks (None: run until
@@ -100,7 +103,7 @@ class EcuNode:
         self.demand_waits = 0  # ticks run without their due Demand after the guard time
         self.sensor_seen = False  # a sensor frame has come (the plant is, or was, alive)
         self.late_sensor_frames = 0  # lockstep: sensor frames of a tick already run
-        self.timeout_s: float | None = None  # set while the plant is silent (see on_timeout)
+        self._timeout_s: float | None = None  # set while the plant is silent (see on_timeout)
         self.finished = False
         # the service port (ecu.service.port.ServicePort), polled before each tick, or None
         self.service: ServicePort | None = None
@@ -182,10 +185,24 @@ class EcuNode:
         )
         return not held and self.applied_tick != tick
 
+    @property
+    def timeout_s(self) -> float | None:
+        """Lockstep silence before ``on_timeout`` (None: the driver's guard). Before the first
+        sensor frame a node with a service port polls it every SERVICE_IDLE_POLL_S."""
+        if self._timeout_s is None and self.service is not None and not self.sensor_seen:
+            return SERVICE_IDLE_POLL_S
+        return self._timeout_s
+
+    @timeout_s.setter
+    def timeout_s(self, value: float | None) -> None:
+        self._timeout_s = value
+
     def on_timeout(self, send: SendFn) -> None:
         """Lockstep guard time passed: run the waiting tick without its Demand; or, when the
         plant has fallen silent, tick on the node's own clock (one tick per period of silence)
-        so that the firmware counts the lost sensor frames and reacts within its ticks."""
+        so that the firmware counts the lost sensor frames and reacts within its ticks; or,
+        with no plant heard yet, serve the service port with the engine stopped (no tick runs:
+        a real ECU answers its port before its engine turns)."""
         if self.waiting:
             self.demand_waits += 1
             self._run_tick(send)
@@ -193,6 +210,8 @@ class EcuNode:
             self.timeout_s = 1.0 / self.rate_hz
             self.tick = (self.tick + 1) % TICK_MODULO
             self._run_tick(send)
+        elif self.service is not None:
+            self.service.poll(self.i)
 
     def on_period(self, send: SendFn) -> None:
         """Real time: one tick per period of the node's own clock."""

@@ -50,12 +50,12 @@ class LoopRig:
         i.demand_cpct, i.arm, i.stop = 8_968, 1, 0
 
 
-def start_ecu(flash: Path, tag: str) -> tuple[subprocess.Popen, str]:
-    """`sil ecu --serial pty --flash FLASH` in real time on a virtual bus of its own; returns the
-    process and the pty path it printed."""
+def start_ecu(flash: Path, tag: str, mode: str = "realtime") -> tuple[subprocess.Popen, str]:
+    """`sil ecu --serial pty --flash FLASH` (in real time by default) on a virtual bus of its
+    own; returns the process and the pty path it printed."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "sil.cli", "ecu", "--bus", f"virtual:svc-{os.getpid()}-{tag}"]
-        + ["--mode", "realtime", "--serial", "pty", "--flash", str(flash), "--json"],
+        + ["--mode", mode, "--serial", "pty", "--flash", str(flash), "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -135,3 +135,20 @@ def test_bad_port_or_flash_file_is_named_and_refused(tmp_path):
         assert done.returncode == 2 and message in done.stderr, done.stderr
     done = _console("/dev/no-such-tty", "identify")
     assert done.returncode == 2 and "port '/dev/no-such-tty': cannot open it" in done.stderr
+
+
+def test_a_lockstep_ecu_with_no_plant_serves_its_port(tmp_path):
+    """A bench ECU in lockstep with nothing on its bus: no tick runs, but the port answers, as
+    a real ECU's does with its engine stopped."""
+    ecu, port = start_ecu(tmp_path / "flash.bin", "lockstep", mode="lockstep")
+    try:
+        client = ServiceClient(open_transport(port), timeout_s=2.0)
+        t0 = time.monotonic()
+        ident = client.identify()
+        assert ident["rate_hz"] == 100 and time.monotonic() - t0 < 1.0
+        assert client.get("pid_kp")["value"] == 2.0
+        client.transport.close()
+    finally:
+        ecu.send_signal(signal.SIGTERM)
+        out, _ = ecu.communicate(timeout=30)
+    assert json.loads(out)["ticks"] == 0  # served with the engine stopped: no tick ran
