@@ -211,7 +211,7 @@ class EcuNode:
             self.tick = (self.tick + 1) % TICK_MODULO
             self._run_tick(send)
         elif self.service is not None:
-            self.service.poll(self.i)
+            self.service.poll(self.i, ticking=False)
 
     def on_period(self, send: SendFn) -> None:
         """Real time: one tick per period of the node's own clock."""

@@ -193,8 +193,11 @@ class ServicePort:
             self.fault_log.record(0, FL.PARAMS_REJECTED, snapshot)
 
     # -- the per-tick task -------------------------------------------------------------------
-    def poll(self, inputs: EcuInputs) -> None:
-        """Service the port once, before the firmware tick that takes ``inputs``."""
+    def poll(self, inputs: EcuInputs, ticking: bool = True) -> None:
+        """Service the port once, before the firmware tick that takes ``inputs``; with
+        ``ticking`` False between no ticks (the engine stopped: a lockstep ECU with no plant
+        yet), when requests are answered but no live sample is due and the poll is not
+        counted."""
         t0 = self._clock()
         cpu0 = self._cpu_clock()
         c = self.counters
@@ -214,7 +217,7 @@ class ServicePort:
             self.ecu.s.stop = 1
         ecu = self.ecu
         self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot())
-        if self._stream_every and c.polls % self._stream_every == 0:
+        if ticking and self._stream_every and c.polls % self._stream_every == 0:
             self._send_stream()
         if self._writer is not None:
             self._flash_step()
@@ -222,6 +225,8 @@ class ServicePort:
             n = self.transport.write(bytes(self._tx[:MAX_TX_BYTES]))
             del self._tx[:n]
             c.tx_bytes += n
+        if not ticking:
+            return
         c.polls += 1
         dt = self._clock() - t0
         cpu = self._cpu_clock() - cpu0
