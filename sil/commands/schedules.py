@@ -75,14 +75,13 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"sil schedules: cannot write to {args.out}: {exc.strerror}", file=sys.stderr)
         return 2
+    model = make_model()
     settings = {
         "egt_limit_k": args.egt_limit,
         "surge_margin": args.surge_margin,
         "lean_margin": args.lean_margin,
-        "far_lean": None,
+        "far_lean": model.params.far_lean,
     }
-    model = make_model()
-    settings["far_lean"] = model.params.far_lean
 
     def progress(done: int, total: int) -> None:
         print(f"\rsil schedules: {done}/{total} speeds", end="", file=sys.stderr, flush=True)
