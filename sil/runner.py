@@ -94,7 +94,8 @@ class RunOptions:
     plots: bool = True
     progress: bool = True
     commission: Path | None = None  # `sil identify --export` file for the ECU
-    ecu_impl: str = "python"  # ECU tick: the Python firmware or its C port ("c", ecu/port)
+    ecu_impl: str = "python"  # ECU tick: the Python firmware, its C port ("c", ecu/port) or
+    # the C firmware image on QEMU ("pil", ecu/port/pil.py; on a bus only)
     ecu_extra_args: tuple[str, ...] = ()  # appended to `sil ecu` (e.g. --serial pty)
     ecu_bus: str | None = None  # the ECU's side of the fault bridge (default: a second udp bus)
     compiled_loop: bool = True  # inproc with the C ECU: one compiled loop (sil/compiled_loop.py)
@@ -233,6 +234,9 @@ def run(opts: RunOptions) -> dict:
     try:
         if s.path is not None:
             (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
+        if opts.mode == "inproc" and opts.ecu_impl == "pil":
+            raise ValueError("--ecu-impl pil runs the image on a bus: use --mode lockstep or "
+                             "realtime")  # fmt: skip
         if opts.mode != "inproc" and s.plant.varied:
             raise ValueError(f"{s.name}: engine variation needs --mode inproc")
         return _run(opts, s, seed, state)
@@ -711,6 +715,7 @@ def _finish(
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
         "e2e": {m: c for m, c in totals["e2e"].items() if set(c) - {"OK"}},
         **({"nodes": nodes} if (nodes := _node_stats(opts.out_dir)) else {}),
+        **({"pil": nodes["ecu"]["pil"]} if "pil" in nodes.get("ecu", {}) else {}),
         "unknown_ids": {f"0x{k:X}": v for k, v in totals["unknown_ids"].items()},
         "wrong_length": {f"0x{k:X}": v for k, v in totals["wrong_length"].items()},
     }

@@ -35,7 +35,14 @@ BUILD_DIR = _build_dir()
 WARNINGS = ("-std=c99", "-Wall", "-Wextra", "-Wconversion", "-pedantic", "-Werror")
 # the control core, the frame codec and the CAN node (ecu_node.c: the C twin of ecu/node.py)
 CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c", "ecu_node.c")
-HEADERS = ("ecu_core.h", "ecu_frames.h", "generated/turbojet.h", "ecu_node.h")
+HEADERS = (
+    "ecu_core.h",
+    "ecu_frames.h",
+    "generated/turbojet.h",
+    "ecu_node.h",
+    "board.h",
+    "ecu_main.h",
+)
 ARM_CC = "arm-none-eabi-gcc"
 ARM_FLAGS = ("-mcpu=cortex-m4", "-mthumb", "-Os", "-ffunction-sections", "-fdata-sections")
 
@@ -60,19 +67,29 @@ def _key(cc: str, flags: tuple[str, ...], sources: tuple[str, ...]) -> str:
     for name in (*sources, *HEADERS):
         h.update(name.encode())
         h.update((PORT_DIR / name).read_bytes())
+    for flag in flags:  # the linker script's text, as a source's
+        if flag.startswith("-T"):
+            h.update(Path(flag[2:]).read_bytes())
     return h.hexdigest()[:16]
 
 
-def _compile(cc: str, flags: tuple[str, ...], sources: tuple[str, ...], out_name: str) -> Path:
-    """Compile ``sources`` into BUILD_DIR/<hash>/<out_name> unless that exists already."""
-    out = BUILD_DIR / _key(cc, flags, sources) / out_name
+def _compile(
+    cc: str,
+    flags: tuple[str, ...],
+    sources: tuple[str, ...],
+    out_name: str,
+    libs: tuple[str, ...] = (),
+) -> Path:
+    """Compile ``sources`` into BUILD_DIR/<hash>/<out_name> unless that exists already
+    (``libs``: linked after the sources)."""
+    out = BUILD_DIR / _key(cc, (*flags, *libs), sources) / out_name
     if out.exists():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
     print(f"ecu.port: compiling {out_name} with {cc} (once: kept in {out.parent})", file=sys.stderr)
     fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out_name}.")
     os.close(fd)
-    cmd = [cc, *flags, f"-I{PORT_DIR}", *(str(PORT_DIR / s) for s in sources), "-o", tmp]
+    cmd = [cc, *flags, f"-I{PORT_DIR}", *(str(PORT_DIR / s) for s in sources), *libs, "-o", tmp]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         Path(tmp).unlink(missing_ok=True)
@@ -117,6 +134,29 @@ def arm_replayer(systick: bool = False) -> Path:
     return _compile(
         ARM_CC, flags, sources, "replay-cm4-systick.elf" if systick else "replay-cm4.elf"
     )
+
+
+PIL_SOURCES = ("ecu_main.c", "board_mps2.c", "startup_pil.s")
+
+
+def arm_pil_image() -> Path:
+    """The firmware image for QEMU's mps2-an386 (ecu_main.c on board_mps2.c): no C library
+    start-up, no semihosting, no heap (a call that needs one would not link)."""
+    if not shutil.which(ARM_CC):
+        raise PortBuildError(
+            f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
+        )
+    flags = (
+        *WARNINGS,
+        *ARM_FLAGS,
+        "-DECU_NODE_PROFILE",
+        "-nostartfiles",
+        "--specs=nano.specs",
+        "-Wl,--gc-sections",
+        f"-T{PORT_DIR / 'mps2_an386_pil.ld'}",
+    )
+    sources = (*CORE_SOURCES, *PIL_SOURCES)
+    return _compile(ARM_CC, flags, sources, "ecu-pil.elf", libs=("-lc", "-lgcc"))
 
 
 def arm_objects() -> dict[str, Path]:

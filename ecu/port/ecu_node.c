@@ -141,7 +141,13 @@ static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
         apply_demand(n);
     }
     n->in.tick = n->tick;
+#ifdef ECU_NODE_PROFILE
+    ecu_node_profile_begin();
     o = ecu_tick(n->ecu, &n->in);
+    ecu_node_profile_end();
+#else
+    o = ecu_tick(n->ecu, &n->in);
+#endif
     n->in.sensor_status = n->in.analog_status = n->in.demand_status = ECU_E2E_NONEWDATA;
     if (n->status_phase == 0u) { /* ticks % every_status == 0 */
         out[count].id = ECU_FRAME_STATUS;

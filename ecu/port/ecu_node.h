@@ -166,6 +166,13 @@ int ecu_node_waiting(const ecu_node_t *n);     /* 1: a tick waits for its Demand
 /* the inputs the next tick gets so far (EcuNode.i) */
 const ecu_inputs_t *ecu_node_inputs(const ecu_node_t *n);
 
+#ifdef ECU_NODE_PROFILE
+/* Built with ECU_NODE_PROFILE, the node calls these right before and right after each ecu_tick
+   (the firmware image times the control core with them: ecu_main.c); you provide them. */
+void ecu_node_profile_begin(void);
+void ecu_node_profile_end(void);
+#endif
+
 #ifdef ECU_WITH_NAMES
 /* "type name" / "type name[n]" of each field, space separated (the Python wrapper reads them) */
 extern const char ecu_can_frame_names[];

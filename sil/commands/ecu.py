@@ -78,9 +78,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--impl",
-        choices=("python", "c"),
+        choices=("python", "c", "pil"),
         default="python",
-        help="tick implementation: Python firmware or its C port (ecu/port, built at first use)",
+        help="tick implementation: Python firmware, its C port (ecu/port, built at first use) or "
+        "processor in the loop: the C firmware image on an emulated Cortex-M4 (QEMU "
+        "mps2-an386), bridged over its slcan UART",
     )
     parser.add_argument(
         "--serial",
@@ -168,6 +170,12 @@ def run(args: argparse.Namespace) -> int:
     if args.ticks is not None and args.ticks < 1:
         print("sil ecu: --ticks must be at least 1", file=sys.stderr)
         return 2
+    if args.impl == "pil":
+        if args.serial or args.flash:
+            print("sil ecu: --impl pil: the image has no service port (--serial, --flash)",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        return _run_pil(args, params)
     from ecu.port.build import PortBuildError
     from ecu.port.core import PortError, make_ecu
 
@@ -220,6 +228,73 @@ def run(args: argparse.Namespace) -> int:
     }
     if node.service is not None:
         summary["service"] = node.service.summary()
+    if args.stats_file is not None:
+        args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for key, value in summary.items():
+            print(f"{key}: {value}")
+    return 0
+
+
+def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)
+    """The firmware image on QEMU, its slcan UART bridged to the bus (ecu/port/pil.py)."""
+    from ecu.port.build import PortBuildError
+    from ecu.port.pil import PilError, PilImage, calibration_block, image_sizes
+    from ecu.port.pil_bridge import PilBridge
+    from protocol.bus import BusSpecError, open_bus
+    from protocol.codec import Codec
+    from protocol.run_bus import RunBus
+
+    lockstep = args.mode == "lockstep"  # profiled by instruction counting (ecu/port/pil.py)
+    block = calibration_block(params, lockstep=lockstep, guard_s=args.guard, profile=lockstep)
+    codec = Codec()
+    frame_ids = [codec[m].frame_id for m in ("PlantSensors", "PlantAnalog", "Demand")]
+    stop = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        image = PilImage(block, icount=lockstep)
+    except (PortBuildError, PilError) as exc:
+        print(f"sil ecu: --impl pil: {exc}", file=sys.stderr)
+        return 2
+    try:
+        bus = RunBus(open_bus(args.bus), args.run_tag)
+    except (BusSpecError, ValueError) as exc:
+        print(f"sil ecu: {exc}", file=sys.stderr)
+        return 2
+    bridge = None
+    try:
+        image.start()
+        image_bus = image.open_bus()
+        try:
+            image.wait_ready()
+            print(f"pil: image {image.elf.name} on {image.url}", file=sys.stderr, flush=True)
+            if args.ready_file:
+                args.ready_file.write_text("ready\n")
+            bridge = PilBridge(bus, image_bus, frame_ids)
+            limit = args.ticks
+
+            def should_stop() -> bool:
+                return stop.is_set() or (limit is not None and image.profile.ticks >= limit)
+
+            bridge.run(should_stop)
+        finally:
+            image_bus.shutdown()
+    except PilError as exc:
+        print(f"sil ecu: --impl pil: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        image.stop()
+        bus.shutdown()
+    summary = {
+        "impl": "pil",
+        **({"ticks": image.profile.ticks} if lockstep else {}),
+        **(bridge.stats() if bridge is not None else {}),
+        **bus.stats(),
+        "pil": {**image.profile.summary(), "image": image_sizes(image.elf)},
+    }
     if args.stats_file is not None:
         args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
     if args.json:

@@ -60,9 +60,10 @@ def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCE
     )
     parser.add_argument(
         "--ecu-impl",
-        choices=("python", "c"),
+        choices=("python", "c", "pil"),
         default="python",
-        help="ECU tick implementation: the Python firmware or its C port (ecu/port)",
+        help="ECU tick implementation: the Python firmware, its C port (ecu/port) or the C "
+        "firmware image on an emulated Cortex-M4 (pil: processor in the loop, on a bus)",
     )
     parser.add_argument(
         "--python-loop",

@@ -1,0 +1,289 @@
+"""Processor in the loop: the firmware image (ecu_main.c on board_mps2.c) on QEMU's emulated
+Cortex-M4, its slcan UART on a loopback TCP port and its console read here.
+
+:func:`calibration_block` writes the block the image reads from its flash sector (layout in
+ecu_main.h); :class:`PilImage` starts QEMU with the image and the block, hands out the slcan
+URL (``socket://127.0.0.1:PORT``: python-can's ``slcan`` interface opens it as it would a USB-CAN
+adapter) and reads the console: the SysTick calibration, the per-tick profile lines and any
+refusal or watchdog reset.
+
+In lockstep QEMU runs with ``-icount shift=0``: its virtual clock advances one nanosecond per
+instruction while the CPU runs (and with the wall clock while it sleeps), so SysTick counts around
+a tick, scaled by the start-up calibration loop, are the tick's instructions. In real time the
+image's SysTick must follow the wall clock, which it does only without instruction counting (with
+it, the emulated time fell behind by half here): QEMU runs without it and no profile is taken.
+CPU load is reported for a 168 MHz Cortex-M4 at one instruction per cycle (an assumption: flash
+wait states and multi-cycle instructions make real cycles somewhat more).
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import struct
+import subprocess
+import tempfile
+import threading
+import time
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import can
+
+from ecu.params import FirmwareParams
+from ecu.port import build
+from ecu.port.core import param_words
+from ecu.port.qemu import MACHINE, QEMU
+
+MAGIC = b"ECUC"
+VERSION = 1
+LOCKSTEP, PROFILE = 1, 2
+CALIB_ADDRESS = 0x000F0000  # mps2_an386_pil.ld: the calibration sector
+CORE_HZ = 168e6  # the Cortex-M4 the load is reported for (STM32F4 class)
+START_TIMEOUT_S = 30.0  # QEMU up, image ready
+
+
+class PilError(RuntimeError):
+    """The image could not be started, or refused its calibration block."""
+
+
+def calibration_block(
+    params: FirmwareParams,
+    *,
+    lockstep: bool,
+    guard_s: float = 1.0,
+    watchdog_ms: int = 250,
+    profile: bool = True,
+) -> bytes:
+    """The calibration block (ecu_main.h) for ``params``, with its CRC-32."""
+    words = param_words(params)
+    flags = (LOCKSTEP if lockstep else 0) | (PROFILE if profile else 0)
+    guard_ms = max(1, round(guard_s * 1e3))
+    body = MAGIC + struct.pack(
+        f"<5I{len(words)}i", VERSION, flags, guard_ms, watchdog_ms, len(words), *words
+    )
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+@dataclass
+class Profile:
+    """What the console's per-tick lines say: SysTick counts of the node call that ran each
+    tick and of its ecu_tick, turned into instructions by the calibration."""
+
+    cal_counts: int = 0
+    cal_instructions: int = 0
+    ticks: int = 0
+    node_sum: int = 0
+    node_max: int = 0
+    core_sum: int = 0
+    core_max: int = 0
+    resets: int = 0
+    refused: str | None = None
+    ready: bool = False
+    lines: list[str] = field(default_factory=list)  # anything else the console said
+
+    def instructions(self, counts: float) -> float:
+        if not self.cal_counts:
+            return float("nan")
+        return counts * self.cal_instructions / self.cal_counts
+
+    def summary(self) -> dict:
+        """Instructions per tick (mean, max) of the core and of the whole node call, and the CPU
+        load they make at 100 Hz and 1 kHz on a 168 MHz Cortex-M4 at one instruction per cycle;
+        without a profile (real time) only the resets."""
+        if not self.ticks:
+            return {
+                "watchdog_resets": self.resets,
+                **({"console": self.lines[-10:]} if self.lines else {}),
+            }
+        n = self.ticks
+        node_mean = self.instructions(self.node_sum / n)
+        out = {
+            "ticks_profiled": self.ticks,
+            "instructions_per_tick": {
+                "core_mean": round(self.instructions(self.core_sum / n), 1),
+                "core_max": round(self.instructions(self.core_max)),
+                "node_mean": round(node_mean, 1),
+                "node_max": round(self.instructions(self.node_max)),
+            },
+            "cpu_load_pct": {
+                "100_Hz": round(100.0 * node_mean * 100 / CORE_HZ, 3),
+                "1_kHz": round(100.0 * node_mean * 1000 / CORE_HZ, 3),
+                "assumes": "168 MHz Cortex-M4, one instruction per cycle",
+            },
+            "watchdog_resets": self.resets,
+        }
+        if self.lines:
+            out["console"] = self.lines[-10:]
+        return out
+
+    def take(self, line: str) -> None:
+        word, _, rest = line.partition(" ")
+        if word == "K":
+            node, _, core = rest.partition(" ")
+            counts = int(node), int(core)
+            self.ticks += 1
+            self.node_sum += counts[0]
+            self.core_sum += counts[1]
+            self.node_max = max(self.node_max, counts[0])
+            self.core_max = max(self.core_max, counts[1])
+        elif word == "CAL":
+            counts, _, instructions = rest.partition(" ")
+            self.cal_counts, self.cal_instructions = int(counts), int(instructions)
+        elif word == "READY":
+            self.ready = True
+        elif word == "CONFIG":
+            self.refused = rest.removeprefix("BAD ").strip()
+        elif line == "RESET watchdog":
+            self.resets += 1
+        elif line:
+            self.lines.append(line)
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def image_sizes(elf: Path) -> dict[str, int]:
+    """Flash (text + data) and RAM (data + bss, without the calibration sector) in bytes."""
+    out = subprocess.run(
+        ["arm-none-eabi-size", "-A", str(elf)], capture_output=True, text=True, check=True
+    ).stdout
+    size = {
+        parts[0]: int(parts[1])
+        for parts in (line.split() for line in out.splitlines())
+        if len(parts) >= 2 and parts[0].startswith(".") and parts[1].isdigit()
+    }
+    text = size.get(".text", 0) + size.get(".ARM.exidx", 0)
+    ram = size.get(".data", 0) + size.get(".bss", 0) + size.get(".noinit", 0)
+    return {"flash_bytes": text + size.get(".data", 0), "ram_bytes": ram}
+
+
+class PilImage:
+    """QEMU running the firmware image with ``block`` in its calibration sector.
+
+    ``url``: the slcan UART as a pyserial URL (loopback only). :meth:`open_bus` gives python-can's
+    slcan bus on it; :attr:`profile` fills from the console as the image runs. A context manager:
+    leaving it stops QEMU.
+    """
+
+    def __init__(self, block: bytes, *, elf: Path | None = None, icount: bool = True) -> None:
+        if not shutil.which(QEMU):
+            raise PilError(f"{QEMU} not found (apt-get install qemu-system-arm)")
+        self.elf = elf or build.arm_pil_image()
+        self._dir = tempfile.TemporaryDirectory(prefix="ecu-pil-")
+        self._cal = Path(self._dir.name) / "calibration.bin"
+        self._cal.write_bytes(block)
+        self.icount = icount
+        self.profile = Profile()
+        self.proc: subprocess.Popen | None = None
+        self.port = 0
+        self._reader: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        return f"socket://127.0.0.1:{self.port}"
+
+    def start(self) -> None:
+        """Start QEMU; it waits (halted) until the slcan port is connected."""
+        for _ in range(5):  # a port taken between choosing it and QEMU's bind: another one
+            self.port = _free_port()
+            self.proc = subprocess.Popen(
+                self._command(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            )
+            said = self._until_listening()
+            if said is None:
+                self._reader = threading.Thread(target=self._read_console, daemon=True)
+                self._reader.start()
+                threading.Thread(target=self._drain_stderr, daemon=True).start()
+                return
+            if "Address already in use" not in said:
+                raise PilError(f"{QEMU} did not start: {said.strip() or 'no message'}")
+        raise PilError(f"{QEMU}: no free loopback port after 5 tries")
+
+    def _until_listening(self) -> str | None:
+        """None once QEMU says it waits for the slcan connection; else what it said before it
+        exited."""
+        assert self.proc is not None and self.proc.stderr is not None
+        said = []
+        for line in self.proc.stderr:
+            if "waiting for connection" in line:
+                return None
+            said.append(line)
+        self.proc.wait()
+        return "".join(said)
+
+    def _drain_stderr(self) -> None:
+        assert self.proc is not None and self.proc.stderr is not None
+        for line in self.proc.stderr:
+            if "terminating on signal" not in line:  # (our own stop)
+                self.profile.lines.append(f"qemu: {line.strip()}")
+
+    def _command(self) -> list[str]:
+        return [
+            QEMU,
+            "-M",
+            MACHINE,
+            *(("-icount", "shift=0") if self.icount else ()),
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            f"tcp:127.0.0.1:{self.port},server=on,wait=on,nodelay=on",
+            "-serial",
+            "stdio",
+            "-device",
+            f"loader,file={self._cal},addr={CALIB_ADDRESS:#x},force-raw=on",
+            "-kernel",
+            str(self.elf),
+        ]
+
+    def _read_console(self) -> None:
+        assert self.proc is not None and self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.profile.take(line.strip())
+
+    def open_bus(self) -> can.BusABC:
+        """python-can's slcan bus on the image's UART (starts the image running)."""
+        bus = can.Bus(interface="slcan", channel=self.url, sleep_after_open=0)
+        # each frame is one small write: without TCP_NODELAY the next one waits for an ACK
+        # (Nagle's algorithm against delayed ACKs: 40 ms a tick); pyserial does not set it
+        sock = getattr(getattr(bus, "serialPortOrig", None), "_socket", None)
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return bus
+
+    def wait_ready(self, timeout: float = START_TIMEOUT_S) -> None:
+        """Until the image says READY; PilError when it refused its block or QEMU stopped."""
+        deadline = time.monotonic() + timeout
+        while not self.profile.ready:
+            if self.profile.refused is not None:
+                raise PilError(f"the image refused its calibration block: {self.profile.refused}")
+            if self.proc is None or self.proc.poll() is not None:
+                said = " | ".join(self.profile.lines[-4:]) or "no message"
+                raise PilError(f"{QEMU} exited before the image was ready: {said}")
+            if time.monotonic() > deadline:
+                raise PilError(f"the image was not ready within {timeout:g} s")
+            time.sleep(0.005)
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5.0)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self._reader is not None:
+            self._reader.join(2.0)
+        self._dir.cleanup()
+
+    def __enter__(self) -> PilImage:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -1,0 +1,126 @@
+"""Processor in the loop: the firmware image (ecu_main.c on board_mps2.c) on QEMU's mps2-an386
+answers as the C node does, looks like a USB-CAN adapter to python-can's slcan interface, refuses
+a bad calibration block, and flies a scenario with a can.log byte-identical to the C ECU's."""
+
+from __future__ import annotations
+
+import json
+import struct
+import subprocess
+import zlib
+
+import can
+import pytest
+
+from ecu.params import compile_params, preset
+from ecu.port import build
+from ecu.port.core import make_ecu
+from ecu.port.node import CEcuNode
+from ecu.port.pil import PilError, PilImage, calibration_block, image_sizes
+from plant.fast_plant import FastPlant
+from plant.interface import PlantConfig
+from plant.node import PlantNode
+from sil import port_bench
+from tests.port.test_sil import _run, _udp_spec
+
+
+@pytest.fixture(scope="module")
+def image(toolchains):
+    return build.arm_pil_image()
+
+
+@pytest.fixture(scope="module")
+def params():
+    return compile_params(preset("default"))
+
+
+def _plant_frames(count: int) -> list[tuple[int, bytes]]:
+    """The plant's first frames (tick 0: truth, PlantAnalog, PlantSensors)."""
+    frames: list[tuple[int, bytes]] = []
+    node = PlantNode(FastPlant(PlantConfig(ecu_period_s=0.01)))
+    node.start(lambda i, d: frames.append((i, bytes(d))))
+    return frames[:count]
+
+
+def test_image_answers_python_can_slcan_as_the_c_node_does(image, params):
+    expected: list[tuple[int, bytes]] = []
+    c_node = CEcuNode(make_ecu("c", params), lockstep=True)
+    frames = _plant_frames(10)
+    for frame_id, data in frames:
+        c_node.on_frame(frame_id, data, lambda i, d: expected.append((i, bytes(d))))
+    assert expected, "the C node answers tick 0"
+    with PilImage(calibration_block(params, lockstep=True), elf=image) as pil:
+        bus = can.Bus(interface="slcan", channel=pil.url, sleep_after_open=0)
+        try:
+            pil.wait_ready()
+            assert bus.get_version(2.0) == (10, 13)  # "V1013": an adapter's answer
+            for frame_id, data in frames:
+                bus.send(can.Message(arbitration_id=frame_id, is_extended_id=False, data=data))
+            got = []
+            while len(got) < len(expected) and (msg := bus.recv(5.0)) is not None:
+                got.append((msg.arbitration_id, bytes(msg.data)))
+        finally:
+            bus.shutdown()
+    assert got == expected
+
+
+@pytest.mark.parametrize(
+    ("spoil", "reason"),
+    [
+        (lambda b: b[:-1] + bytes([b[-1] ^ 1]), "CRC mismatch"),
+        (lambda b: b"XXXX" + b[4:], "no ECUC magic"),
+        (lambda b: b[:4] + struct.pack("<I", 2) + b[8:], "version not supported"),
+        (lambda b: b[:40], "CRC mismatch"),  # a half-written block: the flash reads 0 beyond
+    ],
+)
+def test_image_refuses_a_bad_calibration_block(image, params, spoil, reason):
+    with PilImage(spoil(calibration_block(params, lockstep=True)), elf=image) as pil:
+        bus = pil.open_bus()
+        try:
+            with pytest.raises(PilError, match=reason):
+                pil.wait_ready(10.0)
+        finally:
+            bus.shutdown()
+
+
+def test_image_refuses_parameters_the_core_refuses(image, params):
+    block = bytearray(calibration_block(params, lockstep=True))
+    struct.pack_into("<i", block, 24, 0)  # the first parameter word, rate_hz: 0
+    body = bytes(block[:-4])
+    with PilImage(body + struct.pack("<I", zlib.crc32(body)), elf=image) as pil:
+        bus = pil.open_bus()
+        try:
+            with pytest.raises(PilError, match="refused by ecu_params_load"):
+                pil.wait_ready(10.0)
+        finally:
+            bus.shutdown()
+
+
+def test_image_has_no_heap_and_fits_a_small_part(image):
+    symbols = subprocess.run(
+        ["arm-none-eabi-nm", str(image)], capture_output=True, text=True, check=True
+    ).stdout
+    assert "malloc" not in symbols and "_sbrk" not in symbols
+    sizes = image_sizes(image)
+    assert 0 < sizes["flash_bytes"] <= 32 * 1024 and 0 < sizes["ram_bytes"] <= 16 * 1024
+
+
+@pytest.mark.slow
+def test_pil_lockstep_can_log_is_byte_identical_and_counts_instructions(
+    tmp_path, first_difference, vectors, image
+):
+    pil_log = _run(tmp_path, "pil", "--bus", _udp_spec())
+    c_log = _run(tmp_path, "c", "--bus", _udp_spec())
+    assert len(c_log.splitlines()) > 1000
+    assert first_difference(pil_log, c_log) is None
+    summary = json.loads(next(tmp_path.glob("pil-*")).joinpath("summary.json").read_text())
+    figures = summary["pil"]
+    assert figures["ticks_profiled"] >= 250 and figures["watchdog_resets"] == 0
+    # the core's instructions per tick in the loop, against the golden vectors' figure
+    path, g = vectors["mrac-aero"]
+    golden = port_bench.qemu_instructions(path, g.ticks)
+    assert isinstance(golden, float), golden
+    in_loop = figures["instructions_per_tick"]["core_mean"]
+    assert abs(in_loop / golden - 1.0) <= 0.05, (in_loop, golden)
+    load = figures["cpu_load_pct"]
+    assert load["1_kHz"] == pytest.approx(10 * load["100_Hz"], rel=1e-2)
