@@ -11,7 +11,7 @@
  *     board_can_pending, board_can_send),
  *   - where its calibration block lies in flash (board_calibration),
  *   - its pump driver output (board_pump_output), its watchdog (board_watchdog_start,
- *     board_watchdog_kick) and a debug console (board_console_write).
+ *     board_watchdog_kick) and a debug console (board_console_write, board_console_read).
  *
  * board_mps2.c is the board for QEMU's mps2-an386 (Cortex-M4): its "CAN controller" is UART0
  * speaking slcan (Lawicel), so that the emulated MCU looks like a USB-CAN adapter to the host;
@@ -66,5 +66,8 @@ int board_reset_by_watchdog(void);
 
 /* The debug console: n bytes, queued (waits only while its queue is full). */
 void board_console_write(const char *s, size_t n);
+
+/* The debug console's input: 1 and *c the oldest byte received, or 0 when none. */
+int board_console_read(char *c);
 
 #endif /* BOARD_H */

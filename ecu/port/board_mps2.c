@@ -6,7 +6,7 @@
  *   lines. O, C, L, S, s, F, Z, M, m, X, W, Q, U are answered with "\r" (F with "F00\r"), V with
  *   the version and N with the serial number; anything else with BEL. To the host the emulated
  *   MCU is a USB-CAN adapter (python-can's slcan interface, socket:// URL).
- * - console: UART1, write only.
+ * - console: UART1.
  * - both UARTs interrupt-driven with static ring buffers.
  * - watchdog: the CMSDK APB watchdog at 0x40008000 (first expiry: NMI, second: reset).
  * - calibration block: the 64 KiB flash sector at 0x000F0000 (mps2_an386_pil.ld).
@@ -227,7 +227,8 @@ void board_init(void)
     watchdog_mark = 0u;
     uart_init(&can_uart, UART0,
               UART_CTRL_TX_EN | UART_CTRL_RX_EN | UART_CTRL_TX_INT | UART_CTRL_RX_INT);
-    uart_init(&console_uart, UART1, UART_CTRL_TX_EN | UART_CTRL_TX_INT);
+    uart_init(&console_uart, UART1,
+              UART_CTRL_TX_EN | UART_CTRL_RX_EN | UART_CTRL_TX_INT | UART_CTRL_RX_INT);
     NVIC_ISER0 = 0xFu; /* IRQ 0..3: UART0 RX, TX, UART1 RX, TX */
     irq_enable();
 }
@@ -441,4 +442,14 @@ void board_watchdog_kick(void)
 void board_console_write(const char *s, size_t n)
 {
     uart_write(&console_uart, s, n);
+}
+
+int board_console_read(char *c)
+{
+    uint8_t b;
+    if (!ring_get(&console_uart.rx, &b)) {
+        return 0;
+    }
+    *c = (char)b;
+    return 1;
 }

@@ -1,6 +1,7 @@
-"""Build the C port: the host shared library (for ctypes), the host golden-vector replayer and the
-Cortex-M4 replay firmware (for QEMU). Outputs go to a build directory keyed by a hash of the
-sources and flags, so an edited source is rebuilt on the next use and never reused stale.
+"""Build the C port: the host shared library (for ctypes), the host golden-vector replayer, the
+Cortex-M4 replay firmware and the Cortex-M4 firmware image (both for QEMU). Outputs go to a build
+directory keyed by a hash of the sources and flags, so an edited source is rebuilt on the next use
+and never reused stale.
 
 The warning flags are the issue's: ``-std=c99 -Wall -Wextra -Wconversion -pedantic -Werror``.
 
@@ -175,8 +176,9 @@ def main() -> int:
     print(f"host replayer: {host_replayer()}")
     try:
         print(f"Cortex-M4 replayer: {arm_replayer()}")
+        print(f"Cortex-M4 firmware image (mps2-an386): {arm_pil_image()}")
     except PortBuildError as exc:
-        print(f"Cortex-M4 replayer: not built: {exc}", file=sys.stderr)
+        print(f"Cortex-M4 builds: not built: {exc}", file=sys.stderr)
         return 1
     return 0
 

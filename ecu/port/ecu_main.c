@@ -154,6 +154,31 @@ static void calibrate(void)
     console("\n");
 }
 
+/* the console's commands (ecu_main.h): a line at a time */
+static void console_commands(void)
+{
+    static const char wdtest[] = "WDTEST";
+    static size_t matched;
+    static int other;
+    char c;
+    while (board_console_read(&c)) {
+        if (c == '\r' || c == '\n') {
+            if (matched == sizeof wdtest - 1u && !other) {
+                console("WDTEST\n");
+                board_pump_output(0, 0);
+                for (;;) { /* no kick: the watchdog resets the board */
+                }
+            }
+            matched = 0u;
+            other = 0;
+        } else if (matched < sizeof wdtest - 1u && c == wdtest[matched]) {
+            matched++;
+        } else {
+            other = 1;
+        }
+    }
+}
+
 static void sleep_until_interrupt(uint32_t seen_periods)
 {
     __asm__ volatile("cpsid i" ::: "memory");
@@ -267,6 +292,7 @@ int main(void)
             n = ecu_node_period(&node, out);
             after_node_call(n, out, t0, ticks);
         }
+        console_commands();
         board_watchdog_kick();
         sleep_until_interrupt(p);
     }

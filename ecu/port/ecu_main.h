@@ -25,6 +25,10 @@
  *   "READY <rate_hz> <lockstep>"  running
  *   "K <node> <core>"             profile: SysTick counts of the node call that ran a tick and
  *                                 of its ecu_tick alone
+ *   "WDTEST"                      the answer to the console command below
+ *
+ * Console commands (lines received): "WDTEST" stops the main loop without kicking the watchdog,
+ * to prove on the bench that the watchdog resets the board (the pump output goes off first).
  */
 #ifndef ECU_MAIN_H
 #define ECU_MAIN_H

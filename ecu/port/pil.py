@@ -137,6 +137,7 @@ class Profile:
             self.refused = rest.removeprefix("BAD ").strip()
         elif line == "RESET watchdog":
             self.resets += 1
+            self.ready = False  # until it says READY again
         elif line:
             self.lines.append(line)
 
@@ -192,7 +193,11 @@ class PilImage:
         for _ in range(5):  # a port taken between choosing it and QEMU's bind: another one
             self.port = _free_port()
             self.proc = subprocess.Popen(
-                self._command(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+                self._command(),
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
             )
             said = self._until_listening()
             if said is None:
@@ -245,6 +250,12 @@ class PilImage:
         assert self.proc is not None and self.proc.stdout is not None
         for line in self.proc.stdout:
             self.profile.take(line.strip())
+
+    def console(self, line: str) -> None:
+        """Send a command line to the image's console (ecu_main.h)."""
+        assert self.proc is not None and self.proc.stdin is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
 
     def open_bus(self) -> can.BusABC:
         """python-can's slcan bus on the image's UART (starts the image running)."""

@@ -20,6 +20,7 @@ TARGETS = {
     "service": "sil.console.bench",
     "port": "sil.port_bench",
     "realtime": "sil.realtime_bench",
+    "pil": "sil.pil_bench",
 }
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import struct
 import subprocess
+import time
 import zlib
 
 import can
@@ -124,3 +125,20 @@ def test_pil_lockstep_can_log_is_byte_identical_and_counts_instructions(
     assert abs(in_loop / golden - 1.0) <= 0.05, (in_loop, golden)
     load = figures["cpu_load_pct"]
     assert load["1_kHz"] == pytest.approx(10 * load["100_Hz"], rel=1e-2)
+
+
+def test_watchdog_resets_a_stuck_image(image, params):
+    with PilImage(calibration_block(params, lockstep=True), elf=image) as pil:
+        bus = pil.open_bus()
+        try:
+            pil.wait_ready()
+            assert pil.profile.resets == 0
+            pil.console("WDTEST")  # the main loop stops kicking
+            deadline = time.monotonic() + 20.0
+            while pil.profile.resets == 0 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert pil.profile.resets == 1, pil.profile.lines
+            pil.wait_ready(10.0)  # it boots again, checks its block and runs
+            assert bus.get_version(2.0) == (10, 13)
+        finally:
+            bus.shutdown()

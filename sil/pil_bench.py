@@ -1,0 +1,99 @@
+"""`sil bench pil`: the firmware image on the emulated Cortex-M4 in the loop.
+
+One ``sil run SCENARIO --ecu-impl pil`` in lockstep, as a user runs it, beside the same run with
+the host C ECU (``--ecu-impl c``): whether the two can.log files are byte-identical, the speed of
+each against real time, the image's instructions per tick measured in the loop (core and whole
+node call, mean and max) against the golden-vector figure of the same core under QEMU, the CPU
+load at 100 Hz and 1 kHz on a 168 MHz Cortex-M4 at one instruction per cycle, and the image's
+flash and RAM.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from sil import scenario
+from sil.bench import BenchError
+
+SCENARIO = "thesis-5.2-mrac-fast"
+DURATION_S = 60.0
+QUICK_S = 15.0
+TARGET_REALTIME_FACTOR = 10.0
+TARGET_INSTRUCTIONS_RATIO = 0.05  # in the loop against the golden vectors, at most
+
+
+def _case_file(tmp: Path, seconds: float) -> Path:
+    s = scenario.load(SCENARIO)
+    assert s.path is not None
+    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {seconds:g}", s.path.read_text())
+    if cut != 1:
+        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to set")
+    path = tmp / f"{SCENARIO}.toml"
+    path.write_text(text)
+    return path
+
+
+def _run(path: Path, out: Path, impl: str) -> dict:
+    cmd = [sys.executable, "-m", "sil.cli", "run", str(path), "--ecu-impl", impl]
+    proc = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True, text=True)
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        summary = None
+    if summary is None or summary.get("status") != "completed":
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
+        raise BenchError(f"sil run {path.name} --ecu-impl {impl} (exit {proc.returncode}): {tail}")
+    return summary
+
+
+def run(quick: bool = False) -> dict:
+    from ecu import golden
+    from sil import golden as sources
+    from sil import port_bench
+
+    seconds = QUICK_S if quick else DURATION_S
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _case_file(Path(tmp), seconds)
+        pil = _run(path, Path(tmp) / "pil", "pil")
+        c = _run(path, Path(tmp) / "c", "c")
+        identical = (Path(tmp) / "pil" / "can.log").read_bytes() == (
+            Path(tmp) / "c" / "can.log"
+        ).read_bytes()
+        vectors = Path(tmp) / "pil-scenario.gv"
+        g = sources.record_scenario("pil-scenario", SCENARIO, round(seconds * 100))
+        golden.write(g, vectors)
+        golden_instructions = port_bench.qemu_instructions(vectors, g.ticks)
+    figures = pil.get("pil", {})
+    per_tick = figures.get("instructions_per_tick", {})
+    core = per_tick.get("core_mean")
+    ratio = core / golden_instructions - 1.0 if isinstance(golden_instructions, float) else None
+    out = {
+        "scenario": f"{SCENARIO} ({seconds:g} s, lockstep)",
+        "can_log_identical_to_c": identical,
+        "pil_realtime_factor": round(pil["realtime_factor"], 2),
+        "c_realtime_factor": round(c["realtime_factor"], 2),
+        "pil_startup_s": round(pil.get("startup_s", float("nan")), 2),
+        "ticks_profiled": figures.get("ticks_profiled"),
+        **{f"instructions_{k}": v for k, v in per_tick.items()},
+        "golden_vector_instructions": golden_instructions,
+        "core_vs_golden_pct": None if ratio is None else round(100 * ratio, 2),
+        **{
+            f"cpu_load_{k}_pct": v
+            for k, v in figures.get("cpu_load_pct", {}).items()
+            if k != "assumes"
+        },  # fmt: skip
+        "cpu_load_assumes": figures.get("cpu_load_pct", {}).get("assumes"),
+        **figures.get("image", {}),
+        "watchdog_resets": figures.get("watchdog_resets"),
+    }
+    out["targets_met"] = {
+        "identical": identical,
+        "realtime_factor_10x": out["pil_realtime_factor"] >= TARGET_REALTIME_FACTOR,
+        "instructions_within_5pct": ratio is not None and abs(ratio) <= TARGET_INSTRUCTIONS_RATIO,
+    }
+    return out
