@@ -44,17 +44,36 @@ class BenchError(RuntimeError):
     """A run of the bench failed to produce its summary."""
 
 
+def scenario_cut(name: str, seconds: float, folder: Path, head: str = "") -> Path:
+    """A copy of the shipped scenario ``name`` in ``folder`` with its duration set to
+    ``seconds`` (and ``head``, TOML lines, before its own)."""
+    s = scenario.load(name)
+    assert s.path is not None  # (a shipped scenario has its file)
+    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {seconds:g}", s.path.read_text())
+    if cut != 1:
+        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to set")
+    path = folder / f"{s.name}-{seconds:g}s.toml"
+    path.write_text(head + text)
+    return path
+
+
+def completed_run(path: Path, out: Path, *args: str) -> dict:
+    """``sil run PATH ARGS`` in a process of its own; its summary, which must say completed."""
+    cmd = [sys.executable, "-m", "sil.cli", "run", str(path), *args]
+    proc = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True, text=True)
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        summary = None
+    if summary is None or summary.get("status") != "completed":
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
+        raise BenchError(f"sil run {path.name} {' '.join(args)} (exit {proc.returncode}): {tail}")
+    return summary
+
+
 def _scenario_file(s: scenario.Scenario, tmp: Path, quick: bool) -> str:
     """The scenario to run: the shipped one, or (quick) a copy of its file cut to QUICK_S."""
-    if not quick:
-        return s.name
-    assert s.path is not None  # (a shipped scenario has its file)
-    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {QUICK_S}", s.path.read_text())
-    if cut != 1:
-        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to cut for --quick")
-    quick_file = tmp / f"{s.name}-quick.toml"
-    quick_file.write_text(text)
-    return str(quick_file)
+    return str(scenario_cut(s.name, QUICK_S, tmp)) if quick else s.name
 
 
 def _sil_run(name: str, out: Path, mode: str, impl: str, extra: tuple[str, ...] = ()) -> dict:

@@ -10,45 +10,16 @@ flash and RAM.
 
 from __future__ import annotations
 
-import json
-import re
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-from sil import scenario
-from sil.bench import BenchError
+from sil.bench import completed_run, scenario_cut
 
 SCENARIO = "thesis-5.2-mrac-fast"
 DURATION_S = 60.0
 QUICK_S = 15.0
 TARGET_REALTIME_FACTOR = 10.0
 TARGET_INSTRUCTIONS_RATIO = 0.05  # in the loop against the golden vectors, at most
-
-
-def _case_file(tmp: Path, seconds: float) -> Path:
-    s = scenario.load(SCENARIO)
-    assert s.path is not None
-    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {seconds:g}", s.path.read_text())
-    if cut != 1:
-        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to set")
-    path = tmp / f"{SCENARIO}.toml"
-    path.write_text(text)
-    return path
-
-
-def _run(path: Path, out: Path, impl: str) -> dict:
-    cmd = [sys.executable, "-m", "sil.cli", "run", str(path), "--ecu-impl", impl]
-    proc = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True, text=True)
-    try:
-        summary = json.loads((out / "summary.json").read_text())
-    except (OSError, ValueError):
-        summary = None
-    if summary is None or summary.get("status") != "completed":
-        tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
-        raise BenchError(f"sil run {path.name} --ecu-impl {impl} (exit {proc.returncode}): {tail}")
-    return summary
 
 
 def run(quick: bool = False) -> dict:
@@ -58,9 +29,9 @@ def run(quick: bool = False) -> dict:
 
     seconds = QUICK_S if quick else DURATION_S
     with tempfile.TemporaryDirectory() as tmp:
-        path = _case_file(Path(tmp), seconds)
-        pil = _run(path, Path(tmp) / "pil", "pil")
-        c = _run(path, Path(tmp) / "c", "c")
+        path = scenario_cut(SCENARIO, seconds, Path(tmp))
+        pil = completed_run(path, Path(tmp) / "pil", "--ecu-impl", "pil")
+        c = completed_run(path, Path(tmp) / "c", "--ecu-impl", "c")
         identical = (Path(tmp) / "pil" / "can.log").read_bytes() == (
             Path(tmp) / "c" / "can.log"
         ).read_bytes()

@@ -10,16 +10,11 @@ machine's load before the runs is given: the figures are of the machine as it wa
 
 from __future__ import annotations
 
-import json
 import os
-import re
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-from sil import scenario
-from sil.bench import BenchError
+from sil.bench import BenchError, completed_run, scenario_cut
 
 SCENARIO = "thesis-5.4-staircase"
 RATES_HZ = (100, 1000)
@@ -27,30 +22,6 @@ DURATION_S = 30.0
 QUICK_S = 10.0
 TARGETS_MS = {"p50": 0.05, "p99": 0.3}  # period-start lateness, at most; and no overrun
 NODES = ("plant", "ecu")
-
-
-def _case_file(tmp: Path, rate_hz: int, seconds: float) -> Path:
-    s = scenario.load(SCENARIO)
-    assert s.path is not None
-    text, cut = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {seconds:g}", s.path.read_text())
-    if cut != 1:
-        raise BenchError(f"{s.path}: no single 'duration_s = ...' line to set")
-    path = tmp / f"realtime-{rate_hz}.toml"
-    path.write_text(f"ecu_rate_hz = {rate_hz}\n{text}")
-    return path
-
-
-def _run_case(path: Path, out: Path) -> dict:
-    cmd = [sys.executable, "-m", "sil.cli", "run", str(path), "--mode", "realtime"]
-    proc = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True, text=True)
-    try:
-        summary = json.loads((out / "summary.json").read_text())
-    except (OSError, ValueError):
-        summary = None
-    if summary is None or summary.get("status") != "completed":
-        tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
-        raise BenchError(f"sil run {path.name} --mode realtime (exit {proc.returncode}): {tail}")
-    return summary
 
 
 def run(quick: bool = False) -> dict:
@@ -64,7 +35,8 @@ def run(quick: bool = False) -> dict:
     met = True
     with tempfile.TemporaryDirectory() as tmp:
         for rate in RATES_HZ:
-            summary = _run_case(_case_file(Path(tmp), rate, seconds), Path(tmp) / f"out-{rate}")
+            path = scenario_cut(SCENARIO, seconds, Path(tmp), head=f"ecu_rate_hz = {rate}\n")
+            summary = completed_run(path, Path(tmp) / f"out-{rate}", "--mode", "realtime")
             figures[f"missed_ticks_{rate}hz"] = summary.get("missed_ticks")
             for node in NODES:
                 stats = summary.get("nodes", {}).get(node, {})

@@ -228,14 +228,7 @@ def run(args: argparse.Namespace) -> int:
     }
     if node.service is not None:
         summary["service"] = node.service.summary()
-    if args.stats_file is not None:
-        args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
-    if args.json:
-        print(json.dumps(summary, indent=2))
-    else:
-        for key, value in summary.items():
-            print(f"{key}: {value}")
-    return 0
+    return _report(summary, args)
 
 
 def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)
@@ -295,6 +288,11 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
         **bus.stats(),
         "pil": {**image.profile.summary(), "image": image_sizes(image.elf)},
     }
+    return _report(summary, args)
+
+
+def _report(summary: dict, args: argparse.Namespace) -> int:
+    """The run summary into --stats-file and on stdout (as JSON with --json)."""
     if args.stats_file is not None:
         args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
     if args.json:
