@@ -33,6 +33,7 @@ _TELEMETRY_FIELDS = (
     "kx1_q24", "kx2_q24", "kr_q24", "kf1_q24", "kf2_q24",
 )  # fmt: skip
 TELEMETRY_COUNT = 13  # EcuTelemetry mux indices 0..12 (DBC)
+RECEIVED = ("PlantSensors", "PlantAnalog", "Demand")  # the frames the ECU node takes
 
 
 def _clamp(x: int, lo: int, hi: int) -> int:
@@ -67,9 +68,7 @@ class EcuNode:
         self.lockstep = lockstep
         self.max_ticks = max_ticks
         codec = codec or Codec()
-        self.sensors = codec["PlantSensors"]
-        self.analog = codec["PlantAnalog"]
-        self.demand = codec["Demand"]
+        self.sensors, self.analog, self.demand = (codec[m] for m in RECEIVED)
         self.actuator = codec["EcuActuator"]
         self.status = codec["EcuStatus"]
         self.telemetry = codec["EcuTelemetry"]

@@ -715,7 +715,8 @@ def _finish(
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
         "e2e": {m: c for m, c in totals["e2e"].items() if set(c) - {"OK"}},
         **({"nodes": nodes} if (nodes := _node_stats(opts.out_dir)) else {}),
-        **({"pil": nodes["ecu"]["pil"]} if "pil" in nodes.get("ecu", {}) else {}),
+        # the image's own figures (--ecu-impl pil), taken out of the ECU node's
+        **({"pil": pil} if (pil := nodes.get("ecu", {}).pop("pil", None)) else {}),
         "unknown_ids": {f"0x{k:X}": v for k, v in totals["unknown_ids"].items()},
         "wrong_length": {f"0x{k:X}": v for k, v in totals["wrong_length"].items()},
     }

@@ -19,6 +19,7 @@ import ctypes
 import re
 from functools import cache
 
+from ecu.node import RECEIVED
 from ecu.port.core import CEcu, PortError, library
 from protocol.codec import Codec
 from protocol.lockstep import every_ticks
@@ -115,7 +116,7 @@ class CEcuNode:
         self.ecu = ecu  # kept alive: the node points at its ecu_t
         self.rate_hz = ecu.p.rate_hz
         self.lockstep = lockstep
-        self.frame_ids = tuple(codec[m].frame_id for m in ("PlantSensors", "PlantAnalog", "Demand"))
+        self.frame_ids = tuple(codec[m].frame_id for m in RECEIVED)
         self.every_status = every_ticks(codec["EcuStatus"].cycle_time_ms, self.rate_hz)
         self.every_telemetry = every_ticks(codec["EcuTelemetry"].cycle_time_ms, self.rate_hz)
         self.every_demand = every_ticks(codec["Demand"].cycle_time_ms, self.rate_hz)

@@ -32,9 +32,9 @@ from pathlib import Path
 import can
 
 from ecu.params import FirmwareParams
-from ecu.port import build
+from ecu.port import build, qemu
 from ecu.port.core import param_words
-from ecu.port.qemu import MACHINE, QEMU
+from ecu.port.qemu import QEMU
 
 MAGIC = b"ECUC"
 VERSION = 1
@@ -92,14 +92,14 @@ class Profile:
         """Instructions per tick (mean, max) of the core and of the whole node call, and the CPU
         load they make at 100 Hz and 1 kHz on a 168 MHz Cortex-M4 at one instruction per cycle;
         without a profile (real time) only the resets."""
+        out: dict = {"watchdog_resets": self.resets}
+        if self.lines:
+            out["console"] = self.lines[-10:]
         if not self.ticks:
-            return {
-                "watchdog_resets": self.resets,
-                **({"console": self.lines[-10:]} if self.lines else {}),
-            }
+            return out
         n = self.ticks
         node_mean = self.instructions(self.node_sum / n)
-        out = {
+        return {
             "ticks_profiled": self.ticks,
             "instructions_per_tick": {
                 "core_mean": round(self.instructions(self.core_sum / n), 1),
@@ -112,11 +112,8 @@ class Profile:
                 "1_kHz": round(100.0 * node_mean * 1000 / CORE_HZ, 3),
                 "assumes": "168 MHz Cortex-M4, one instruction per cycle",
             },
-            "watchdog_resets": self.resets,
+            **out,
         }
-        if self.lines:
-            out["console"] = self.lines[-10:]
-        return out
 
     def take(self, line: str) -> None:
         word, _, rest = line.partition(" ")
@@ -229,13 +226,7 @@ class PilImage:
 
     def _command(self) -> list[str]:
         return [
-            QEMU,
-            "-M",
-            MACHINE,
-            *(("-icount", "shift=0") if self.icount else ()),
-            "-nographic",
-            "-monitor",
-            "none",
+            *qemu.command(icount=self.icount),
             "-serial",
             f"tcp:127.0.0.1:{self.port},server=on,wait=on,nodelay=on",
             "-serial",

@@ -10,17 +10,19 @@ QEMU = "qemu-system-arm"
 MACHINE = "mps2-an386"
 
 
+def command(*, icount: bool) -> list[str]:
+    """QEMU on the board, no display and no monitor (``icount``: the virtual clock advances one
+    ns per instruction)."""
+    return [QEMU, "-M", MACHINE, *(("-icount", "shift=0") if icount else ()), "-nographic",
+            "-monitor", "none"]  # fmt: skip
+
+
 def run(elf: Path, vectors: Path, *, icount: bool = False, timeout: float = 300.0):  # noqa: ANN201
     """``replay VECTORS`` on the emulated board; returns the CompletedProcess (text output)."""
     if not shutil.which(QEMU):
         raise FileNotFoundError(f"{QEMU} not found (apt-get install qemu-system-arm)")
     cmd = [
-        QEMU,
-        "-M",
-        MACHINE,
-        "-nographic",
-        "-monitor",
-        "none",
+        *command(icount=icount),
         "-serial",
         "none",
         "-semihosting-config",
@@ -29,6 +31,4 @@ def run(elf: Path, vectors: Path, *, icount: bool = False, timeout: float = 300.
         "-kernel",
         str(elf),
     ]
-    if icount:
-        cmd[1:1] = ["-icount", "shift=0"]  # virtual clock: one ns per instruction
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)

@@ -233,6 +233,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)
     """The firmware image on QEMU, its slcan UART bridged to the bus (ecu/port/pil.py)."""
+    from ecu.node import RECEIVED
     from ecu.port.build import PortBuildError
     from ecu.port.pil import PilError, PilImage, calibration_block, image_sizes
     from ecu.port.pil_bridge import PilBridge
@@ -243,7 +244,7 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
     lockstep = args.mode == "lockstep"  # profiled by instruction counting (ecu/port/pil.py)
     block = calibration_block(params, lockstep=lockstep, guard_s=args.guard, profile=lockstep)
     codec = Codec()
-    frame_ids = [codec[m].frame_id for m in ("PlantSensors", "PlantAnalog", "Demand")]
+    frame_ids = [codec[m].frame_id for m in RECEIVED]
     stop = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
