@@ -1,8 +1,9 @@
 """`sil bench pil`: the firmware image on the emulated Cortex-M4 in the loop.
 
-One ``sil run SCENARIO --ecu-impl pil`` in lockstep, as a user runs it, beside the same run with
-the host C ECU (``--ecu-impl c``): whether the two can.log files are byte-identical, the speed of
-each against real time, the image's instructions per tick measured in the loop (core and whole
+One ``sil run SCENARIO --ecu-impl pil`` in lockstep on each of the image's CAN links (Ethernet,
+the default, and slcan on its UART), as a user runs it, beside the same run with the host C ECU
+(``--ecu-impl c``): whether the can.log files are byte-identical, the speed of each against real
+time, the image's instructions per tick measured in the loop (core and whole
 node call, mean and max) against the golden-vector figure of the same core under QEMU, the CPU
 load at 100 Hz and 1 kHz on a 168 MHz Cortex-M4 at one instruction per cycle, and the image's
 flash and RAM.
@@ -31,10 +32,11 @@ def run(quick: bool = False) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         path = scenario_cut(SCENARIO, seconds, Path(tmp))
         pil = completed_run(path, Path(tmp) / "pil", "--ecu-impl", "pil")
+        slcan = completed_run(path, Path(tmp) / "slcan", "--ecu-impl", "pil", "--pil-link", "slcan")
         c = completed_run(path, Path(tmp) / "c", "--ecu-impl", "c")
-        identical = (Path(tmp) / "pil" / "can.log").read_bytes() == (
-            Path(tmp) / "c" / "can.log"
-        ).read_bytes()
+        c_log = (Path(tmp) / "c" / "can.log").read_bytes()
+        identical = (Path(tmp) / "pil" / "can.log").read_bytes() == c_log
+        slcan_identical = (Path(tmp) / "slcan" / "can.log").read_bytes() == c_log
         vectors = Path(tmp) / "pil-scenario.gv"
         g = sources.record_scenario("pil-scenario", SCENARIO, round(seconds * 100))
         golden.write(g, vectors)
@@ -46,7 +48,9 @@ def run(quick: bool = False) -> dict:
     out = {
         "scenario": f"{SCENARIO} ({seconds:g} s, lockstep)",
         "can_log_identical_to_c": identical,
+        "slcan_can_log_identical_to_c": slcan_identical,
         "pil_realtime_factor": round(pil["realtime_factor"], 2),
+        "pil_slcan_realtime_factor": round(slcan["realtime_factor"], 2),
         "c_realtime_factor": round(c["realtime_factor"], 2),
         "pil_startup_s": round(pil.get("startup_s", float("nan")), 2),
         "ticks_profiled": figures.get("ticks_profiled"),
@@ -63,7 +67,7 @@ def run(quick: bool = False) -> dict:
         "watchdog_resets": figures.get("watchdog_resets"),
     }
     out["targets_met"] = {
-        "identical": identical,
+        "identical": identical and slcan_identical,
         "realtime_factor_10x": out["pil_realtime_factor"] >= TARGET_REALTIME_FACTOR,
         "instructions_within_5pct": ratio is not None and abs(ratio) <= TARGET_INSTRUCTIONS_RATIO,
     }

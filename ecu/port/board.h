@@ -13,10 +13,11 @@
  *   - its pump driver output (board_pump_output), its watchdog (board_watchdog_start,
  *     board_watchdog_kick) and a debug console (board_console_write, board_console_read).
  *
- * board_mps2.c is the board for QEMU's mps2-an386 (Cortex-M4): its "CAN controller" is UART0
- * speaking slcan (Lawicel), so that the emulated MCU looks like a USB-CAN adapter to the host;
- * its console is UART1. Interrupt handlers of a board call nothing of ecu_main.c but
- * ecu_main_systick() (from SysTick_Handler, if the board owns the vector table).
+ * board_mps2.c is the board for QEMU's mps2-an386 (Cortex-M4), with one of two CAN links:
+ * board_mps2_eth.c (its Ethernet controller, one CAN frame per Ethernet frame) or
+ * board_mps2_slcan.c (UART0 speaking slcan, so that the emulated MCU looks like a USB-CAN
+ * adapter to the host); its console is UART1. Interrupt handlers of a board call nothing of
+ * ecu_main.c but ecu_main_systick() (from SysTick_Handler, if the board owns the vector table).
  */
 #ifndef BOARD_H
 #define BOARD_H

@@ -43,6 +43,7 @@ HEADERS = (
     "ecu_node.h",
     "board.h",
     "ecu_main.h",
+    "board_mps2.h",
 )
 ARM_CC = "arm-none-eabi-gcc"
 ARM_FLAGS = ("-mcpu=cortex-m4", "-mthumb", "-Os", "-ffunction-sections", "-fdata-sections")
@@ -138,11 +139,15 @@ def arm_replayer(systick: bool = False) -> Path:
 
 
 PIL_SOURCES = ("ecu_main.c", "board_mps2.c", "startup_pil.s")
+PIL_LINKS = {"eth": "board_mps2_eth.c", "slcan": "board_mps2_slcan.c"}  # the board's CAN link
 
 
-def arm_pil_image() -> Path:
-    """The firmware image for QEMU's mps2-an386 (ecu_main.c on board_mps2.c): no C library
-    start-up, no semihosting, no heap (a call that needs one would not link)."""
+def arm_pil_image(link: str = "eth") -> Path:
+    """The firmware image for QEMU's mps2-an386 (ecu_main.c on board_mps2.c) with its CAN on
+    ``link`` (PIL_LINKS: Ethernet or slcan on UART0): no C library start-up, no semihosting, no
+    heap (a call that needs one would not link)."""
+    if link not in PIL_LINKS:
+        raise ValueError(f"unknown CAN link {link!r} (known: {', '.join(PIL_LINKS)})")
     if not shutil.which(ARM_CC):
         raise PortBuildError(
             f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
@@ -156,8 +161,8 @@ def arm_pil_image() -> Path:
         "-Wl,--gc-sections",
         f"-T{PORT_DIR / 'mps2_an386_pil.ld'}",
     )
-    sources = (*CORE_SOURCES, *PIL_SOURCES)
-    return _compile(ARM_CC, flags, sources, "ecu-pil.elf", libs=("-lc", "-lgcc"))
+    sources = (*CORE_SOURCES, *PIL_SOURCES, PIL_LINKS[link])
+    return _compile(ARM_CC, flags, sources, f"ecu-pil-{link}.elf", libs=("-lc", "-lgcc"))
 
 
 def arm_objects() -> dict[str, Path]:
@@ -176,7 +181,8 @@ def main() -> int:
     print(f"host replayer: {host_replayer()}")
     try:
         print(f"Cortex-M4 replayer: {arm_replayer()}")
-        print(f"Cortex-M4 firmware image (mps2-an386): {arm_pil_image()}")
+        for link in PIL_LINKS:
+            print(f"Cortex-M4 firmware image (mps2-an386, CAN on {link}): {arm_pil_image(link)}")
     except PortBuildError as exc:
         print(f"Cortex-M4 builds: not built: {exc}", file=sys.stderr)
         return 1

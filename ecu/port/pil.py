@@ -1,11 +1,16 @@
 """Processor in the loop: the firmware image (ecu_main.c on board_mps2.c) on QEMU's emulated
-Cortex-M4, its slcan UART on a loopback TCP port and its console read here.
+Cortex-M4, its CAN link on the loopback interface and its console read here.
+
+The image's CAN link (LINKS) is its Ethernet controller (``eth``: one CAN frame per Ethernet
+frame, each a UDP datagram of QEMU's socket network backend; ecu/port/eth_can.py) or its UART0
+speaking slcan (``slcan``: on a loopback TCP port that python-can's ``slcan`` interface opens as
+``socket://127.0.0.1:PORT``, as it would a USB-CAN adapter). The serial link costs QEMU a round
+of its event loop per byte, some 22 bytes a frame; the Ethernet link one per frame.
 
 :func:`calibration_block` writes the block the image reads from its flash sector (layout in
-ecu_main.h); :class:`PilImage` starts QEMU with the image and the block, hands out the slcan
-URL (``socket://127.0.0.1:PORT``: python-can's ``slcan`` interface opens it as it would a USB-CAN
-adapter) and reads the console: the SysTick calibration, the per-tick profile lines and any
-refusal or watchdog reset.
+ecu_main.h); :class:`PilImage` starts QEMU with the image and the block, opens the link as a
+python-can bus and reads the console: the SysTick calibration, the per-tick profile lines and
+any refusal or watchdog reset.
 
 In lockstep QEMU runs with ``-icount shift=0``: its virtual clock advances one nanosecond per
 instruction while the CPU runs (and with the wall clock while it sleeps), so SysTick counts around
@@ -34,6 +39,7 @@ import can
 from ecu.params import FirmwareParams
 from ecu.port import build, qemu
 from ecu.port.core import param_words
+from ecu.port.eth_can import EthCanBus
 from ecu.port.qemu import QEMU
 
 MAGIC = b"ECUC"
@@ -42,6 +48,7 @@ LOCKSTEP, PROFILE = 1, 2
 CALIB_ADDRESS = 0x000F0000  # mps2_an386_pil.ld: the calibration sector
 CORE_HZ = 168e6  # the Cortex-M4 the load is reported for (STM32F4 class)
 START_TIMEOUT_S = 30.0  # QEMU up, image ready
+LINKS = tuple(build.PIL_LINKS)  # the image's CAN link: Ethernet or slcan on UART0
 
 
 class PilError(RuntimeError):
@@ -119,13 +126,17 @@ class Profile:
         word, _, rest = line.partition(" ")
         if word == "K":
             node, _, core = rest.partition(" ")
-            counts = int(node), int(core)
+            try:
+                counts = int(node), int(core)
+            except ValueError:  # a line cut short (QEMU stopped while it was written)
+                self.lines.append(line)
+                return
             self.ticks += 1
             self.node_sum += counts[0]
             self.core_sum += counts[1]
             self.node_max = max(self.node_max, counts[0])
             self.core_max = max(self.core_max, counts[1])
-        elif word == "CAL":
+        elif word == "CAL" and all(part.isdigit() for part in rest.split(" ", 1)):
             counts, _, instructions = rest.partition(" ")
             self.cal_counts, self.cal_instructions = int(counts), int(instructions)
         elif word == "READY":
@@ -139,8 +150,8 @@ class Profile:
             self.lines.append(line)
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+def _free_port(kind: int = socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
@@ -161,50 +172,78 @@ def image_sizes(elf: Path) -> dict[str, int]:
 
 
 class PilImage:
-    """QEMU running the firmware image with ``block`` in its calibration sector.
+    """QEMU running the firmware image with ``block`` in its calibration sector and its CAN on
+    ``link`` (LINKS), on the loopback interface only.
 
-    ``url``: the slcan UART as a pyserial URL (loopback only). :meth:`open_bus` gives python-can's
-    slcan bus on it; :attr:`profile` fills from the console as the image runs. A context manager:
-    leaving it stops QEMU.
+    :meth:`open_bus` gives the link as a python-can bus; :attr:`profile` fills from the console
+    as the image runs. A context manager: leaving it stops QEMU.
     """
 
-    def __init__(self, block: bytes, *, elf: Path | None = None, icount: bool = True) -> None:
+    def __init__(
+        self,
+        block: bytes,
+        *,
+        link: str = "eth",
+        elf: Path | None = None,
+        icount: bool = True,
+    ) -> None:
+        if link not in LINKS:
+            raise PilError(f"unknown CAN link {link!r} (known: {', '.join(LINKS)})")
         if not shutil.which(QEMU):
             raise PilError(f"{QEMU} not found (apt-get install qemu-system-arm)")
-        self.elf = elf or build.arm_pil_image()
+        self.link = link
+        self.elf = elf or build.arm_pil_image(link)
         self._dir = tempfile.TemporaryDirectory(prefix="ecu-pil-")
         self._cal = Path(self._dir.name) / "calibration.bin"
         self._cal.write_bytes(block)
         self.icount = icount
         self.profile = Profile()
         self.proc: subprocess.Popen | None = None
-        self.port = 0
+        self.port = 0  # QEMU's end of the link on 127.0.0.1 (TCP for slcan, UDP for eth)
+        self._host: socket.socket | None = None  # eth: our UDP end, bound before QEMU starts
         self._reader: threading.Thread | None = None
 
     @property
     def url(self) -> str:
-        return f"socket://127.0.0.1:{self.port}"
+        """Where the image's link is: a pyserial URL (slcan) or its UDP address (eth)."""
+        if self.link == "slcan":
+            return f"socket://127.0.0.1:{self.port}"
+        return f"udp://127.0.0.1:{self.port}"
 
     def start(self) -> None:
-        """Start QEMU; it waits (halted) until the slcan port is connected."""
+        """Start QEMU. On slcan it waits (halted) until the port is connected; on eth the image
+        runs at once (:meth:`wait_ready`)."""
+        if self.link == "eth":
+            self._host = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._host.bind(("127.0.0.1", 0))
+            self.port = _free_port(socket.SOCK_DGRAM)
+            self.proc = self._popen()
+            self._start_readers()
+            return
         for _ in range(5):  # a port taken between choosing it and QEMU's bind: another one
             self.port = _free_port()
-            self.proc = subprocess.Popen(
-                self._command(),
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
+            self.proc = self._popen()
             said = self._until_listening()
             if said is None:
-                self._reader = threading.Thread(target=self._read_console, daemon=True)
-                self._reader.start()
-                threading.Thread(target=self._drain_stderr, daemon=True).start()
+                self._start_readers()
                 return
             if "Address already in use" not in said:
                 raise PilError(f"{QEMU} did not start: {said.strip() or 'no message'}")
         raise PilError(f"{QEMU}: no free loopback port after 5 tries")
+
+    def _popen(self) -> subprocess.Popen:
+        return subprocess.Popen(
+            self._command(),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+
+    def _start_readers(self) -> None:
+        self._reader = threading.Thread(target=self._read_console, daemon=True)
+        self._reader.start()
+        threading.Thread(target=self._drain_stderr, daemon=True).start()
 
     def _until_listening(self) -> str | None:
         """None once QEMU says it waits for the slcan connection; else what it said before it
@@ -225,10 +264,25 @@ class PilImage:
                 self.profile.lines.append(f"qemu: {line.strip()}")
 
     def _command(self) -> list[str]:
+        if self.link == "eth":
+            assert self._host is not None
+            host_port = self._host.getsockname()[1]
+            link = [
+                "-serial",
+                "null",
+                "-nic",
+                f"socket,model=lan9118,udp=127.0.0.1:{host_port},localaddr=127.0.0.1:{self.port}",
+            ]
+        else:
+            link = [
+                "-serial",
+                f"tcp:127.0.0.1:{self.port},server=on,wait=on,nodelay=on",
+                "-nic",
+                "none",
+            ]
         return [
             *qemu.command(icount=self.icount),
-            "-serial",
-            f"tcp:127.0.0.1:{self.port},server=on,wait=on,nodelay=on",
+            *link,
             "-serial",
             "stdio",
             "-device",
@@ -249,7 +303,10 @@ class PilImage:
         self.proc.stdin.flush()
 
     def open_bus(self) -> can.BusABC:
-        """python-can's slcan bus on the image's UART (starts the image running)."""
+        """The image's CAN link as a python-can bus (on slcan this starts the image running)."""
+        if self.link == "eth":
+            assert self._host is not None
+            return EthCanBus(self._host, ("127.0.0.1", self.port))
         bus = can.Bus(interface="slcan", channel=self.url, sleep_after_open=0)
         # each frame is one small write: without TCP_NODELAY the next one waits for an ACK
         # (Nagle's algorithm against delayed ACKs: 40 ms a tick); pyserial does not set it
@@ -281,6 +338,8 @@ class PilImage:
                 self.proc.wait()
         if self._reader is not None:
             self._reader.join(2.0)
+        if self._host is not None:
+            self._host.close()
         self._dir.cleanup()
 
     def __enter__(self) -> PilImage:

@@ -1,4 +1,4 @@
-"""The bridge between a run's bus and the firmware image's slcan UART (``sil ecu --impl pil``).
+"""The bridge between a run's bus and the firmware image's CAN link (``sil ecu --impl pil``).
 
 Frames of the ECU's IDs (PlantSensors, PlantAnalog, Demand) go from the bus to the image, in the
 order heard; every frame the image sends goes to the bus, in its order. The image keeps its own
@@ -19,20 +19,23 @@ POLL_S = 0.05  # the longest either direction waits before it looks at the stop 
 
 
 class PilBridge:
-    """Carry frames between ``bus`` (the run's) and ``image`` (python-can's slcan bus on the
-    image's UART) until ``should_stop()``; counts in :meth:`stats`."""
+    """Carry frames between ``bus`` (the run's) and ``image`` (the image's CAN link as a
+    python-can bus, PilImage.open_bus) until ``should_stop()``; counts in :meth:`stats`."""
 
     def __init__(self, bus: can.BusABC, image: can.BusABC, frame_ids: Collection[int]) -> None:
         self.bus = bus
         self.image = image
         self.to_image = 0
         self.from_image = 0
+        self.stale = 0  # frames the image sent before the bridge ran, dropped
         self.errors: list[str] = []
         bus.set_filters([{"can_id": i, "can_mask": 0x7FF, "extended": False} for i in frame_ids])
         self._ids = frozenset(frame_ids)
         self._stop = threading.Event()
 
     def run(self, should_stop: Callable[[], bool]) -> None:
+        while self.image.recv(0) is not None:  # sent before the run began (real time): not of it
+            self.stale += 1
         back = threading.Thread(target=self._from_image, name="pil-from-image", daemon=True)
         back.start()
         try:
@@ -83,7 +86,11 @@ class PilBridge:
         self._stop.set()
 
     def stats(self) -> dict:
-        out = {"frames_to_image": self.to_image, "frames_from_image": self.from_image}
+        out = {
+            "frames_to_image": self.to_image,
+            "frames_from_image": self.from_image,
+            "frames_before_the_run": self.stale,
+        }
         if self.errors:
             out["bridge_errors"] = self.errors
         return out

@@ -82,7 +82,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="python",
         help="tick implementation: Python firmware, its C port (ecu/port, built at first use) or "
         "processor in the loop: the C firmware image on an emulated Cortex-M4 (QEMU "
-        "mps2-an386), bridged over its slcan UART",
+        "mps2-an386), bridged over its CAN link (--pil-link)",
+    )
+    parser.add_argument(
+        "--pil-link",
+        choices=("eth", "slcan"),
+        default="eth",
+        help="with --impl pil: the image's CAN link, its Ethernet controller (eth, one frame per "
+        "Ethernet frame) or slcan on its UART (as a USB-CAN adapter; slower)",
     )
     parser.add_argument(
         "--serial",
@@ -232,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)
-    """The firmware image on QEMU, its slcan UART bridged to the bus (ecu/port/pil.py)."""
+    """The firmware image on QEMU, its CAN link bridged to the bus (ecu/port/pil.py)."""
     from ecu.node import RECEIVED
     from ecu.port.build import PortBuildError
     from ecu.port.pil import PilError, PilImage, calibration_block, image_sizes
@@ -249,7 +256,7 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        image = PilImage(block, icount=lockstep)
+        image = PilImage(block, link=args.pil_link, icount=lockstep)
     except (PortBuildError, PilError) as exc:
         print(f"sil ecu: --impl pil: {exc}", file=sys.stderr)
         return 2

@@ -66,6 +66,13 @@ def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCE
         "firmware image on an emulated Cortex-M4 (pil: processor in the loop, on a bus)",
     )
     parser.add_argument(
+        "--pil-link",
+        choices=("eth", "slcan"),
+        default="eth",
+        help="with --ecu-impl pil: the image's CAN link, its Ethernet controller (eth, one "
+        "frame per Ethernet frame) or slcan on its UART (as a USB-CAN adapter; slower)",
+    )
+    parser.add_argument(
         "--python-loop",
         action="store_true",
         help="inproc with the C ECU: carry the frames between the nodes in Python (the same "
@@ -152,6 +159,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         commission=args.commission,
         plots=not args.no_plots,
         ecu_impl=getattr(args, "ecu_impl", "python"),
+        pil_link=getattr(args, "pil_link", "eth"),
         ecu_bus=getattr(args, "ecu_bus", None),
         compiled_loop=not getattr(args, "python_loop", False),
     )

@@ -1,6 +1,7 @@
 """Processor in the loop: the firmware image (ecu_main.c on board_mps2.c) on QEMU's mps2-an386
-answers as the C node does, looks like a USB-CAN adapter to python-can's slcan interface, refuses
-a bad calibration block, and flies a scenario with a can.log byte-identical to the C ECU's."""
+answers as the C node does on both its CAN links (Ethernet; slcan on its UART, where it looks like
+a USB-CAN adapter to python-can's slcan interface), refuses a bad calibration block, and flies a
+scenario with a can.log byte-identical to the C ECU's."""
 
 from __future__ import annotations
 
@@ -27,7 +28,13 @@ from tests.port.test_sil import _run, _udp_spec
 
 @pytest.fixture(scope="module")
 def image(toolchains):
-    return build.arm_pil_image()
+    """The image with its CAN on Ethernet (the default link)."""
+    return build.arm_pil_image("eth")
+
+
+@pytest.fixture(scope="module")
+def slcan_image(toolchains):
+    return build.arm_pil_image("slcan")
 
 
 @pytest.fixture(scope="module")
@@ -43,26 +50,73 @@ def _plant_frames(count: int) -> list[tuple[int, bytes]]:
     return frames[:count]
 
 
-def test_image_answers_python_can_slcan_as_the_c_node_does(image, params):
+def _closed_loop(params, ticks: int) -> list[tuple[list, list]]:
+    """The plant's frames of each tick and the C node's answers, the loop closed here."""
+    plant = PlantNode(FastPlant(PlantConfig(ecu_period_s=0.01)))
+    c_node = CEcuNode(make_ecu("c", params), lockstep=True)
+    out: list[tuple[list, list]] = []
+    frames: list[tuple[int, bytes]] = []
+    plant.start(lambda i, d: frames.append((i, bytes(d))))
+    for _ in range(ticks):
+        answers: list[tuple[int, bytes]] = []
+        for frame_id, data in frames:
+            c_node.on_frame(frame_id, data, lambda i, d, a=answers: a.append((i, bytes(d))))
+        out.append((frames, answers))
+        frames = []
+        for frame_id, data in answers:
+            plant.on_frame(frame_id, data, lambda i, d, f=frames: f.append((i, bytes(d))))
+    return out
+
+
+def _c_node_answers(params, frames: list[tuple[int, bytes]]) -> list[tuple[int, bytes]]:
     expected: list[tuple[int, bytes]] = []
     c_node = CEcuNode(make_ecu("c", params), lockstep=True)
-    frames = _plant_frames(10)
     for frame_id, data in frames:
         c_node.on_frame(frame_id, data, lambda i, d: expected.append((i, bytes(d))))
     assert expected, "the C node answers tick 0"
-    with PilImage(calibration_block(params, lockstep=True), elf=image) as pil:
+    return expected
+
+
+def _exchange(bus: can.BusABC, frames: list[tuple[int, bytes]], count: int) -> list:
+    """Send ``frames``; the first ``count`` frames heard back (or fewer after 5 s of silence)."""
+    for frame_id, data in frames:
+        bus.send(can.Message(arbitration_id=frame_id, is_extended_id=False, data=data))
+    got = []
+    while len(got) < count and (msg := bus.recv(5.0)) is not None:
+        got.append((msg.arbitration_id, bytes(msg.data)))
+    return got
+
+
+def test_image_answers_python_can_slcan_as_the_c_node_does(slcan_image, params):
+    frames = _plant_frames(10)
+    expected = _c_node_answers(params, frames)
+    with PilImage(calibration_block(params, lockstep=True), link="slcan", elf=slcan_image) as pil:
         bus = can.Bus(interface="slcan", channel=pil.url, sleep_after_open=0)
         try:
             pil.wait_ready()
             assert bus.get_version(2.0) == (10, 13)  # "V1013": an adapter's answer
-            for frame_id, data in frames:
-                bus.send(can.Message(arbitration_id=frame_id, is_extended_id=False, data=data))
-            got = []
-            while len(got) < len(expected) and (msg := bus.recv(5.0)) is not None:
-                got.append((msg.arbitration_id, bytes(msg.data)))
+            got = _exchange(bus, frames, len(expected))
         finally:
             bus.shutdown()
     assert got == expected
+
+
+def test_image_answers_on_its_ethernet_link_as_the_c_node_does(image, params):
+    ticks = _closed_loop(params, 3)  # the plant's frames and the C node's answers, tick by tick
+    got = []
+    with PilImage(calibration_block(params, lockstep=True), elf=image) as pil:
+        assert pil.url.startswith("udp://127.0.0.1:")  # loopback only
+        bus = pil.open_bus()
+        try:
+            pil.wait_ready()
+            for frames, answers in ticks:
+                got.append(_exchange(bus, frames, len(answers)))
+                # a frame of another EtherType and a runt: dropped by the image, not taken
+                bus._sock.sendto(b"\xff" * 6 + b"\x02" * 6 + b"\x08\x00" + bytes(46), bus._peer)
+                bus._sock.sendto(b"\xff" * 6, bus._peer)
+        finally:
+            bus.shutdown()
+    assert all(answers for _, answers in ticks) and got == [answers for _, answers in ticks]
 
 
 @pytest.mark.parametrize(
@@ -97,20 +151,23 @@ def test_image_refuses_parameters_the_core_refuses(image, params):
             bus.shutdown()
 
 
-def test_image_has_no_heap_and_fits_a_small_part(image):
+@pytest.mark.parametrize("link", ["eth", "slcan"])
+def test_image_has_no_heap_and_fits_a_small_part(toolchains, link):
+    elf = build.arm_pil_image(link)
     symbols = subprocess.run(
-        ["arm-none-eabi-nm", str(image)], capture_output=True, text=True, check=True
+        ["arm-none-eabi-nm", str(elf)], capture_output=True, text=True, check=True
     ).stdout
     assert "malloc" not in symbols and "_sbrk" not in symbols
-    sizes = image_sizes(image)
+    sizes = image_sizes(elf)
     assert 0 < sizes["flash_bytes"] <= 32 * 1024 and 0 < sizes["ram_bytes"] <= 16 * 1024
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("link", ["eth", "slcan"])
 def test_pil_lockstep_can_log_is_byte_identical_and_counts_instructions(
-    tmp_path, first_difference, vectors, image
+    tmp_path, first_difference, vectors, toolchains, link
 ):
-    pil_log = _run(tmp_path, "pil", "--bus", _udp_spec())
+    pil_log = _run(tmp_path, "pil", "--bus", _udp_spec(), "--pil-link", link)
     c_log = _run(tmp_path, "c", "--bus", _udp_spec())
     assert len(c_log.splitlines()) > 1000
     assert first_difference(pil_log, c_log) is None
@@ -128,6 +185,8 @@ def test_pil_lockstep_can_log_is_byte_identical_and_counts_instructions(
 
 
 def test_watchdog_resets_a_stuck_image(image, params):
+    frames = _plant_frames(10)
+    expected = _c_node_answers(params, frames)
     with PilImage(calibration_block(params, lockstep=True), elf=image) as pil:
         bus = pil.open_bus()
         try:
@@ -138,7 +197,7 @@ def test_watchdog_resets_a_stuck_image(image, params):
             while pil.profile.resets == 0 and time.monotonic() < deadline:
                 time.sleep(0.01)
             assert pil.profile.resets == 1, pil.profile.lines
-            pil.wait_ready(10.0)  # it boots again, checks its block and runs
-            assert bus.get_version(2.0) == (10, 13)
+            pil.wait_ready(10.0)  # it boots again, checks its block and flies from tick 0
+            assert _exchange(bus, frames, len(expected)) == expected
         finally:
             bus.shutdown()
