@@ -240,7 +240,6 @@ class Ecu:
             rate_filter_step(s, p, dn, u_last, speed_ok)
         # the control laws' and limit loops' rate: filtered while the sensor is valid
         ctrl_rate = s.rf_v_q24 if (p.rate_filter_on and speed_ok) else rate
-        ctrl_dn = s.rf_n_q24 if (p.rate_filter_on and speed_ok) else dn
 
         # 4. protection trips and mode
         running = 1 if (mode == M.ARMED or mode == M.RUN) else 0
@@ -305,7 +304,7 @@ class Ecu:
                 )
             r = sub_sat(demand, p.trim_n_q24)
             if p.controller == CTRL_MRAC:
-                u = mrac_control(s, p, ctrl_dn, ctrl_rate, r)
+                u = mrac_control(s, p, dn, ctrl_rate, r)
                 mrac_gain_update(s, p)
             elif p.controller == CTRL_PID:
                 u = pid_control(s, p, sat32(demand - n_q24), ctrl_rate)
