@@ -55,4 +55,9 @@ def run(quick: bool = False) -> dict:
         sensors.pack_raw(raws)
         sensors.unpack_raw(sensors.data, out)
     figures["alloc_blocks_per_1k_frames"] = (sys.getallocatedblocks() - before) * 1000 / n
-    return {k: round(v, 3) if isinstance(v, float) else v for k, v in figures.items()}
+    out = {k: round(v, 3) if isinstance(v, float) else v for k, v in figures.items()}
+    out["targets_met"] = {
+        "faster_than_cantools": figures["encode_speedup"] > 1 and figures["decode_speedup"] > 1,
+        "no_allocation_per_frame": figures["alloc_blocks_per_1k_frames"] < 1,
+    }
+    return out
