@@ -72,6 +72,9 @@ def new_running_ecu() -> tuple[Ecu, EcuInputs]:
     return ecu, i
 
 
+TARGET_TEXT = {"no_allocation_per_tick": "under 1 allocated block per 1,000 firmware ticks"}
+
+
 def run(quick: bool = False) -> dict:
     n = 5_000 if quick else 50_000
     inputs = scripted_inputs(20_000)

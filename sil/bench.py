@@ -36,6 +36,11 @@ TARGETS = {  # key: at least (issues #5 and #8)
     "inproc_realtime_factor": 100.0,
     "inproc_realtime_factor_c_ecu": 500.0,
 }
+TARGET_TEXT = {
+    "realtime_factor": ">= 40x real time, lockstep over the loopback bus",
+    "inproc_realtime_factor": ">= 100x real time in process, Python ECU",
+    "inproc_realtime_factor_c_ecu": ">= 500x real time in process, C ECU",
+}
 REPEATS = 3  # (1 with --quick)
 QUICK_S = 30.0  # --quick: the scenario cut to this
 

@@ -75,8 +75,10 @@ def run_all(
         start = time.monotonic()
         entry: dict = {"what": ""}
         try:
+            module = importlib.import_module(module_name)
             entry["what"] = _description(module_name)
-            figures = importlib.import_module(module_name).run(quick=quick)
+            entry["target_text"] = dict(getattr(module, "TARGET_TEXT", {}))
+            figures = module.run(quick=quick)
         except Exception as exc:  # noqa: BLE001 (one bench's failure must not lose the others)
             entry["error"] = f"{type(exc).__name__}: {exc}"
         else:
@@ -131,8 +133,9 @@ def markdown(result: dict) -> str:
     for name, entry in result["benches"].items():
         if "error" in entry:
             lines.append(f"| {name} | (the bench failed) | no |")
+        text = entry.get("target_text", {})
         for target, met in entry.get("targets_met", {}).items():
-            lines.append(f"| {name} | {target} | {'yes' if met else '**no**'} |")
+            lines.append(f"| {name} | {text.get(target, target)} | {'yes' if met else '**no**'} |")
     for name, entry in result["benches"].items():
         lines += ["", f"## `sil bench {name}`", "", entry["what"], ""]
         if "error" in entry:

@@ -37,6 +37,12 @@ RAM_TARGET = 2 * 1024
 INSTRUCTIONS_TARGET = 5000
 REPEATS = 3  # SIL runs per case
 SIL_TARGET = 500.0  # in process with the C ECU, real-time factor
+TARGET_TEXT = {
+    "flash": "control core and frame codec <= 16 KiB of Cortex-M4 flash",
+    "ram": "<= 2 KiB of RAM with the CAN node (data, bss, stack bound)",
+    "instructions": "< 5,000 instructions per tick (host and Cortex-M4)",
+    "sil_inproc": ">= 500x real time in process with the C ECU",
+}
 
 
 def _size(obj: Path) -> tuple[int, int, int]:

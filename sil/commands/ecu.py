@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 from ecu.params import CONTROLLERS
+from sil.node_options import add_launcher_options, add_pil_link
 from sil.validation import option
 
 NAME = "ecu"
@@ -84,13 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "processor in the loop: the C firmware image on an emulated Cortex-M4 (QEMU "
         "mps2-an386), bridged over its CAN link (--pil-link)",
     )
-    parser.add_argument(
-        "--pil-link",
-        choices=("eth", "slcan"),
-        default="eth",
-        help="with --impl pil: the image's CAN link, its Ethernet controller (eth, one frame per "
-        "Ethernet frame) or slcan on its UART (as a USB-CAN adapter; slower)",
-    )
+    add_pil_link(parser, "--impl pil")
     parser.add_argument(
         "--serial",
         metavar="PORT",
@@ -103,21 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="emulated flash image holding the stored parameter set (created when missing)",
     )
-    parser.add_argument(
-        "--run-tag",
-        type=int,
-        default=0,
-        metavar="TAG",
-        help="the run's tag on a shared bus (protocol.run_tag; sil run claims it): 0 sends "
-        "the DBC IDs as they are; frames of other tags are dropped and counted",
-    )
-    parser.add_argument(
-        "--stats-file",
-        type=Path,
-        metavar="PATH",
-        help="write the run summary (frames, timeouts; in real time the periods' jitter and "
-        "overruns) as JSON to this file at the end (for launchers)",
-    )
+    add_launcher_options(parser)
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
 
 

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from sil.node_options import add_launcher_options
 from sil.validation import option
 
 NAME = "plant"
@@ -97,21 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "tick 0 (a launcher starts the plant and the ECU at once and creates it when the ECU "
         "listens)",
     )
-    parser.add_argument(
-        "--run-tag",
-        type=int,
-        default=0,
-        metavar="TAG",
-        help="the run's tag on a shared bus (protocol.run_tag; sil run claims it): 0 sends "
-        "the DBC IDs as they are; frames of other tags are dropped and counted",
-    )
-    parser.add_argument(
-        "--stats-file",
-        type=Path,
-        metavar="PATH",
-        help="write the run summary (frames, timeouts; in real time the periods' jitter and "
-        "overruns) as JSON to this file at the end (for launchers)",
-    )
+    add_launcher_options(parser)
     parser.add_argument(
         "--fault",
         type=_fault,

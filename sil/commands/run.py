@@ -13,6 +13,7 @@ from protocol.bus import BusSpecError
 from sil import results, validation
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
+from sil.node_options import add_pil_link
 from sil.watchdog import Terminated, interrupt_reason
 
 NAME = "run"
@@ -65,13 +66,7 @@ def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCE
         help="ECU tick implementation: the Python firmware, its C port (ecu/port) or the C "
         "firmware image on an emulated Cortex-M4 (pil: processor in the loop, on a bus)",
     )
-    parser.add_argument(
-        "--pil-link",
-        choices=("eth", "slcan"),
-        default="eth",
-        help="with --ecu-impl pil: the image's CAN link, its Ethernet controller (eth, one "
-        "frame per Ethernet frame) or slcan on its UART (as a USB-CAN adapter; slower)",
-    )
+    add_pil_link(parser, "--ecu-impl pil")
     parser.add_argument(
         "--python-loop",
         action="store_true",

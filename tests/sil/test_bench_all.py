@@ -35,7 +35,8 @@ def test_all_writes_the_page_with_every_figure_and_target(tmp_path: Path) -> Non
                 shown = f"{value:g}" if isinstance(value, float) else str(value)
                 assert f"| `{key}` | {shown} |" in text, key
         for target, met in entry["targets_met"].items():
-            assert f"| {name} | {target} | {'yes' if met else '**no**'} |" in text
+            stated = entry["target_text"][target]  # each target in words, from its bench
+            assert f"| {name} | {stated} | {'yes' if met else '**no**'} |" in text
     assert result["benches"]["ecu"]["targets_met"]["no_allocation_per_tick"]
 
 
