@@ -1,6 +1,6 @@
 """The engine: aero-thermal model, gear pump, sensors, faults; the plant node.
 
-Interface documented in README.md, section "Plant".
+Interface documented in docs/plant.md.
 """
 
 from plant.jit import ensure_fresh

@@ -28,6 +28,7 @@ heard, and counted.
 from __future__ import annotations
 
 import ctypes
+import gc
 import os
 import sys
 import time
@@ -253,13 +254,17 @@ def run_realtime(
     on the clock for its last ``SPIN_S``. The period then starts (its lateness is measured here),
     takes the frames that came meanwhile, and runs. A period that starts more than
     one period late counts as an overrun and the missed ones are skipped, as a real-time
-    scheduler would.
+    scheduler would. Once the node is set up, every object then alive is frozen out of the
+    cyclic collector (``gc.freeze``): its passes then walk only what the loop makes, not the
+    hundreds of thousands of objects of the imports, whose full passes stalled a period for
+    milliseconds (at 1 kHz, 30 s: about 130 overruns with them, 5 without).
     """
     stats = DriverStats()
     send = bus_sender(bus, stats)
     receive = bus_receiver(bus)
     listen_for(node, bus)
     node.start(send)
+    gc.freeze()  # the set-up's objects: out of every later collection
     start = clock()
     k = 0
     while not node.finished and not should_stop():

@@ -62,17 +62,27 @@ def scenario_cut(name: str, seconds: float, folder: Path, head: str = "") -> Pat
     return path
 
 
-def completed_run(path: Path, out: Path, *args: str) -> dict:
-    """``sil run PATH ARGS`` in a process of its own; its summary, which must say completed."""
+def finished_run(path: Path, out: Path, *args: str) -> dict:
+    """``sil run PATH ARGS`` in a process of its own; its summary, whatever its status."""
     cmd = [sys.executable, "-m", "sil.cli", "run", str(path), *args]
     proc = subprocess.run([*cmd, "--out", str(out), "--no-plots"], capture_output=True, text=True)
     try:
-        summary = json.loads((out / "summary.json").read_text())
+        return json.loads((out / "summary.json").read_text())
     except (OSError, ValueError):
-        summary = None
-    if summary is None or summary.get("status") != "completed":
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
-        raise BenchError(f"sil run {path.name} {' '.join(args)} (exit {proc.returncode}): {tail}")
+        raise BenchError(
+            f"sil run {path.name} {' '.join(args)} (exit {proc.returncode}, no summary): {tail}"
+        ) from None
+
+
+def completed_run(path: Path, out: Path, *args: str) -> dict:
+    """``sil run PATH ARGS`` in a process of its own; its summary, which must say completed."""
+    summary = finished_run(path, out, *args)
+    if summary.get("status") != "completed":
+        raise BenchError(
+            f"sil run {path.name} {' '.join(args)}: {summary.get('status')}, "
+            f"{summary.get('abort_reason')}"
+        )
     return summary
 
 

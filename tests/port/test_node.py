@@ -395,7 +395,7 @@ def _record_run(tmp: Path, scenario_name: str, ecu_impl: str, duration_s: float)
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """thesis-5.2-mrac-fast through the Python node on the C core (the README's `sil run
+    """thesis-5.2-mrac-fast through the Python node on the C core (docs/sil-runs.md's `sil run
     thesis-5.2-mrac-fast --mode inproc --ecu-impl c`, 120 s of it) and thesis-6.1-pid on the
     Python firmware."""
     tmp = tmp_path_factory.mktemp("runs")

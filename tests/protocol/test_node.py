@@ -1,5 +1,6 @@
 """Node drivers: the same sans-IO nodes in one process and over a bus, lockstep and real time."""
 
+import gc
 import threading
 import time
 
@@ -115,7 +116,14 @@ def test_realtime_paces_by_the_clock():
         now[0] += seconds + SPIN_S  # and the spin after it ends at once
 
     pinger = Pinger(10)
-    stats = run_realtime(pinger, FakeBus(), 0.01, clock=lambda: now[0], sleep=sleep)
+    set_up = [object()]  # an object of the node's set-up, tracked by the collector
+    gc.unfreeze()
+    try:
+        stats = run_realtime(pinger, FakeBus(), 0.01, clock=lambda: now[0], sleep=sleep)
+        assert gc.get_freeze_count() > 0  # what existed when the loop began is frozen ...
+        assert not any(o is set_up for o in gc.get_objects())  # ... out of the collector's reach
+    finally:
+        gc.unfreeze()
     assert stats.periods == 10 and stats.overruns == 0
     assert max(stats.jitter_s) < 1e-9
 
