@@ -18,6 +18,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from types import ModuleType
 
 
 def machine() -> dict:
@@ -39,9 +40,9 @@ def machine() -> dict:
     }
 
 
-def _description(module_name: str) -> str:
-    doc = importlib.import_module(module_name).__doc__ or ""
-    return " ".join(doc.strip().split("\n\n")[0].split())
+def _description(module: ModuleType) -> str:
+    """The first paragraph of the bench module's docstring, on one line."""
+    return " ".join((module.__doc__ or "").strip().split("\n\n")[0].split())
 
 
 def targets_of(figures: dict) -> dict[str, bool]:
@@ -76,7 +77,7 @@ def run_all(
         entry: dict = {"what": ""}
         try:
             module = importlib.import_module(module_name)
-            entry["what"] = _description(module_name)
+            entry["what"] = _description(module)
             entry["target_text"] = dict(getattr(module, "TARGET_TEXT", {}))
             figures = module.run(quick=quick)
         except Exception as exc:  # noqa: BLE001 (one bench's failure must not lose the others)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-PIL_LINKS = ("eth", "slcan")  # ecu.port.pil.LINKS, without importing the port here
+from ecu.port.build import PIL_LINKS
 
 
 def add_launcher_options(parser: argparse.ArgumentParser) -> None:
@@ -32,7 +32,7 @@ def add_pil_link(parser: argparse.ArgumentParser, applies: str) -> None:
     """--pil-link; ``applies``: the option it goes with (``--impl pil``...)."""
     parser.add_argument(
         "--pil-link",
-        choices=PIL_LINKS,
+        choices=tuple(PIL_LINKS),
         default="eth",
         help=f"with {applies}: the image's CAN link, its Ethernet controller (eth, one frame per "
         "Ethernet frame) or slcan on its UART (as a USB-CAN adapter; slower)",

@@ -96,7 +96,7 @@ class RunOptions:
     commission: Path | None = None  # `sil identify --export` file for the ECU
     ecu_impl: str = "python"  # ECU tick: the Python firmware, its C port ("c", ecu/port) or
     # the C firmware image on QEMU ("pil", ecu/port/pil.py; on a bus only)
-    pil_link: str = "eth"  # the image's CAN link (ecu.port.pil.LINKS: eth or slcan)
+    pil_link: str = "eth"  # the image's CAN link (ecu.port.build.PIL_LINKS: eth or slcan)
     ecu_extra_args: tuple[str, ...] = ()  # appended to `sil ecu` (e.g. --serial pty)
     ecu_bus: str | None = None  # the ECU's side of the fault bridge (default: a second udp bus)
     compiled_loop: bool = True  # inproc with the C ECU: one compiled loop (sil/compiled_loop.py)

@@ -1,11 +1,11 @@
 """Processor in the loop: the firmware image (ecu_main.c on board_mps2.c) on QEMU's emulated
 Cortex-M4, its CAN link on the loopback interface and its console read here.
 
-The image's CAN link (LINKS) is its Ethernet controller (``eth``: one CAN frame per Ethernet
-frame, each a UDP datagram of QEMU's socket network backend; ecu/port/eth_can.py) or its UART0
-speaking slcan (``slcan``: on a loopback TCP port that python-can's ``slcan`` interface opens as
-``socket://127.0.0.1:PORT``, as it would a USB-CAN adapter). The serial link costs QEMU a round
-of its event loop per byte, some 22 bytes a frame; the Ethernet link one per frame.
+The image's CAN link (build.PIL_LINKS) is its Ethernet controller (``eth``: one CAN frame per
+Ethernet frame, each a UDP datagram of QEMU's socket network backend; ecu/port/eth_can.py) or its
+UART0 speaking slcan (``slcan``: on a loopback TCP port that python-can's ``slcan`` interface
+opens as ``socket://127.0.0.1:PORT``, as it would a USB-CAN adapter). The serial link costs QEMU
+a round of its event loop per byte, some 22 bytes a frame; the Ethernet link one per frame.
 
 :func:`calibration_block` writes the block the image reads from its flash sector (layout in
 ecu_main.h); :class:`PilImage` starts QEMU with the image and the block, opens the link as a
@@ -48,7 +48,6 @@ LOCKSTEP, PROFILE = 1, 2
 CALIB_ADDRESS = 0x000F0000  # mps2_an386_pil.ld: the calibration sector
 CORE_HZ = 168e6  # the Cortex-M4 the load is reported for (STM32F4 class)
 START_TIMEOUT_S = 30.0  # QEMU up, image ready
-LINKS = tuple(build.PIL_LINKS)  # the image's CAN link: Ethernet or slcan on UART0
 
 
 class PilError(RuntimeError):
@@ -173,7 +172,7 @@ def image_sizes(elf: Path) -> dict[str, int]:
 
 class PilImage:
     """QEMU running the firmware image with ``block`` in its calibration sector and its CAN on
-    ``link`` (LINKS), on the loopback interface only.
+    ``link`` (build.PIL_LINKS), on the loopback interface only.
 
     :meth:`open_bus` gives the link as a python-can bus; :attr:`profile` fills from the console
     as the image runs. A context manager: leaving it stops QEMU.
@@ -187,8 +186,8 @@ class PilImage:
         elf: Path | None = None,
         icount: bool = True,
     ) -> None:
-        if link not in LINKS:
-            raise PilError(f"unknown CAN link {link!r} (known: {', '.join(LINKS)})")
+        if link not in build.PIL_LINKS:
+            raise PilError(f"unknown CAN link {link!r} (known: {', '.join(build.PIL_LINKS)})")
         if not shutil.which(QEMU):
             raise PilError(f"{QEMU} not found (apt-get install qemu-system-arm)")
         self.link = link

@@ -201,10 +201,3 @@ def test_watchdog_resets_a_stuck_image(image, params):
             assert _exchange(bus, frames, len(expected)) == expected
         finally:
             bus.shutdown()
-
-
-def test_the_commands_offer_the_links_the_port_builds():
-    from ecu.port.pil import LINKS
-    from sil.node_options import PIL_LINKS
-
-    assert tuple(LINKS) == PIL_LINKS == tuple(build.PIL_LINKS)
