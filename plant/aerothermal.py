@@ -36,7 +36,7 @@ from plant.periphery import (
     vec,
 )
 from plant.pump import pump_flow
-from plant.trim import solve_steady
+from plant.trim import solve_steady, solve_steady_at_speed
 from plant.turbine import TurbineMap
 
 _HEALTH_FIELD = {  # fault kind -> (engine parameter, as-built value in PlantConfig)
@@ -133,8 +133,8 @@ def make_model(ambient: Ambient | None = None, maps: EngineMaps | None = None) -
 class AeroThermalPlant(PlantBase):
     """Aero-thermal turbojet with gear pump, sensors and faults; ``step`` = one ECU period.
 
-    Starts at the steady state of ``config.initial_fuel_kg_s``; ``trim_pump_voltage`` and
-    ``trim_duty`` hold it there.
+    Starts at the steady state of ``config.initial_fuel_kg_s`` (or of ``initial_speed_pct``
+    within ``initial_egt_max_k``); ``trim_pump_voltage`` and ``trim_duty`` hold it there.
     """
 
     ENGINE_SLOTS = N_SUB + 1 - ENGINE
@@ -153,12 +153,18 @@ class AeroThermalPlant(PlantBase):
         self._model = self._model._replace(params=params)  # as the trim below sees it
         s[PARAMS:X] = params
         self._refuse_unsupported(config.faults)
-        steady = solve_steady(self._model, config.initial_fuel_kg_s)
+        g_fuel = config.initial_fuel_kg_s
+        if config.initial_speed_pct is None:
+            steady = solve_steady(self._model, g_fuel)
+        else:
+            g_fuel, steady = solve_steady_at_speed(
+                self._model, config.initial_speed_pct, config.initial_egt_max_k
+            )
         s[X : X + 4] = steady.x
         s[LIT] = 1.0
         s[N_SUB] = config.substeps
         s[STATIONS:LIT] = steady.stations  # stations of the present state
-        self.trim_pump_voltage = self._voltage_for(config.initial_fuel_kg_s)
+        self.trim_pump_voltage = self._voltage_for(g_fuel)
         self.trim_duty = self._duty_for(self.trim_pump_voltage)
         self._start(steady.stations.t5, self.trim_duty)
 

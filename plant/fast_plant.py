@@ -175,6 +175,11 @@ class FastPlant(PlantBase):
         n0 = float(
             np.interp(config.initial_fuel_kg_s, self._table["fuel_kg_s"], self._table["N_pct"])
         )
+        if config.initial_speed_pct is not None:  # EGT rises with speed along the line
+            hottest = float(
+                np.interp(config.initial_egt_max_k, self._table["EGT_K"], self._table["N_pct"])
+            )
+            n0 = min(config.initial_speed_pct, hottest)
         s = self._s
         s[X : X + 2] = (n0 - TRIM_N_PCT, 0.0)
         s[THETA:THETA_EFF] = self.theta

@@ -69,6 +69,10 @@ class PlantConfig:
     ambient: Ambient = field(default_factory=Ambient)
     battery: Battery = field(default_factory=Battery)
     initial_fuel_kg_s: float = 0.008  # start at the steady state of this fuel flow (eq. 2.33)
+    # or, when set, at the steady state holding this speed (%N), or the fastest one within
+    # initial_egt_max_k if that speed is hotter: each varied engine where its governor holds it
+    initial_speed_pct: float | None = None
+    initial_egt_max_k: float = math.inf
     faults: tuple[Fault, ...] = ()
     seed: int = 0
     speed_pickup: SpeedPickupConfig = field(default_factory=SpeedPickupConfig)
@@ -92,6 +96,12 @@ class PlantConfig:
                 f"ecu_period_s must be a multiple of {SUBSTEP_S} s, got {self.ecu_period_s}"
             )
         check_finite("initial_fuel_kg_s", self.initial_fuel_kg_s, 1e-4, 0.05)
+        if self.initial_speed_pct is not None:
+            check_finite("initial_speed_pct", self.initial_speed_pct, 10.0, 120.0)
+        if not (math.isinf(self.initial_egt_max_k) or 300.0 <= self.initial_egt_max_k <= 2500.0):
+            raise ValueError(
+                f"initial_egt_max_k must be in [300, 2500] K, got {self.initial_egt_max_k!r}"
+            )
         check_finite("overspeed_pct", self.overspeed_pct, 0.0)
         check_finite("overtemperature_egt_k", self.overtemperature_egt_k, 0.0)
         for name in HEALTH_FIELDS:

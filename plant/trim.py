@@ -15,6 +15,7 @@ from plant.flags import LEAN_LIMIT
 
 SCALE = np.array([1e5, 1e5, 1e3, 100.0])  # Pa, Pa, K, %N
 TRIM_GUESS = np.array([294845.0, 162676.0, 1159.0, 89.68])  # eq. 2.32
+TRIM_FUEL_KG_S = 0.008  # eq. 2.32's fuel flow
 DT_S = 0.001
 MIN_RUNNING_N_PCT = 10.0
 DECELERATING_PCT_S = 0.1  # %N/s: still decelerating after settling, no steady state near
@@ -88,6 +89,89 @@ def solve_steady(
             f"fuel flow {g_fuel * 1e3:.2f} g/s is below the lean limit: the engine flames out"
         )
     return SteadyState(x=x, stations=st, residual=residual)
+
+
+def solve_steady_at_speed(
+    model: EngineModel, n_pct: float, egt_max_k: float = np.inf
+) -> tuple[float, SteadyState]:
+    """Fuel flow and steady state holding speed n_pct, or, where that EGT would exceed
+    egt_max_k, the fastest steady state within it: the point a governor with that EGT limit
+    holds. Speed and EGT both rise with fuel along the running line, so the point is the root in
+    the fuel flow of max(N - n_pct, (EGT - egt_max_k) / 10 K), bracketed by walking the line from
+    the eq. 2.32 trim in FUEL_STEP_KG_S steps (continuation) and found by the Illinois method. An
+    engine whose EGT has a minimum above egt_max_k starts at that minimum."""
+    if not np.isfinite(n_pct) or not MIN_RUNNING_N_PCT < n_pct <= 120.0:
+        raise ValueError(f"speed must be in ({MIN_RUNNING_N_PCT:g}, 120] %N, got {n_pct!r}")
+    if not egt_max_k > 0.0:
+        raise ValueError(f"EGT limit must be positive (K), got {egt_max_k!r}")
+
+    def f(s: SteadyState) -> float:
+        return max(s.x[3] - n_pct, (s.stations.t5 - egt_max_k) / 10.0)
+
+    what = f"at {n_pct:g} %N" + ("" if np.isinf(egt_max_k) else f" or EGT {egt_max_k:g} K")
+    return _walk_to(model, f, what)
+
+
+FUEL_STEP_KG_S = 0.0005
+
+
+def _walk_to(
+    model: EngineModel,
+    f,  # noqa: ANN001
+    what: str,
+) -> tuple[float, SteadyState]:
+    """Root in the fuel flow of f(steady state), which rises with fuel along the running line;
+    where f turns back before its root on the way down, the steady state nearest the root."""
+    g, s = TRIM_FUEL_KG_S, solve_steady(model, TRIM_FUEL_KG_S)
+    step = FUEL_STEP_KG_S if f(s) < 0.0 else -FUEL_STEP_KG_S
+    while True:
+        try:
+            nxt = solve_steady(model, g + step, x0=s.x, settle_s=5.0)
+        except ValueError:
+            raise ValueError(
+                f"no steady state {what}: the running line ends at {g * 1e3:.1f} g/s "
+                f"({s.x[3]:.1f} %N, EGT {s.stations.t5:.0f} K)"
+            ) from None
+        if (f(nxt) >= 0.0) == (step > 0.0):
+            break
+        if step < 0.0 and f(nxt) >= f(s):
+            return g, s
+        g, s = g + step, nxt
+        if not 0.0 < g + step < 0.05:
+            raise ValueError(f"no steady state {what} below 50 g/s")
+    lo, hi, x0 = (g, g + step, s.x) if step > 0.0 else (g + step, g, nxt.x)
+    states = {lo: s if step > 0.0 else nxt}
+
+    def at(g: float) -> SteadyState:
+        if g not in states:
+            states[g] = solve_steady(model, g, x0=x0, settle_s=5.0)
+        return states[g]
+
+    root = _illinois(lambda g: f(at(g)), lo, hi)
+    return root, at(root)
+
+
+def _illinois(f, a: float, b: float, xtol: float = 1e-12, iterations: int = 60) -> float:  # noqa: ANN001
+    """Root of f in [a, b], f(a) < 0 < f(b): regula falsi with the Illinois halving (scipy's
+    root finders are not used here: the plant node starts without scipy.linalg)."""
+    fa, fb = f(a), f(b)
+    side = 0
+    for _ in range(iterations):
+        c = (a * fb - b * fa) / (fb - fa)
+        fc = f(c)
+        if fc == 0.0 or b - a < xtol:
+            return c
+        if fc < 0.0:
+            a, fa = c, fc
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = c, fc
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    return c
 
 
 def steady_line(

@@ -128,7 +128,8 @@ class RunState:
 
 
 def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfig:
-    """The scenario's plant; ``nominal``: the same without its engine-to-engine variation."""
+    """The scenario's plant; ``nominal``: the engine the ECU is commissioned for, without the
+    engine-to-engine variation and at the eq. 2.32 trim whatever the scenario starts from."""
     p = s.plant
     config = PlantConfig(
         ecu_period_s=1.0 / s.ecu_rate_hz,
@@ -136,7 +137,12 @@ def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfi
         battery=Battery(p.supply_voltage_V),
         seed=seed,
     )
-    if nominal or not p.varied:
+    if nominal:
+        return config
+    config = replace(
+        config, initial_speed_pct=p.initial_speed_pct, initial_egt_max_k=p.initial_egt_max_K
+    )
+    if not p.varied:
         return config
     return replace(
         config,
@@ -154,8 +160,9 @@ def build_plant(s: Scenario, seed: int, *, nominal: bool = False) -> Plant:
 
 
 def ecu_trim_voltage(s: Scenario, plant: Plant) -> float:
-    """The ECU's trim voltage: the nominal engine's (the ECU is not told how its engine varies)."""
-    if not s.plant.varied:
+    """The ECU's trim voltage: the nominal engine's at its trim (the ECU is not told how its
+    engine varies, nor where the scenario starts it)."""
+    if not s.plant.varied and s.plant.initial_speed_pct is None:
         return plant.trim_pump_voltage
     return build_plant(s, 0, nominal=True).trim_pump_voltage
 
@@ -444,6 +451,10 @@ def _plant_args(
         "--stats-file",
         str(_stats_file(opts.out_dir, "plant")),
     ]
+    if p.initial_speed_pct is not None:
+        args += ["--initial-speed", repr(p.initial_speed_pct)]
+        if math.isfinite(p.initial_egt_max_K):
+            args += ["--initial-egt-max", repr(p.initial_egt_max_K)]
     if opts.mode == "realtime":
         args.append("--realtime")
     return args

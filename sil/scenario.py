@@ -55,6 +55,12 @@ Engine-to-engine variation, as built (all optional, nominal by default; ``sil ru
     speed_bias_rpm = 0
     egt_noise_K = 1            # thermocouple noise (1 sigma) and offset
     egt_bias_K = 0
+
+Starting point (default: the steady state of eq. 2.32's 8 g/s, whatever speed that gives):
+
+    [plant]
+    initial_speed_pct = 90     # the steady state holding this speed, each engine its own fuel
+    initial_egt_max_K = 1280   # or the fastest steady state within this EGT, if that is hotter
 """
 
 from __future__ import annotations
@@ -98,6 +104,8 @@ class PlantSettings:
     speed_bias_rpm: float = 0.0
     egt_noise_K: float = 1.0
     egt_bias_K: float = 0.0
+    initial_speed_pct: float | None = None
+    initial_egt_max_K: float = math.inf
 
     @property
     def varied(self) -> bool:
@@ -108,6 +116,8 @@ class PlantSettings:
             self.ambient_pressure_Pa,
             self.flight_speed_m_s,
             self.supply_voltage_V,
+            initial_speed_pct=self.initial_speed_pct,
+            initial_egt_max_K=self.initial_egt_max_K,
         )
         return self != nominal
 
@@ -398,6 +408,14 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
         speed_bias_rpm=p.number("speed_bias_rpm", 0.0, lo=-10_000, hi=10_000),
         egt_noise_K=p.number("egt_noise_K", 1.0, lo=0, hi=100),
         egt_bias_K=p.number("egt_bias_K", 0.0, lo=-200, hi=200),
+        initial_speed_pct=(
+            p.number("initial_speed_pct", lo=10, hi=120) if "initial_speed_pct" in p.table else None
+        ),
+        initial_egt_max_K=(
+            p.number("initial_egt_max_K", lo=300, hi=2500)
+            if "initial_egt_max_K" in p.table
+            else math.inf
+        ),
     )
     if plant.model == "fast":
         for k in HEALTH:

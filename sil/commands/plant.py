@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import math
 import signal
 import sys
 import threading
@@ -79,6 +80,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.008,
         help="start at the steady state of this fuel flow, kg/s",
     )
+    parser.add_argument(
+        "--initial-speed",
+        type=option(lo=10.0, hi=120.0),
+        metavar="PCT",
+        help="start instead at the steady state holding this speed, %%N",
+    )
+    parser.add_argument(
+        "--initial-egt-max",
+        type=option(lo=300.0, hi=2500.0),
+        default=math.inf,
+        metavar="K",
+        help="with --initial-speed: the fastest steady state within this EGT if that is hotter",
+    )
     parser.add_argument("--t0", type=float, default=288.15, help="ambient temperature, K")
     parser.add_argument("--p0", type=float, default=101325.0, help="ambient pressure, Pa")
     parser.add_argument("--flight-speed", type=float, default=0.0, help="flight speed, m/s")
@@ -142,6 +156,8 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
         ambient=Ambient(args.t0, args.p0, args.flight_speed),
         battery=Battery(args.battery_v),
         initial_fuel_kg_s=args.fuel,
+        initial_speed_pct=args.initial_speed,
+        initial_egt_max_k=args.initial_egt_max,
         faults=tuple(args.fault),
         seed=args.seed,
     )

@@ -105,3 +105,86 @@ def test_ram_compression_raises_delivery_pressure(capsys):
     assert main(["trim", "--json"]) == 0
     static = json.loads(capsys.readouterr().out)
     assert ram["P3_Pa"] > static["P3_Pa"] * 1.05
+
+
+# -- starting at a speed (each engine of a variation where its governor holds it) -------------
+
+
+def _varied(model, ce, cf, te, tf):
+    return model._replace(
+        params=model.params._replace(
+            comp_eff_scale=ce, comp_flow_scale=cf, turb_eff_scale=te, turb_flow_scale=tf
+        )
+    )
+
+
+def _rates_scaled(model, g, x):
+    import numpy as np
+
+    from plant.engine import engine_rates
+    from plant.trim import SCALE
+
+    dxdt = np.empty(4)
+    engine_rates(x, g, 1.0, model, dxdt)
+    return np.abs(dxdt / SCALE)
+
+
+@pytest.mark.parametrize("n_pct", [60.0, 75.0, 89.68, 97.0])
+def test_steady_state_at_a_speed_holds_it(model, n_pct):
+    from plant.trim import solve_steady_at_speed
+
+    g, s = solve_steady_at_speed(model, n_pct)
+    assert s.x[3] == pytest.approx(n_pct, abs=1e-6)
+    assert max(_rates_scaled(model, g, s.x)) < 1e-6  # a steady state: every rate zero
+    assert s.stations.g2 == pytest.approx(s.stations.g6 - g, rel=1e-6)  # air in = gas out - fuel
+
+
+def test_steady_state_at_the_trim_speed_is_the_trim(model, trim):
+    from plant.trim import solve_steady_at_speed
+
+    g, s = solve_steady_at_speed(model, float(trim.x[3]))
+    assert g == pytest.approx(0.008, rel=1e-6)
+
+
+def test_a_hot_engine_starts_at_its_egt_limit_below_the_speed(model):
+    from plant.trim import solve_steady, solve_steady_at_speed
+
+    weak = _varied(model, 0.95, 0.95, 0.95, 0.95)  # 80 %N and 1218 K at 8 g/s
+    assert solve_steady(weak, 0.008).stations.t5 > 1200.0
+    g, s = solve_steady_at_speed(weak, 90.0, egt_max_k=1250.0)
+    assert s.stations.t5 == pytest.approx(1250.0, abs=0.01)
+    assert s.x[3] < 90.0
+    assert max(_rates_scaled(weak, g, s.x)) < 1e-6
+    g_free, free = solve_steady_at_speed(weak, 90.0)  # without the limit: the speed, hotter
+    assert free.x[3] == pytest.approx(90.0, abs=1e-6) and free.stations.t5 > 1250.0
+
+
+def test_an_engine_hot_everywhere_starts_at_its_coolest_point(model):
+    from plant.trim import solve_steady_at_speed
+
+    weak = _varied(model, 0.95, 1.05, 0.95, 0.95)  # EGT never falls under about 1283 K
+    g, s = solve_steady_at_speed(weak, 90.0, egt_max_k=1200.0)
+    step = 0.0005
+    for other in (g - step, g + step):  # its neighbours on the line are hotter
+        from plant.trim import solve_steady
+
+        assert solve_steady(weak, other, x0=s.x).stations.t5 >= s.stations.t5 - 0.5
+
+
+def test_plant_started_at_a_speed_stays_there():
+    from plant.aerothermal import AeroThermalPlant
+    from plant.interface import PlantConfig
+
+    plant = AeroThermalPlant(PlantConfig(initial_speed_pct=75.0, pump_gain=1.2))
+    for _ in range(200):  # 2 s at its own trim voltage
+        out = plant.step(plant.trim_duty)
+    assert out.n_pct == pytest.approx(75.0, abs=0.02)
+
+
+def test_plant_refuses_a_bad_start():
+    from plant.interface import PlantConfig
+
+    with pytest.raises(ValueError, match="initial_speed_pct"):
+        PlantConfig(initial_speed_pct=5.0)
+    with pytest.raises(ValueError, match="initial_egt_max_k"):
+        PlantConfig(initial_speed_pct=90.0, initial_egt_max_k=-1.0)

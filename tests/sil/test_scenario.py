@@ -79,6 +79,14 @@ MINIMAL = "duration_s = 10\n[command]\nbase = 90\n"
             MINIMAL + "[[command.component]]\nkind = 'staircase'\nlevels = []\nstep_s = 1\n",
             "field 'command.component[0].levels': expected a non-empty list",
         ),
+        (
+            "duration_s = 10\n[plant]\ninitial_speed_pct = 5\n[command]\n",
+            "field 'plant.initial_speed_pct': expected a number in 10..120",
+        ),
+        (
+            "duration_s = 10\n[plant]\ninitial_egt_max_K = 'hot'\n[command]\n",
+            "field 'plant.initial_egt_max_K': expected a number",
+        ),
     ],
 )
 def test_bad_files_name_the_file_and_field(tmp_path, text, words):
@@ -135,3 +143,17 @@ def test_scenarios_command_lists_and_checks(tmp_path):
         text=True,
     )
     assert result.returncode == 2 and "duration_s" in result.stderr
+
+
+def test_a_start_speed_is_the_plants_not_the_ecus(tmp_path):
+    """The plant starts where the scenario says; the ECU keeps the commissioned trim."""
+    from sil.runner import build_plant, ecu_trim_voltage
+
+    path = tmp_path / "start.toml"
+    path.write_text("duration_s = 10\n[plant]\ninitial_speed_pct = 75\n[command]\n")
+    s = scenario.load(path)
+    assert s.plant.initial_speed_pct == 75.0 and not s.plant.varied
+    plant = build_plant(s, 0)
+    assert plant.outputs.n_pct == pytest.approx(75.0, abs=0.05)
+    nominal = build_plant(scenario.load(scenario.SCENARIO_DIR / "thesis-5.4-staircase.toml"), 0)
+    assert ecu_trim_voltage(s, plant) == nominal.trim_pump_voltage != plant.trim_pump_voltage
