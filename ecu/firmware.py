@@ -273,10 +273,10 @@ class Ecu:
             trip_shutdown,
             1 if n_rpm < p.shutdown_done_rpm else 0,
         )
-        if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless start at trim voltage
-            reset_loops(s, p.trim_v_q24)
+        if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless at the entry voltage
+            reset_loops(s, p.entry_v_q24)
             s.hist_fill = 0
-            s.theta_q24[PID_I] = 0
+            s.theta_q24[PID_I] = sub_sat(p.entry_v_q24, p.trim_v_q24)
             s.theta_ext[PID_I] = 0
             s.xm1_q24 = dn
             s.xm2_q24 = 0

@@ -66,6 +66,9 @@ class EcuParams:
     # V0, pump voltage at trim: 12.41 V delivers the trim's 8 g/s against its P3 in our plant's
     # pump table (plant.aerothermal: trim_pump_voltage); the fast model is in deviations from it
     trim_v: float = 12.41
+    # pump voltage on entry into RUN, the limit loops and the PI(D)'s integrator started from it
+    # (bumpless): the trim voltage, or what a run that starts elsewhere held before it began
+    entry_v: float = 12.41
 
     # online estimator (eq. 4.7, 4.31); row 1 of A_p and Theta_f is kinematic and not adapted
     am_row2: tuple[float, float] = (-25.0, -10.0)  # identification model A_m row 2
@@ -376,6 +379,7 @@ def validate(p: EcuParams) -> None:
     _check(p.reading in READINGS, "reading", p.reading, f"one of {READINGS}")
     _check(0.0 < p.trim_n_pct < 110.0, "trim_n_pct", p.trim_n_pct, "must be in (0, 110)")
     _check(p.v_min <= p.trim_v <= p.v_max, "trim_v", p.trim_v, "must lie in [v_min, v_max]")
+    _check(p.v_min <= p.entry_v <= p.v_max, "entry_v", p.entry_v, "must lie in [v_min, v_max]")
     a21, a22 = p.am_row2
     _check(a21 < 0.0 and a22 < 0.0, "am_row2", p.am_row2, "A_m must be Hurwitz (both < 0)")
     _check(p.p22 > 0.0, "p22", p.p22, "P must be positive definite")
@@ -510,6 +514,7 @@ class FirmwareParams:
 
     __slots__ = (
         "rate_hz", "controller", "dt_q24", "n_max_rpm", "rpm_to_q24_k", "trim_n_q24", "trim_v_q24",
+        "entry_v_q24",
         "am21_q24", "am22_q24", "idm11_q24", "idm12_q24", "idm21_q24", "idm22_q24",
         "idh1_q24", "idh2_q24",
         "g_a1_q28", "g_a2_q28", "g_lam_q28", "g_th1_q28", "g_th2_q28",
@@ -609,6 +614,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         rpm_to_q24_k=_q(pct_per_rpm, Q24 + 16, "n_max_rpm"),
         trim_n_q24=_q(p.trim_n_pct, Q24, "trim_n_pct"),
         trim_v_q24=_q(p.trim_v, Q24, "trim_v"),
+        entry_v_q24=_q(p.entry_v, Q24, "entry_v"),
         am21_q24=_q(p.am_row2[0], Q24, "am_row2"),
         am22_q24=_q(p.am_row2[1], Q24, "am_row2"),
         idm11_q24=_q(idm[0], Q24, "am_row2"),

@@ -67,3 +67,13 @@ def compressor(
         t3 = t2_k * (1.0 + max(math.expm1(ln_beta * (g - 1.0) / g), 0.0) / eta)  # 2.10
     power = g2 * (cp_air(t3) * t3 - cp_air(t2_k) * t2_k)  # 2.11, absorbed power > 0
     return g2, t3, power, flags
+
+
+def surge_margin(
+    cmap: CompressorMap, p2_pa: float, t2_k: float, p3_pa: np.ndarray, n_pct: np.ndarray
+) -> np.ndarray:
+    """Surge margin: the surge line's pressure ratio at the corrected speed over the working
+    pressure ratio P3/P2, less one (0 on the surge line, negative beyond it); arrays welcome."""
+    n_cor = np.asarray(n_pct, dtype=float) / math.sqrt(t2_k / T_STD_K)  # 2.9
+    surge_beta = np.interp(n_cor, cmap.n_cor_pct, cmap.surge_beta)  # clamped as interp1
+    return surge_beta / (np.asarray(p3_pa, dtype=float) / p2_pa) - 1.0

@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
+from plant.compressor import surge_margin as compressor_surge_margin
 from plant.engine import EngineModel, Stations, engine_rates, stations
+from plant.intake import intake
 from plant.linearise import pump_voltage_for
-from plant.lookup import interp1
 from plant.steady_line import running_line
-from plant.thermo import T_STD_K
 from plant.trim import SCALE, SteadyState
 
 SPEEDS_PCT = tuple(float(n) for n in range(45, 101, 5))
@@ -90,11 +90,10 @@ def frozen_state(model: EngineModel, x0: np.ndarray, g_fuel: float) -> np.ndarra
 
 
 def surge_margin(model: EngineModel, x: np.ndarray) -> float:
-    """Surge pressure ratio over the working one, less one, at the state's corrected speed."""
+    """Surge pressure ratio over the working one, less one, at the state x."""
     p = model.params
-    n_cor = x[3] / np.sqrt(p.t0_k / T_STD_K)
-    surge_beta, _ = interp1(model.compressor.n_cor_pct, model.compressor.surge_beta, n_cor)
-    return float(surge_beta / (x[0] / p.p0_pa) - 1.0)
+    p2, t2 = intake(p.p0_pa, p.t0_k, p.u0_m_s)
+    return float(compressor_surge_margin(model.compressor, p2, t2, x[0], x[3]))
 
 
 def _stations(model: EngineModel, x: np.ndarray, g_fuel: float) -> Stations:

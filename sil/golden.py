@@ -4,7 +4,8 @@ in closed loop.
 Sources:
 - SIL scenarios run in one process (command node, ECU, plant as in ``sil run --mode inproc``),
   cut to their first ticks: MRAC, PID and open loop on the aero-thermal plant, plant and sensor
-  faults, limit loops on a hot day;
+  faults, limit loops on a hot day, the transients from idle and from maximum (an entry voltage
+  other than the trim's);
 - a scripted sequence for what the SIL never does (it arms once and runs): OFF, ARMED, RUN,
   SHUTDOWN and a latched FAULT, lost and corrupt frames, pump current faults.
 
@@ -43,9 +44,9 @@ def record_scenario(name: str, scenario_text: str, ticks: int) -> Golden:
         s = scenario.load(scenario_text)
     s = dataclasses.replace(s, duration_s=ticks / s.ecu_rate_hz)
     plant = runner.build_plant(s, s.seed)
-    params = compile_params(runner.ecu_params(s, plant.trim_pump_voltage))
+    params = compile_params(runner.ecu_params(s, plant))
     open_loop = s.controller.kind == "open_loop"
-    trim_value = plant.trim_pump_voltage if open_loop else runner.ecu_params(s, 0.0).trim_n_pct
+    trim_value = plant.trim_pump_voltage if open_loop else runner.ecu_params(s, plant).trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     ecu = RecordingEcu(params)
     codec = Codec()
@@ -246,6 +247,13 @@ class Source:
     ticks: int  # default length: keeps the regeneration test short
 
 
+_CHOP_PI = (
+    (scenario.SCENARIO_DIR / "throttle-chop.toml")
+    .read_text()
+    .replace('kind = "mrac"', 'kind = "pi"')
+)  # the PI's integrator started from an entry voltage other than the trim's
+
+
 def _scenario(name: str, scenario_text: str, ticks: int) -> Source:
     return Source(lambda n: record_scenario(name, scenario_text, n), ticks)
 
@@ -266,6 +274,8 @@ SOURCES: dict[str, Source] = {
     "egt-open": _scenario("egt-open", _EGT_OPEN, 1000),
     "egt-overtemp": _scenario("egt-overtemp", _EGT_OVERTEMP, 1000),
     "overspeed": _scenario("overspeed", _OVERSPEED, 1000),
+    "accel-idle": _scenario("accel-idle", "accel-idle-to-max", 1200),
+    "chop-pi": _scenario("chop-pi", _CHOP_PI, 1200),
     "modes": Source(record_modes, 2400),
 }
 

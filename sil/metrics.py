@@ -1,9 +1,12 @@
-"""Figures of a run, computed from its trace: tracking, EGT, limiter time, faults, estimates."""
+"""Figures of a run, computed from its trace: tracking, EGT, limiter time, faults, estimates, and
+the transient figures of its largest demand step (thrust rise, EGT overshoot, surge margin,
+flameouts)."""
 
 from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +20,10 @@ ESTIMATES = {
     "Kf": ("Gain_Kf1", "Gain_Kf2"),
 }
 LOOP_OWNER_EGT = 1
+STEP_MIN_PCT = 1.0  # a demand change at least this large is a step
+SETTLED_S = 1.0  # the final thrust of a step: its mean over this long before the next change
+THRUST_FRACTION = 0.95  # thrust_rise_s: from the step to this fraction of the thrust change
+SurgeMargin = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (P3 Pa, N %) -> margin
 
 
 def load_trace(path: Path) -> dict[str, np.ndarray]:
@@ -78,4 +85,52 @@ def summarize(trace: dict[str, np.ndarray], period_s: float, bit_names: dict[int
         "egt_limit_time_s": float(np.sum(owner == LOOP_OWNER_EGT) * period_s),
         "faults": fault_events(trace, bit_names),
         "estimates": final_estimates(trace),
+    }
+
+
+def largest_step(trace: dict[str, np.ndarray]) -> tuple[int, int] | None:
+    """(first tick of the largest demand step, first tick of the next change or the end)."""
+    demand = np.nan_to_num(trace["SpeedDemand"])
+    changes = np.flatnonzero(np.abs(np.diff(demand)) >= STEP_MIN_PCT) + 1
+    if not len(changes):
+        return None
+    k = int(np.argmax(np.abs(demand[changes] - demand[changes - 1])))
+    end = int(changes[k + 1]) if k + 1 < len(changes) else len(demand)
+    return int(changes[k]), end
+
+
+def thrust_rise_s(trace: dict[str, np.ndarray]) -> float | None:
+    """Time from the largest demand step to 95 % of the thrust change it settles to (a rise or
+    a fall; 14 CFR 33.73 asks 5 s from idle); None without a step or if it never gets there."""
+    step = largest_step(trace)
+    if step is None:
+        return None
+    i, end = step
+    t, thrust = trace["time"], trace["Thrust"]
+    settled = (t[:end] >= t[end - 1] - SETTLED_S) & (np.arange(end) >= i)
+    before, after = float(thrust[i - 1]), float(np.mean(thrust[:end][settled]))
+    target = before + THRUST_FRACTION * (after - before)
+    reached = np.flatnonzero((thrust[i:end] - target) * np.sign(after - before) >= 0.0)
+    return float(t[i + reached[0]] - t[i - 1]) if len(reached) else None
+
+
+def transient(
+    trace: dict[str, np.ndarray], egt_limit_k: float, surge_margin: SurgeMargin
+) -> dict[str, float | int | None]:
+    """Transient figures of a run: thrust rise of its largest step, EGT overshoot over the limit
+    (the thermocouple's reading, 0 when under), the least surge margin (%, from the true P3 and
+    speed), the flameouts (rising edges of the plant's flag) and the least true speed after the
+    step (the whole run without one)."""
+    egt = trace["EGT"]
+    ok = np.isfinite(trace["P3"]) & np.isfinite(trace["speed_true"])
+    margin = surge_margin(trace["P3"][ok], trace["speed_true"][ok])
+    flame = np.nan_to_num(trace["Flameout"]).astype(np.int64)
+    step = largest_step(trace)
+    after = trace["speed_true"][step[0] if step else 0 :]
+    return {
+        "thrust_rise_s": thrust_rise_s(trace),
+        "egt_overshoot_K": max(0.0, float(np.nanmax(egt)) - egt_limit_k) if len(egt) else None,
+        "min_surge_margin_pct": float(100.0 * margin.min()) if len(margin) else None,
+        "flameouts": int(np.sum(np.diff(flame, prepend=0) > 0)),
+        "min_speed_pct": float(np.nanmin(after)) if np.isfinite(after).any() else None,
     }

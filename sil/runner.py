@@ -42,9 +42,11 @@ from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params, preset
 from ecu.port.core import make_ecu
 from ecu.port.node import CEcuNode
-from plant.aerothermal import AeroThermalPlant
+from plant.aerothermal import AeroThermalPlant, make_model
+from plant.compressor import surge_margin
 from plant.fast_plant import FastPlant
 from plant.faults import Fault, FaultKind
+from plant.intake import intake
 from plant.interface import Ambient, Battery, Plant, PlantConfig
 from plant.node import PlantNode
 from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
@@ -167,11 +169,14 @@ def ecu_trim_voltage(s: Scenario, plant: Plant) -> float:
     return build_plant(s, 0, nominal=True).trim_pump_voltage
 
 
-def ecu_overrides(s: Scenario, trim_v: float) -> dict[str, object]:
+def ecu_overrides(s: Scenario, trim_v: float, entry_v: float) -> dict[str, object]:
+    """The scenario's ECU parameters over its preset's; ``entry_v``: the pump voltage holding the
+    plant's initial state, which the ECU takes over (as if it had held it before the run)."""
     overrides: dict[str, object] = {
         "controller": s.controller.kind,
         "rate_hz": int(round(s.ecu_rate_hz)),
         "trim_v": trim_v,
+        "entry_v": entry_v,
     }
     if s.controller.reading is not None:
         overrides["reading"] = s.controller.reading
@@ -179,8 +184,10 @@ def ecu_overrides(s: Scenario, trim_v: float) -> dict[str, object]:
     return overrides
 
 
-def ecu_params(s: Scenario, trim_v: float) -> EcuParams:
-    return preset(s.controller.preset or "default", **ecu_overrides(s, trim_v))
+def ecu_params(s: Scenario, plant: Plant) -> EcuParams:
+    """The ECU's parameters for a run of scenario s on this plant."""
+    overrides = ecu_overrides(s, ecu_trim_voltage(s, plant), plant.trim_pump_voltage)
+    return preset(s.controller.preset or "default", **overrides)
 
 
 def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
@@ -292,7 +299,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
             "plant", _plant_args(opts, s, seed, spec, state.claims[0].tag, ticks), opts.out_dir
         )
     plant = build_plant(s, seed)
-    params = ecu_params(s, ecu_trim_voltage(s, plant))
+    params = ecu_params(s, plant)
     if opts.commission is not None:
         params = commissioning.apply(params, commissioning.load(opts.commission))
     compile_params(params)  # refuse bad overrides before anything starts
@@ -486,7 +493,7 @@ def _ecu_args(
     ]
     if opts.commission is not None:
         args += ["--commission", str(opts.commission)]
-    for name, value in ecu_overrides(s, params.trim_v).items():
+    for name, value in ecu_overrides(s, params.trim_v, params.entry_v).items():
         if name == "controller":
             args += ["--controller", str(value)]
         elif name == "rate_hz":
@@ -685,6 +692,20 @@ def demand_warnings(s: Scenario, commands: np.ndarray, params: EcuParams) -> lis
     return out
 
 
+def _egt_limit_k(s: Scenario) -> float:
+    return preset(s.controller.preset or "default", **s.controller.params).egt_limit_k
+
+
+def _transient(s: Scenario, trace: dict) -> dict:
+    """metrics.transient with the ECU's EGT limit and the surge line of the scenario's engine."""
+    p = s.plant
+    model = make_model(Ambient(p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s))
+    p2, t2 = intake(model.params.p0_pa, model.params.t0_k, model.params.u0_m_s)
+    return metrics.transient(
+        trace, _egt_limit_k(s), lambda p3, n: surge_margin(model.compressor, p2, t2, p3, n)
+    )
+
+
 def _finish(
     opts: RunOptions,
     s: Scenario,
@@ -723,6 +744,7 @@ def _finish(
         "bus_load_pct": bus_load_pct(totals["bits"], sim_time),
         "missed_ticks": totals["missed_ticks"],
         **(metrics.summarize(trace, period, REPORTED_FAULTS) if trace is not None else {}),
+        **(_transient(s, trace) if trace is not None and len(trace["time"]) > 1 else {}),
         "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
         "bus_faults_injected": state.bus_fault_events,
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),
@@ -746,7 +768,7 @@ def _finish(
         from sil import plots  # matplotlib: only when plotting (campaign runs do not)
 
         title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
-        limit = ecu_params(s, 0.0).egt_limit_k  # (the trim voltage plays no part in it)
+        limit = _egt_limit_k(s)
         summary["plots"] = [
             p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind, limit)
         ]

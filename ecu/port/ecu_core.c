@@ -790,10 +790,10 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     new_mode = next_mode(mode, s->arm, s->stop, n_rpm >= p->run_entry_rpm,
                          s->demand_age <= p->demand_hold_ticks, trip_fault, trip_shutdown,
                          n_rpm < p->shutdown_done_rpm);
-    if (new_mode == ECU_RUN && mode != ECU_RUN) { /* bumpless start at trim voltage */
-        reset_loops(s, p->trim_v_q24);
+    if (new_mode == ECU_RUN && mode != ECU_RUN) { /* bumpless start at the entry voltage */
+        reset_loops(s, p->entry_v_q24);
         s->hist_fill = 0;
-        th[ECU_PID_I] = 0;
+        th[ECU_PID_I] = sat32(e, (int64_t)p->entry_v_q24 - p->trim_v_q24);
         s->theta_ext[ECU_PID_I] = 0;
         s->xm1_q24 = dn;
         s->xm2_q24 = 0;

@@ -77,7 +77,7 @@ enum {
 /* ecu.params.FirmwareParams, in its order; init_theta_q24 holds the ECU_N_THETA start values */
 #define ECU_PARAM_FIELDS(X, A) \
     X(rate_hz) X(controller) X(dt_q24) X(n_max_rpm) X(rpm_to_q24_k) X(trim_n_q24) \
-    X(trim_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) X(idm21_q24) \
+    X(trim_v_q24) X(entry_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) X(idm21_q24) \
     X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) X(g_th1_q28) \
     X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
     X(rate_half_window) X(rate_den) X(lambda_floor_on) X(lambda_floor_q24) X(dead_zone_on) \

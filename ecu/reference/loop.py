@@ -25,6 +25,7 @@ class FloatLoop:
         self.mrac = FloatMrac(params)
         self.pid = FloatPid(params)
         self.pi = FloatPi(params)
+        self.pid.i = self.pi.i = params.entry_v - params.trim_v  # bumpless entry into RUN
         self.rate_filter = FloatRateFilter(params)
         self.m = max(1, round(params.rate_window_s * params.rate_hz / 2.0))
         self.n_hist: deque[float] = deque(maxlen=2 * self.m + 2)  # newest last

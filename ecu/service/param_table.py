@@ -86,6 +86,7 @@ TABLE: tuple[ParamSpec, ...] = (
     # unsafe while the engine runs: trim point, protection levels, actuator range, model
     _s("trim_n_pct", "%N", Q24, 50.0, 100.0, False),
     _s("trim_v", "V", Q24, 1.0, 25.0, False),
+    _s("entry_v", "V", Q24, 1.0, 25.0, False),
     _s("idle_pct", "%N", Q24, 20.0, 60.0, False),
     _s("demand_max_pct", "%N", Q24, 50.0, 105.0, False),
     _s("n_limit_pct", "%N", Q24, 90.0, 108.0, False),

@@ -25,7 +25,7 @@ from sil.busfault.inproc import FaultyInProcessBus
 from sil.campaign.probe import Probe
 from sil.command_node import CommandNode
 from sil.compiled_loop import CompiledLoop, compile_loop
-from sil.runner import build_plant, ecu_params, ecu_trim_voltage
+from sil.runner import build_plant, ecu_params
 from sil.scenario import Scenario
 
 
@@ -53,7 +53,7 @@ def run_case(
     seed = s.seed if seed is None else seed
     t0 = time.perf_counter()
     plant = build_plant(s, seed)
-    params = ecu_params(s, ecu_trim_voltage(s, plant))
+    params = ecu_params(s, plant)
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)

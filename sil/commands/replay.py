@@ -116,7 +116,7 @@ def _into_ecu(args: argparse.Namespace) -> int:
     path = args.scenario or args.log.parent / "scenario.toml"
     try:
         s = scenarios.load(path)
-        params = ecu_params(s, build_plant(s, s.seed).trim_pump_voltage)
+        params = ecu_params(s, build_plant(s, s.seed))
         changes = dict(_param(p) for p in args.param)
         params = compile_params(replace(params, **changes))
         report = replay.into_ecu(args.log, EcuNode(params))

@@ -384,7 +384,7 @@ def _record_run(tmp: Path, scenario_name: str, ecu_impl: str, duration_s: float)
     summary = runner.run(options)
     assert summary["status"] == "completed", summary
     plant = runner.build_plant(s, s.seed)
-    params = compile_params(runner.ecu_params(s, runner.ecu_trim_voltage(s, plant)))
+    params = compile_params(runner.ecu_params(s, plant))
     frames = []
     for line in (tmp / scenario_name / "can.log").read_text().splitlines():
         found = CANDUMP.match(line)
