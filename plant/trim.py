@@ -99,7 +99,8 @@ def solve_steady_at_speed(
     holds. Speed and EGT both rise with fuel along the running line, so the point is the root in
     the fuel flow of max(N - n_pct, (EGT - egt_max_k) / 10 K), bracketed by walking the line from
     the eq. 2.32 trim in FUEL_STEP_KG_S steps (continuation) and found by the Illinois method. An
-    engine whose EGT has a minimum above egt_max_k starts at that minimum."""
+    engine whose EGT has a minimum above egt_max_k starts at that minimum, one that runs no
+    slower than n_pct at its slowest steady state."""
     if not np.isfinite(n_pct) or not MIN_RUNNING_N_PCT < n_pct <= 120.0:
         raise ValueError(f"speed must be in ({MIN_RUNNING_N_PCT:g}, 120] %N, got {n_pct!r}")
     if not egt_max_k > 0.0:
@@ -121,13 +122,16 @@ def _walk_to(
     what: str,
 ) -> tuple[float, SteadyState]:
     """Root in the fuel flow of f(steady state), which rises with fuel along the running line;
-    where f turns back before its root on the way down, the steady state nearest the root."""
+    where f turns back before its root on the way down, or the line ends (to FUEL_STEP_KG_S),
+    the steady state nearest the root."""
     g, s = TRIM_FUEL_KG_S, solve_steady(model, TRIM_FUEL_KG_S)
     step = FUEL_STEP_KG_S if f(s) < 0.0 else -FUEL_STEP_KG_S
     while True:
         try:
             nxt = solve_steady(model, g + step, x0=s.x, settle_s=5.0)
-        except ValueError:
+        except (ValueError, RuntimeError):
+            if step < 0.0:  # the engine runs no slower: its slowest steady state
+                return g, s
             raise ValueError(
                 f"no steady state {what}: the running line ends at {g * 1e3:.1f} g/s "
                 f"({s.x[3]:.1f} %N, EGT {s.stations.t5:.0f} K)"

@@ -40,6 +40,7 @@ from plant.node import (
     DUE_ANALOG,
     DUE_TRUTH,
     NF_SIZE,
+    NS_FLAGS,
     NS_SIZE,
     PlantNode,
     actuator_compiled,
@@ -88,8 +89,11 @@ NODE_OUT = 3  # ECU_NODE_MAX_OUT
 I_SENSORS, I_ACTUATOR, I_FAULT, I_ECU, I_PLANT = 0, 1, 2, 3, 6  # I_ECU: 3, I_PLANT: 4 IDs
 # why the loop returned
 DONE, CHUNK, FAULT_FRAME, PLANT_PYTHON, IDLE = range(5)
-# the plant's truth kept per tick answered (CompiledLoop.truth): true speed %N and EGT, K
-TRUTH = (OUT + OUT_FIELDS.index("n_pct"), OUT + OUT_FIELDS.index("egt_true_k"))
+# the plant's truth kept per tick answered (CompiledLoop.truth): true speed %N, EGT K, P3 Pa and
+# thrust N from its outputs, then its flags (plant.flags)
+TRUTH_FIELDS = ("n_pct", "egt_true_k", "p3_pa", "thrust_n")
+TRUTH = tuple(OUT + OUT_FIELDS.index(name) for name in TRUTH_FIELDS)
+TRUTH_COLUMNS = len(TRUTH) + 1
 
 
 @intrinsic
@@ -155,8 +159,9 @@ def run_frames(
             elif frame_id == ids[I_ACTUATOR]:
                 k = ls[L_ANSWERED]
                 if k < len(truth):  # the plant as it is when the ECU answers tick k
-                    truth[k, 0] = s[TRUTH[0]]
-                    truth[k, 1] = s[TRUTH[1]]
+                    for j in range(len(TRUTH)):
+                        truth[k, j] = s[TRUTH[j]]
+                    truth[k, len(TRUTH)] = ns[NS_FLAGS]
                 ls[L_ANSWERED] = k + 1
                 ls[L_BOUNDARY] = ls[L_OUT]
                 if ls[L_ANSWERED] > ls[L_LAST_TICK]:
@@ -265,9 +270,9 @@ class CompiledLoop:
         if ctypes.sizeof(node_library().frame_t) != FRAME_BYTES:
             raise ValueError("ecu_can_frame_t is not the 12 bytes the compiled loop reads")
         self.command, self.ecu, self.plant, self.recorder = command, ecu, plant, recorder
-        # per tick answered, the plant's true speed (%N) and EGT (K) when the ECU answered it:
+        # per tick answered, the plant's truth (TRUTH_FIELDS, flags) when the ECU answered it:
         # what a campaign's probe reads from the plant in process (sil/campaign/probe.py)
-        self.truth = np.full((command.last_tick + 1, 2), np.nan)
+        self.truth = np.full((command.last_tick + 1, TRUTH_COLUMNS), np.nan)
         self._first_tick = True  # the frames up to the first EcuActuator go one by one
         self._one_by_one = False  # every frame from now on (after a chunk of no whole tick)
         self._own_ids = (command.demand.frame_id, command.fault_msg.frame_id)

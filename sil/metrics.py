@@ -26,6 +26,18 @@ THRUST_FRACTION = 0.95  # thrust_rise_s: from the step to this fraction of the t
 SurgeMargin = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (P3 Pa, N %) -> margin
 
 
+def surge_margin_at(t0_k: float, p0_pa: float, u0_m_s: float) -> SurgeMargin:
+    """The surge margin of the engine's compressor map at this ambient and flight speed."""
+    from plant.aerothermal import make_model  # (the maps: only when a margin is wanted)
+    from plant.compressor import surge_margin
+    from plant.intake import intake
+    from plant.interface import Ambient
+
+    cmap = make_model(Ambient(t0_k, p0_pa, u0_m_s)).compressor
+    p2, t2 = intake(p0_pa, t0_k, u0_m_s)
+    return lambda p3, n: surge_margin(cmap, p2, t2, p3, n)
+
+
 def load_trace(path: Path) -> dict[str, np.ndarray]:
     """trace.csv as columns keyed by signal name (units stripped from the header)."""
     with path.open() as f:
@@ -90,7 +102,7 @@ def summarize(trace: dict[str, np.ndarray], period_s: float, bit_names: dict[int
 
 def largest_step(trace: dict[str, np.ndarray]) -> tuple[int, int] | None:
     """(first tick of the largest demand step, first tick of the next change or the end)."""
-    demand = np.nan_to_num(trace["SpeedDemand"])
+    demand = np.nan_to_num(trace["command"])
     changes = np.flatnonzero(np.abs(np.diff(demand)) >= STEP_MIN_PCT) + 1
     if not len(changes):
         return None
@@ -117,7 +129,8 @@ def thrust_rise_s(trace: dict[str, np.ndarray]) -> float | None:
 def transient(
     trace: dict[str, np.ndarray], egt_limit_k: float, surge_margin: SurgeMargin
 ) -> dict[str, float | int | None]:
-    """Transient figures of a run: thrust rise of its largest step, EGT overshoot over the limit
+    """Transient figures of a run: its largest demand step (signed, %N) and the thrust's rise
+    (or fall) after it, EGT overshoot over the limit
     (the thermocouple's reading, 0 when under), the least surge margin (%, from the true P3 and
     speed), the flameouts (rising edges of the plant's flag) and the least true speed after the
     step (the whole run without one)."""
@@ -127,7 +140,9 @@ def transient(
     flame = np.nan_to_num(trace["Flameout"]).astype(np.int64)
     step = largest_step(trace)
     after = trace["speed_true"][step[0] if step else 0 :]
+    demand = trace["command"]
     return {
+        "step_pct": float(demand[step[0]] - demand[step[0] - 1]) if step else None,
         "thrust_rise_s": thrust_rise_s(trace),
         "egt_overshoot_K": max(0.0, float(np.nanmax(egt)) - egt_limit_k) if len(egt) else None,
         "min_surge_margin_pct": float(100.0 * margin.min()) if len(margin) else None,

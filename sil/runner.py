@@ -42,11 +42,9 @@ from ecu.node import EcuNode
 from ecu.params import EcuParams, compile_params, preset
 from ecu.port.core import make_ecu
 from ecu.port.node import CEcuNode
-from plant.aerothermal import AeroThermalPlant, make_model
-from plant.compressor import surge_margin
+from plant.aerothermal import AeroThermalPlant
 from plant.fast_plant import FastPlant
 from plant.faults import Fault, FaultKind
-from plant.intake import intake
 from plant.interface import Ambient, Battery, Plant, PlantConfig
 from plant.node import PlantNode
 from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
@@ -186,8 +184,13 @@ def ecu_overrides(s: Scenario, trim_v: float, entry_v: float) -> dict[str, objec
 
 def ecu_params(s: Scenario, plant: Plant) -> EcuParams:
     """The ECU's parameters for a run of scenario s on this plant."""
+    name = s.controller.preset or "default"
     overrides = ecu_overrides(s, ecu_trim_voltage(s, plant), plant.trim_pump_voltage)
-    return preset(s.controller.preset or "default", **overrides)
+    params = preset(name, **{**overrides, "entry_v": ecu_trim_voltage(s, plant)})
+    # the plant may hold its start beyond the ECU's range (a weak pump at maximum speed): the ECU
+    # takes over at the nearest voltage it may command
+    overrides["entry_v"] = min(max(plant.trim_pump_voltage, params.v_min), params.v_max)
+    return preset(name, **overrides)
 
 
 def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
@@ -699,11 +702,10 @@ def _egt_limit_k(s: Scenario) -> float:
 def _transient(s: Scenario, trace: dict) -> dict:
     """metrics.transient with the ECU's EGT limit and the surge line of the scenario's engine."""
     p = s.plant
-    model = make_model(Ambient(p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s))
-    p2, t2 = intake(model.params.p0_pa, model.params.t0_k, model.params.u0_m_s)
-    return metrics.transient(
-        trace, _egt_limit_k(s), lambda p3, n: surge_margin(model.compressor, p2, t2, p3, n)
+    margin = metrics.surge_margin_at(
+        p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s
     )
+    return metrics.transient(trace, _egt_limit_k(s), margin)
 
 
 def _finish(

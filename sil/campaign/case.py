@@ -40,6 +40,7 @@ class CaseRun:
     wall_s: float
     bus_events: list[dict] = field(default_factory=list)
     stalls: dict[str, int] = field(default_factory=dict)
+    demand: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the command per tick
 
     def column(self, name: str) -> np.ndarray:
         return np.asarray(getattr(self.probe, name))
@@ -59,7 +60,7 @@ def run_case(
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     codec = Codec()
     out = plant.outputs
-    probe = Probe(codec, lambda: (out.n_pct, out.egt_true_k))
+    probe = Probe(codec, lambda: (out.n_pct, out.egt_true_k, out.p3_pa, out.thrust_n, out.flags))
     command = CommandNode(
         codec, probe, commands, ecu_rate_hz=s.ecu_rate_hz, open_loop=open_loop, faults=s.faults
     )
@@ -73,7 +74,7 @@ def run_case(
         loop = CompiledLoop(command, CEcuNode(core, codec=codec), plant_node, probe)
         loop.run()
         probe.take_truth(loop.truth)
-        return CaseRun(s, params, probe, len(commands), time.perf_counter() - t0)
+        return CaseRun(s, params, probe, len(commands), time.perf_counter() - t0, demand=commands)
     ecu = EcuNode(ecu=core, codec=codec)
     if s.bus_faults:
         injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, codec)
@@ -82,4 +83,5 @@ def run_case(
         events, stalls = injector.events, bus.stalls
     else:
         InProcessBus([command, ecu, plant_node]).run(done=lambda: command.finished)
-    return CaseRun(s, params, probe, len(commands), time.perf_counter() - t0, events, stalls)
+    wall = time.perf_counter() - t0
+    return CaseRun(s, params, probe, len(commands), wall, events, stalls, demand=commands)

@@ -29,7 +29,8 @@ from sil.parent_death import die_with_parent
 FIGURES = (
     "ticks", "wall_s", "tracking_rms_pct", "tracking_mean_pct", "max_n_pct", "max_egt_K",
     "max_egt_time_s", "egt_limit_time_s", "pump_v_min", "pump_v_max", "final_mode", "fault_bits",
-    "stalls",
+    "stalls", "step_pct", "thrust_rise_s", "egt_overshoot_K", "min_surge_margin_pct",
+    "flameouts", "min_speed_pct",
 )  # fmt: skip
 
 

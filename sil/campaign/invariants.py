@@ -3,6 +3,13 @@
 Invariants (thresholds in the campaign's ``[invariants]``):
 - ``overspeed``: the true speed never above ``max_speed_pct``;
 - ``egt``: the true EGT never above the ECU's EGT limit plus ``egt_margin_K``;
+- ``surge``: the compressor's surge margin (true P3 and speed on the map's surge line) never
+  under ``min_surge_margin_pct``;
+- ``flameout``: no flameout while the ECU is in RUN (``check_flameout``);
+- ``undershoot``: in RUN, the true speed never under the ECU's flameout threshold (idle less its
+  flameout margin; ``check_undershoot``);
+- ``thrust_rise``: after the largest demand step, when it is a step up, the thrust reaches 95 %
+  of its change within ``max_thrust_rise_s``;
 - ``pump_command``: the pump voltage the ECU commands within [0, v_max], and within
   [v_min, v_max] while it runs;
 - per ``[[bus_fault]]`` with expectations: ``detect`` (every corrupted frame rejected by its
@@ -20,6 +27,8 @@ import numpy as np
 
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
+from plant.flags import FLAMEOUT
+from sil import metrics
 from sil.busfault.spec import E2E_KINDS
 from sil.campaign.case import CaseRun
 from sil.campaign.spec import Invariants
@@ -31,6 +40,32 @@ OWNER_EGT = 1
 def _rms(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     return float(np.sqrt(np.mean(x * x))) if x.size else math.nan
+
+
+def transient(r: CaseRun) -> dict:
+    """The transient figures of sil.metrics on the plant's truth: thrust rise of the largest
+    demand step, EGT overshoot (true EGT), least surge margin, flameouts and least speed in RUN."""
+    rate = r.scenario.ecu_rate_hz
+    n = len(r.probe.n_pct)
+    running = r.column("mode") == ecu_modes.RUN
+    flags = np.nan_to_num(r.column("flags")).astype(np.int64)
+    trace = {
+        "time": np.arange(n) / rate,
+        "command": np.asarray(r.demand[:n], dtype=float),
+        "Thrust": r.column("thrust_n"),
+        "EGT": r.column("egt_k"),
+        "P3": r.column("p3_pa"),
+        "speed_true": np.where(running, r.column("n_pct"), np.nan),
+        "Flameout": ((flags & FLAMEOUT) != 0) & running,
+    }
+    p = r.scenario.plant
+    margin = metrics.surge_margin_at(
+        p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s
+    )
+    if p.model != "aero":  # the fast plant has no compressor
+        margin = lambda p3, n: np.full(len(p3), np.nan)  # noqa: E731
+    out = metrics.transient(trace, r.params.egt_limit_k, margin)
+    return {k: (math.nan if v is None else v) for k, v in out.items()}
 
 
 def figures(r: CaseRun) -> dict:
@@ -55,6 +90,7 @@ def figures(r: CaseRun) -> dict:
             ecu_faults.names(seen & ~(ecu_faults.LIMITER_ACTIVE | ecu_faults.PUMP_SATURATED))
         ),
         "stalls": sum(r.stalls.values()),
+        **transient(r),
     }
 
 
@@ -106,6 +142,19 @@ def check(r: CaseRun, inv: Invariants) -> tuple[dict, list[dict], list[str]]:
         violations.append(
             f"egt: {fig['max_egt_K']:.1f} K > {egt_cap:g} K (peak at {fig['max_egt_time_s']:.2f} s)"
         )
+    if fig["min_surge_margin_pct"] < inv.min_surge_margin_pct:
+        violations.append(
+            f"surge: margin {fig['min_surge_margin_pct']:.2f} % < {inv.min_surge_margin_pct:g} %"
+        )
+    if inv.check_flameout and fig["flameouts"]:
+        violations.append(f"flameout: {fig['flameouts']} while in RUN")
+    threshold = params.idle_pct * (1.0 - params.flameout_margin)
+    if inv.check_undershoot and fig["min_speed_pct"] < threshold:
+        violations.append(f"undershoot: {fig['min_speed_pct']:.2f} %N < {threshold:g} %N in RUN")
+    rise = fig["thrust_rise_s"]
+    step_up = fig["step_pct"] > 0.0
+    if step_up and math.isfinite(inv.max_thrust_rise_s) and not rise <= inv.max_thrust_rise_s:
+        violations.append(f"thrust_rise: {rise:.2f} s > {inv.max_thrust_rise_s:g} s")
     v, mode = r.column("pump_v"), r.column("mode")
     running = mode == ecu_modes.RUN
     tol = 0.0015  # the frame's 1 mV resolution and rounding

@@ -3,9 +3,9 @@
 It stands in for :class:`sil.recorder.Recorder` towards the command node (``record``,
 ``commands_sent``, ``tick``, ``latest_sensor_tick``) and keeps, sample-and-hold as the trace
 does, the true speed of PlantTruthB, the ECU's reference speed, fault word and loop owner of
-EcuStatus and the pump voltage and mode of EcuActuator; the plant's true speed and EGT are read
-from the plant in process (``truth``), so invariants hold on the engine, not on what its sensors
-claim.
+EcuStatus and the pump voltage and mode of EcuActuator; the plant's true speed, EGT, P3, thrust
+and flags are read from the plant in process (``truth``), so invariants hold on the engine, not on
+what its sensors claim.
 
 A run in the compiled loop (sil/compiled_loop.py, the C ECU) hands the frames over in blocks
 (:meth:`Probe.record_ticks`, decoded vectorised to the same rows) and the plant's truth per tick
@@ -22,7 +22,7 @@ import numpy as np
 from protocol.codec import Codec
 from sil.recorder import ACTUATOR, N_MAX_RPM, InOrderTicks, raw_field
 
-Truth = Callable[[], tuple[float, float]]  # (true speed %N, true EGT K) now
+Truth = Callable[[], tuple[float, float, float, float, int]]  # (N %, EGT K, P3 Pa, thrust N, flags)
 
 
 class Probe(InOrderTicks):
@@ -46,6 +46,9 @@ class Probe(InOrderTicks):
         self.ref_pct: list[float] = []
         self.n_pct: list[float] = []  # plant truth, read in process
         self.egt_k: list[float] = []
+        self.p3_pa: list[float] = []
+        self.thrust_n: list[float] = []
+        self.flags: list[float] = []  # (float: NaN until the compiled loop's truth is taken)
         self.fault_word: list[int] = []
         self.owner: list[int] = []
         self.mode: list[int] = []
@@ -79,14 +82,14 @@ class Probe(InOrderTicks):
         self.owner += owner.astype(np.int64).tolist()
         self.mode += _field(words[rows], self._actuator, 1).tolist()
         self.pump_v += (_field(words[rows], self._actuator, 4) * 0.001).tolist()
-        self.n_pct += [math.nan] * len(rows)
-        self.egt_k += [math.nan] * len(rows)
+        for column in (self.n_pct, self.egt_k, self.p3_pa, self.thrust_n, self.flags):
+            column += [math.nan] * len(rows)
 
     def take_truth(self, truth: np.ndarray) -> None:
-        """The plant's true speed (%N) and EGT (K) per row, as the loop kept them ((rows, 2))."""
+        """The plant's truth per row as the loop kept it ((rows, 5): N %, EGT K, P3 Pa, thrust N,
+        flags)."""
         n = len(self.n_pct)
-        self.n_pct = truth[:n, 0].tolist()
-        self.egt_k = truth[:n, 1].tolist()
+        self.n_pct, self.egt_k, self.p3_pa, self.thrust_n, self.flags = truth[:n, :5].T.tolist()
 
     def commands_sent(self) -> None:
         """Nothing waits: in process the frames come in order and a row is taken per actuator
@@ -106,11 +109,14 @@ class Probe(InOrderTicks):
     def _on_actuator(self, data: bytes | bytearray) -> None:
         raw = self._raw
         self._actuator.unpack_raw(data, raw)
-        n, egt = self.truth()
+        n, egt, p3, thrust, flags = self.truth()
         self.speed_pct.append(self._speed)
         self.ref_pct.append(self._ref)
         self.n_pct.append(n)
         self.egt_k.append(egt)
+        self.p3_pa.append(p3)
+        self.thrust_n.append(thrust)
+        self.flags.append(float(flags))
         self.fault_word.append(self._fault_word)
         self.owner.append(self._owner)
         self.mode.append(raw[1])

@@ -25,6 +25,10 @@
     [invariants]                   # see sil.campaign.invariants
     max_speed_pct = 102.0
     egt_margin_K = 25.0
+    min_surge_margin_pct = 0.0
+    check_flameout = true
+    check_undershoot = false
+    max_thrust_rise_s = 5.0        # default: not checked
 
 Cases come samples outermost (the same engine and noise seed under every sweep combination and
 variant, so controllers are compared on equal engines). Each case is a complete scenario; every
@@ -37,6 +41,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import itertools
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +63,10 @@ class CampaignError(ValueError):
 class Invariants:
     max_speed_pct: float = 102.0  # true speed never above (the topping governor's limit)
     egt_margin_K: float = 25.0  # true EGT never above the ECU's EGT limit by more than this
+    min_surge_margin_pct: float = 0.0  # the compressor's surge margin never under this (true P3)
+    check_flameout: bool = True  # no flameout while the ECU is in RUN
+    check_undershoot: bool = False  # in RUN, true speed never under the ECU's flameout threshold
+    max_thrust_rise_s: float = math.inf  # the largest demand step: 95 % of its thrust within this
     check_faults: bool = True  # each [[bus_fault]] expectation (detect, fallback, recovery)
 
 

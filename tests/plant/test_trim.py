@@ -188,3 +188,14 @@ def test_plant_refuses_a_bad_start():
         PlantConfig(initial_speed_pct=5.0)
     with pytest.raises(ValueError, match="initial_egt_max_k"):
         PlantConfig(initial_speed_pct=90.0, initial_egt_max_k=-1.0)
+
+
+def test_an_engine_that_runs_no_slower_starts_at_its_slowest_steady_state(model):
+    from plant.trim import FUEL_STEP_KG_S, solve_steady, solve_steady_at_speed
+
+    weak = _varied(model, 0.95, 0.95, 0.95, 0.95)  # no steady state down at 40 %N
+    g, s = solve_steady_at_speed(weak, 40.0)
+    assert 40.0 < s.x[3] < 60.0
+    assert max(_rates_scaled(weak, g, s.x)) < 1e-6
+    with pytest.raises((ValueError, RuntimeError)):  # a step less fuel keeps it running no more
+        solve_steady(weak, g - FUEL_STEP_KG_S, x0=s.x, settle_s=5.0)

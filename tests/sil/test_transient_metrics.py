@@ -20,7 +20,7 @@ def _trace(t, demand, thrust, **extra):
     n = len(t)
     base = {
         "time": t,
-        "SpeedDemand": demand,
+        "command": demand,
         "Thrust": thrust,
         "EGT": np.full(n, 1000.0),
         "P3": np.full(n, 3e5),
@@ -100,14 +100,14 @@ def _run(tmp_path, name, kind, duration_s):
     return metrics.load_trace(out / "trace.csv"), json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("kind", ["pi", "pid"])
-def test_idle_start_is_steady_and_taken_over_without_a_bump(tmp_path, kind):
-    """The plant starts in steady state at 45 %N and the PI(D) takes it over bumplessly (its
-    integrator from the voltage holding the plant there): no drift before the step at 1 s."""
-    trace, summary = _run(tmp_path, "accel-idle-to-max", kind, 3)
+def test_idle_start_is_steady_and_taken_over_without_a_bump(tmp_path):
+    """The plant starts in steady state at 55 %N (idle) and the PI takes it over bumplessly (its
+    integrator from the voltage holding the plant there): no drift before the step at 1 s. (The
+    document's PID wanders by itself, about 0.5 %N in that second.)"""
+    trace, summary = _run(tmp_path, "accel-idle-to-max", "pi", 3)
     before = trace["time"] < 1.0
     # from the trim voltage instead (12.41 V against about 2.6 V) it would gain several %N
-    assert np.nanmax(np.abs(trace["speed_true"][before] - 45.0)) < 0.3
+    assert np.nanmax(np.abs(trace["speed_true"][before] - 55.0)) < 0.3
     assert summary["flameouts"] == 0 and summary["min_surge_margin_pct"] > 0.0
 
 
