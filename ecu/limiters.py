@@ -5,7 +5,10 @@ selection.
     then [V_min, V_max] and slew.
 
 V_line and V_floor are the fuel schedules (acceleration line, deceleration floor) against
-corrected speed Nc, moved with the estimated pump (ecu.params: accel_line_v, decel_floor_v);
+corrected speed Nc, moved with the estimated pump in the safe direction only (the line down for a
+stronger pump, the floor up for a weaker one: an estimate thrown off by a transient or by the fast
+model's distance from its trim speed never makes the engine hotter or leaner; ecu.params:
+accel_line_v, decel_floor_v);
 they own the command as the acceleration and deceleration limits do (OWNER_ACCEL, OWNER_DECEL).
 
 Each limit loop is a PI in velocity (incremental) form on its own error (margin to its limit),
@@ -46,15 +49,17 @@ def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
     s.egt_lead_q12 = sat32(y + ((p.egt_lead_ctc_q16 * (egt_dk - s.egt_dk)) >> 4))
 
 
-def schedule_v(s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
+def schedule_v(
+    s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int, lam_lo: int, lam_hi: int
+) -> int:
     """A fuel schedule's pump voltage at speed n_q24 (Q7.24): the table at corrected speed, for
-    the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel
-    (Lambda-hat within the schedule's pump range)."""
+    the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel, with
+    Lambda-hat taken within [lam_lo, lam_hi] (Q24)."""
     n_cor = sat32((n_q24 * p.ncor_k_q24) >> 24)
     v = interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
     if not p.pump_scaling_on:
         return v
-    lam = clamp(s.theta_q24[LAM], p.sched_lam_lo_q24, p.sched_lam_hi_q24)
+    lam = clamp(s.theta_q24[LAM], lam_lo, lam_hi)
     return sat32(p.pump_dead_q24 + div_trunc((v - p.pump_dead_q24) * p.lambda_comm_q24, lam))
 
 
@@ -103,7 +108,8 @@ def select_voltage(
             owner = OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
     if p.fuel_schedules_on:
-        v_line = schedule_v(s, p, p.accel_line_q24, n_q24)
+        # one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it
+        v_line = schedule_v(s, p, p.accel_line_q24, n_q24, p.lambda_comm_q24, p.sched_lam_hi_q24)
         if v_line < v:
             v = v_line
             owner = OWNER_ACCEL
@@ -115,7 +121,8 @@ def select_voltage(
             owner = OWNER_DECEL
     s.dec_e_prev_q24 = e
     if p.fuel_schedules_on:
-        v_floor = schedule_v(s, p, p.decel_floor_q24, n_q24)
+        # one-sided: a weaker pump raises the floor, an estimate over Lambda_c never lowers it
+        v_floor = schedule_v(s, p, p.decel_floor_q24, n_q24, p.sched_lam_lo_q24, p.lambda_comm_q24)
         if v_floor > v:
             v = v_floor
             owner = OWNER_DECEL

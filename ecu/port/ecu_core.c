@@ -425,7 +425,8 @@ static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_pre
     return sat32(e, v_prev + ((kp_q24 * (err - err_prev)) >> 24) + ((ki_dt_q24 * err) >> 24));
 }
 
-static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24)
+static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24, int32_t lam_lo,
+                          int32_t lam_hi)
 {
     const ecu_params_t *p = e->p;
     int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
@@ -435,7 +436,7 @@ static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24)
     if (!p->pump_scaling_on) {
         return v;
     }
-    lam = (int32_t)clamp(e->s.theta_q24[ECU_LAM], p->sched_lam_lo_q24, p->sched_lam_hi_q24);
+    lam = (int32_t)clamp(e->s.theta_q24[ECU_LAM], lam_lo, lam_hi);
     return sat32(e, (int64_t)p->pump_dead_q24 +
                         div_trunc(e, ((int64_t)v - p->pump_dead_q24) * p->lambda_comm_q24, lam));
 }
@@ -486,7 +487,8 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     s->nlim_e_prev_q24 = err;
     if (p->fuel_schedules_on) {
-        v_loop = schedule_v(e, p->accel_line_q24, n_q24);
+        /* one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it */
+        v_loop = schedule_v(e, p->accel_line_q24, n_q24, p->lambda_comm_q24, p->sched_lam_hi_q24);
         if (v_loop < v) {
             v = v_loop;
             owner = OWNER_ACCEL;
@@ -503,7 +505,8 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     s->dec_e_prev_q24 = err;
     if (p->fuel_schedules_on) {
-        v_loop = schedule_v(e, p->decel_floor_q24, n_q24);
+        /* one-sided: a weaker pump raises the floor, an estimate over Lambda_c never lowers it */
+        v_loop = schedule_v(e, p->decel_floor_q24, n_q24, p->sched_lam_lo_q24, p->lambda_comm_q24);
         if (v_loop > v) {
             v = v_loop;
             owner = OWNER_DECEL;

@@ -108,6 +108,42 @@ def detection(rows: list[dict]) -> dict[str, dict]:
     return classes
 
 
+TRANSIENT_STEP_PCT = 20.0  # a largest demand step at least this large makes a run a transient
+
+
+def transients(rows: list[dict]) -> list[dict]:
+    """Per controller and variant, over the runs whose largest demand step is a transient: the
+    thrust rise (nominal engine, median, p95, max), the worst EGT overshoot, the least surge
+    margin, the runs with a flameout and the least speed."""
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in rows:
+        if r["status"] == "completed" and abs(_float(r.get("step_pct", ""))) >= TRANSIENT_STEP_PCT:
+            groups[(r.get(CONTROLLER) or "base", r.get("variant") or "-")].append(r)
+    out = []
+    for (name, variant), rs in sorted(groups.items()):
+
+        def col(key: str, rs: list[dict] = rs) -> np.ndarray:
+            return np.array([_float(r[key]) for r in rs])
+
+        rise = col("thrust_rise_s")
+        nominal = [_float(r["thrust_rise_s"]) for r in rs if r["sample"] == "-1"]
+        out.append({
+            "controller": name,
+            "variant": variant,
+            "step_pct": float(np.median(col("step_pct"))),
+            "runs": len(rs),
+            "rise_nominal": nominal[0] if nominal else math.nan,
+            "rise_p50": float(np.nanmedian(rise)) if np.isfinite(rise).any() else math.nan,
+            "rise_p95": _pct(rise[np.isfinite(rise)], 95),
+            "rise_max": float(np.max(np.where(np.isfinite(rise), rise, np.inf))),
+            "egt_overshoot_max": float(np.nanmax(col("egt_overshoot_K"))),
+            "surge_margin_min": float(np.nanmin(col("min_surge_margin_pct"))),
+            "flameout_runs": int(np.sum(col("flameouts") > 0)),
+            "speed_min": float(np.nanmin(col("min_speed_pct"))),
+        })  # fmt: skip
+    return out
+
+
 def _plots(rows: list[dict], track: dict, classes: dict, out: Path) -> list[str]:
     import matplotlib
 
@@ -182,6 +218,25 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
         lines.append("")
         lines += _targets(track)
         lines += ["", "![tracking](tracking_rms.png)", ""]
+    steps = transients(rows)
+    if steps:
+        lines += ["## Transients", "",
+                  "| controller | variant | step [%N] | runs | thrust rise [s] nominal / median / "
+                  "p95 / max | EGT overshoot max [K] | surge margin min [%] | runs with a "
+                  "flameout | least speed [%N] |",
+                  "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for s in steps:
+            rise = " / ".join(
+                _fmt(s[k], ".2f") for k in ("rise_nominal", "rise_p50", "rise_p95", "rise_max")
+            )
+            lines.append(
+                f"| {s['controller']} | {s['variant']} | {s['step_pct']:+.0f} | {s['runs']} | "
+                f"{rise} | {_fmt(s['egt_overshoot_max'], '.1f')} | "
+                f"{_fmt(s['surge_margin_min'], '.1f')} | {s['flameout_runs']} | "
+                f"{_fmt(s['speed_min'], '.1f')} |"
+            )
+        lines += ["", "Thrust rise: from the step to 95 % of the thrust change (a fall after a "
+                  "step down); EGT overshoot over the ECU's limit, true EGT.", ""]  # fmt: skip
     if classes:
         lines += [
             "## Bus faults",

@@ -56,6 +56,9 @@ def test_transient_invariants_and_figures(write, tmp_path):
     assert "undershoot" not in accel["violations"]
     for r in rows.values():
         assert 0.0 < float(r["min_surge_margin_pct"]) < 100.0
+    report = (out / "report.md").read_text()
+    row = next(ln for ln in report.splitlines() if ln.startswith("| pi | accel | +45 | 1 |"))
+    assert f"{float(accel['thrust_rise_s']):.2f} / {float(accel['thrust_rise_s']):.2f}" in row
     # the same figures from `sil run` of the case (the trace: CAN resolution, sensor EGT)
     run = tmp_path / "run"
     scenario = out / "scenarios" / f"{accel['run_id']}.toml"

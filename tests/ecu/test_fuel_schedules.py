@@ -31,9 +31,14 @@ SPEEDS = SCHED_N0_PCT + SCHED_STEP_PCT * np.arange(SCHED_POINTS)
 
 
 def _expected(p: EcuParams, table: tuple[float, ...], n: float, lam: float) -> float:
-    """The schedule's voltage by its definition, in floats."""
+    """The schedule's voltage by its definition, in floats: the line moves only down (Lambda-hat
+    in [Lambda_c, hi]), the floor only up (in [lo, Lambda_c])."""
     v = float(np.interp(n * math.sqrt(288.15 / p.inlet_temp_k), SPEEDS, table))
     lo, hi = (r * p.lambda_commissioned for r in p.schedule_pump_range)
+    if table is p.accel_line_v:
+        lo = p.lambda_commissioned
+    else:
+        hi = p.lambda_commissioned
     return p.pump_dead_v + (v - p.pump_dead_v) * p.lambda_commissioned / min(max(lam, lo), hi)
 
 
@@ -57,11 +62,11 @@ def test_schedule_voltage_follows_its_definition(inlet_k: float, lam_ratio: floa
     s.theta_q24[LAM] = round(p.lambda_commissioned * lam_ratio * Q)
     lam = s.theta_q24[LAM] / Q
     for n in np.linspace(30.0, 110.0, 81):
-        for table, raw in (
-            (p.accel_line_v, fw.accel_line_q24),
-            (p.decel_floor_v, fw.decel_floor_q24),
+        for table, raw, lo, hi in (
+            (p.accel_line_v, fw.accel_line_q24, fw.lambda_comm_q24, fw.sched_lam_hi_q24),
+            (p.decel_floor_v, fw.decel_floor_q24, fw.sched_lam_lo_q24, fw.lambda_comm_q24),
         ):
-            got = schedule_v(s, fw, raw, round(n * Q)) / Q
+            got = schedule_v(s, fw, raw, round(n * Q), lo, hi) / Q
             assert abs(got - _expected(p, table, n, lam)) < 1e-5, (n, table is p.accel_line_v)
 
 
