@@ -291,6 +291,8 @@ class Ecu:
             adapt = speed_ok
             if p.freeze_on and (s.owner != OWNER_SPEED or s.v_saturated):
                 adapt = 0
+            if p.adapt_band_q24 and (dn > p.adapt_band_q24 or dn < -p.adapt_band_q24):
+                adapt = 0  # off the trim speed the fast model no longer holds
             if speed_ok and s.hist_fill > m + 1 and s.speed_seen > 2 * m + 1:
                 estimator_step(
                     s,

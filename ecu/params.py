@@ -98,6 +98,10 @@ class EcuParams:
     speed_noise_rpm: float = 3.0  # speed sensor noise (1 sigma); sizes the dead zone
     dead_zone_sigmas: float = 3.0
     freeze_on: bool = True  # no adaptation while a limiter owns the command or V saturates
+    # no adaptation further than this from the trim speed (0: everywhere), where the fast model,
+    # linearised at trim, no longer holds: at 55 %N Lambda-hat would fall to a quarter of
+    # Lambda_c within a second, carrying the model's error rather than the pump's
+    adapt_band_pct: float = 25.0
     # the pump's effectiveness scales the whole fuel path: fuel goes with Lambda-hat times the
     # absolute pump voltage, so a changed Lambda-hat moves the trim voltage (a bias
     # (Lambda-hat - lambda_commissioned) (trim_v - pump_dead_v) in eq. 4.7, cancelled by the
@@ -232,6 +236,7 @@ def _doc_common(**kw: object) -> EcuParams:
         lambda_floor_on=False,
         dead_zone_on=False,
         freeze_on=False,
+        adapt_band_pct=0.0,
         pump_scaling_on=False,
         p12=0.0,
         limiters_on=False,
@@ -379,6 +384,8 @@ def validate(p: EcuParams) -> None:
     _check(p.reading in READINGS, "reading", p.reading, f"one of {READINGS}")
     _check(0.0 < p.trim_n_pct < 110.0, "trim_n_pct", p.trim_n_pct, "must be in (0, 110)")
     _check(p.v_min <= p.trim_v <= p.v_max, "trim_v", p.trim_v, "must lie in [v_min, v_max]")
+    band = p.adapt_band_pct
+    _check(0.0 <= band <= 60.0, "adapt_band_pct", band, "must be in [0, 60]")
     _check(p.v_min <= p.entry_v <= p.v_max, "entry_v", p.entry_v, "must lie in [v_min, v_max]")
     a21, a22 = p.am_row2
     _check(a21 < 0.0 and a22 < 0.0, "am_row2", p.am_row2, "A_m must be Hurwitz (both < 0)")
@@ -521,6 +528,7 @@ class FirmwareParams:
         "init_theta_q24",
         "lambda_comm_q24", "health_alarm_pm", "rate_half_window", "rate_den",
         "lambda_floor_on", "lambda_floor_q24", "dead_zone_on", "dead_zone_q24", "freeze_on",
+        "adapt_band_q24",
         "p12_ratio_q24", "pump_scaling_on", "th_per_lam1_q28", "th_per_lam2_q28",
         "pump_v0_q24", "lam_comm_v0_q16", "g_b_q28",
         "ref_am21_q24", "ref_am22_q24", "ref_bm2_q24",
@@ -654,6 +662,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         dead_zone_on=int(p.dead_zone_on),
         dead_zone_q24=_q(p.dead_zone_sigmas * sigma_rate, Q24, "speed_noise_rpm"),
         freeze_on=int(p.freeze_on),
+        adapt_band_q24=_q(p.adapt_band_pct, Q24, "adapt_band_pct"),
         p12_ratio_q24=_q(p.p12 / p.p22, Q24, "p12"),
         pump_scaling_on=int(p.pump_scaling_on),
         th_per_lam1_q28=_q(p.init_theta_row2[0] / p.lambda_commissioned, Q28, "init_theta_row2"),

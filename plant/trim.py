@@ -149,16 +149,32 @@ def _walk_to(
         g, s = g + step, nxt
         if not 0.0 < g + step < 0.05:
             raise ValueError(f"no steady state {what} below 50 g/s")
-    lo, hi, x0 = (g, g + step, s.x) if step > 0.0 else (g + step, g, nxt.x)
-    states = {lo: s if step > 0.0 else nxt}
+    lo, hi = sorted((g, g + step))
+    states = {g: s, g + step: nxt}  # the bracket's ends
 
     def at(g: float) -> SteadyState:
         if g not in states:  # (a start: steady to 0.01 %N/s where the maps' kinks stop Newton)
-            states[g] = solve_steady(model, g, x0=x0, settle_s=5.0, tolerance=START_TOLERANCE)
+            for end in (lo, hi):  # settled from either end of the bracket
+                try:
+                    states[g] = solve_steady(
+                        model, g, x0=states[end].x, settle_s=5.0, tolerance=START_TOLERANCE
+                    )
+                    break
+                except (ValueError, RuntimeError):
+                    continue
+            else:
+                raise _Unsettled
         return states[g]
 
-    root = _illinois(lambda g: f(at(g)), lo, hi)
+    try:
+        root = _illinois(lambda g: f(at(g)), lo, hi)
+    except _Unsettled:  # a point inside the bracket settled from neither end: its nearer end
+        root = min((lo, hi), key=lambda g: abs(f(states[g])))
     return root, at(root)
+
+
+class _Unsettled(Exception):
+    """No steady state settled at a fuel flow inside a bracket of two steady ones."""
 
 
 def _illinois(f, a: float, b: float, xtol: float = 1e-12, iterations: int = 60) -> float:  # noqa: ANN001

@@ -815,6 +815,9 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         if (p->freeze_on && (s->owner != OWNER_SPEED || s->v_saturated)) {
             adapt = 0;
         }
+        if (p->adapt_band_q24 && (dn > p->adapt_band_q24 || dn < -p->adapt_band_q24)) {
+            adapt = 0; /* off the trim speed the fast model no longer holds */
+        }
         if (speed_ok && s->hist_fill > m + 1 && s->speed_seen > 2 * m + 1) {
             estimator_step(e, dn_q24(e, m + 1), rate_q24(e, m + 1), dn_q24(e, m), rate_q24(e, m),
                            s->u_hist_q24[ring(s->hist_idx - m - 1)], adapt);

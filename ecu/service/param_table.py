@@ -83,6 +83,7 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("accel_max_pct_s", "%N/s", Q24, 1.0, 50.0, True),
     _s("decel_max_pct_s", "%N/s", Q24, 1.0, 60.0, True),
     _s("pump_health_alarm", "-", Q24, 0.1, 0.99, True),
+    _s("adapt_band_pct", "%N", Q24, 0.0, 60.0, True),
     # unsafe while the engine runs: trim point, protection levels, actuator range, model
     _s("trim_n_pct", "%N", Q24, 50.0, 100.0, False),
     _s("trim_v", "V", Q24, 1.0, 25.0, False),

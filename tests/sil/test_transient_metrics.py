@@ -117,3 +117,22 @@ def test_chop_reports_its_transient(tmp_path):
     assert 0.5 < summary["thrust_rise_s"] < 7.0  # the fall to 95 % of the way to idle thrust
     assert summary["flameouts"] == 0
     assert summary["min_speed_pct"] > 40.0
+
+
+@pytest.mark.parametrize(("band", "moves"), [(25.0, False), (0.0, True)])
+def test_no_adaptation_off_the_trim_speed(tmp_path, band, moves):
+    """At idle, 35 %N under the trim, the fast model does not hold: within adapt_band_pct the
+    estimator leaves Lambda-hat where it was; with the band off it drags it away in a second."""
+    from sil import scenario
+
+    text = (scenario.SCENARIO_DIR / "accel-idle-to-max.toml").read_text()
+    text = text.replace('kind = "mrac"', 'kind = "pi"').replace("duration_s = 12", "duration_s = 1")
+    text = text.replace("params = { ", f"params = {{ adapt_band_pct = {band}, ")
+    path = tmp_path / "idle.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    args = ["run", str(path), "--mode", "inproc", "--ecu-impl", "c", "--out", str(out)]
+    assert main([*args, "--no-plots"]) == 0
+    lam = metrics.load_trace(out / "trace.csv")["Est_Lambda"]
+    lam = lam[np.isfinite(lam)]
+    assert (abs(lam[-1] - lam[0]) > 0.1 * abs(lam[0])) == moves
