@@ -6,6 +6,7 @@ and polishing with Newton's method on dx/dt = 0 in scaled variables.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -123,9 +124,7 @@ START_TOLERANCE = 1e-4  # scaled rates of a start state: N drifts by under 0.01 
 
 
 def _walk_to(
-    model: EngineModel,
-    f,  # noqa: ANN001
-    what: str,
+    model: EngineModel, f: Callable[[SteadyState], float], what: str
 ) -> tuple[float, SteadyState]:
     """Root in the fuel flow of f(steady state), which rises with fuel along the running line;
     where f turns back before its root on the way down, or the line ends (to FUEL_STEP_KG_S),
@@ -177,7 +176,9 @@ class _Unsettled(Exception):
     """No steady state settled at a fuel flow inside a bracket of two steady ones."""
 
 
-def _illinois(f, a: float, b: float, xtol: float = 1e-12, iterations: int = 60) -> float:  # noqa: ANN001
+def _illinois(
+    f: Callable[[float], float], a: float, b: float, xtol: float = 1e-12, iterations: int = 60
+) -> float:
     """Root of f in [a, b], f(a) < 0 < f(b): regula falsi with the Illinois halving (scipy's
     root finders are not used here: the plant node starts without scipy.linalg)."""
     fa, fb = f(a), f(b)

@@ -44,9 +44,10 @@ def record_scenario(name: str, scenario_text: str, ticks: int) -> Golden:
         s = scenario.load(scenario_text)
     s = dataclasses.replace(s, duration_s=ticks / s.ecu_rate_hz)
     plant = runner.build_plant(s, s.seed)
-    params = compile_params(runner.ecu_params(s, plant))
+    ecu_params = runner.ecu_params(s, plant)
+    params = compile_params(ecu_params)
     open_loop = s.controller.kind == "open_loop"
-    trim_value = plant.trim_pump_voltage if open_loop else runner.ecu_params(s, plant).trim_n_pct
+    trim_value = plant.trim_pump_voltage if open_loop else ecu_params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
     ecu = RecordingEcu(params)
     codec = Codec()

@@ -130,10 +130,9 @@ def transient(
     trace: dict[str, np.ndarray], egt_limit_k: float, surge_margin: SurgeMargin
 ) -> dict[str, float | int | None]:
     """Transient figures of a run: its largest demand step (signed, %N) and the thrust's rise
-    (or fall) after it, EGT overshoot over the limit
-    (the thermocouple's reading, 0 when under), the least surge margin (%, from the true P3 and
-    speed), the flameouts (rising edges of the plant's flag) and the least true speed after the
-    step (the whole run without one)."""
+    (or fall) after it, the EGT's overshoot over the limit (0 when under), the least surge margin
+    (%, from the true P3 and speed), the flameouts (rising edges of the plant's flag) and the
+    least true speed after the step (the whole run without one)."""
     egt = trace["EGT"]
     ok = np.isfinite(trace["P3"]) & np.isfinite(trace["speed_true"])
     margin = surge_margin(trace["P3"][ok], trace["speed_true"][ok])

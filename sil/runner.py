@@ -184,13 +184,11 @@ def ecu_overrides(s: Scenario, trim_v: float, entry_v: float) -> dict[str, objec
 
 def ecu_params(s: Scenario, plant: Plant) -> EcuParams:
     """The ECU's parameters for a run of scenario s on this plant."""
-    name = s.controller.preset or "default"
-    overrides = ecu_overrides(s, ecu_trim_voltage(s, plant), plant.trim_pump_voltage)
-    params = preset(name, **{**overrides, "entry_v": ecu_trim_voltage(s, plant)})
+    trim_v = ecu_trim_voltage(s, plant)
+    params = preset(s.controller.preset or "default", **ecu_overrides(s, trim_v, trim_v))
     # the plant may hold its start beyond the ECU's range (a weak pump at maximum speed): the ECU
     # takes over at the nearest voltage it may command
-    overrides["entry_v"] = min(max(plant.trim_pump_voltage, params.v_min), params.v_max)
-    return preset(name, **overrides)
+    return replace(params, entry_v=min(max(plant.trim_pump_voltage, params.v_min), params.v_max))
 
 
 def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:

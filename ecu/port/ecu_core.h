@@ -77,12 +77,12 @@ enum {
 /* ecu.params.FirmwareParams, in its order; init_theta_q24 holds the ECU_N_THETA start values */
 #define ECU_PARAM_FIELDS(X, A) \
     X(rate_hz) X(controller) X(dt_q24) X(n_max_rpm) X(rpm_to_q24_k) X(trim_n_q24) \
-    X(trim_v_q24) X(entry_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) X(idm21_q24) \
-    X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) X(g_th1_q28) \
-    X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
+    X(trim_v_q24) X(entry_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) \
+    X(idm21_q24) X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) \
+    X(g_th1_q28) X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
     X(rate_half_window) X(rate_den) X(lambda_floor_on) X(lambda_floor_q24) X(dead_zone_on) \
-    X(dead_zone_q24) X(freeze_on) X(adapt_band_q24) X(p12_ratio_q24) X(pump_scaling_on) X(th_per_lam1_q28) \
-    X(th_per_lam2_q28) X(pump_v0_q24) X(lam_comm_v0_q16) X(g_b_q28) \
+    X(dead_zone_q24) X(freeze_on) X(adapt_band_q24) X(p12_ratio_q24) X(pump_scaling_on) \
+    X(th_per_lam1_q28) X(th_per_lam2_q28) X(pump_v0_q24) X(lam_comm_v0_q16) X(g_b_q28) \
     X(ref_am21_q24) X(ref_am22_q24) X(ref_bm2_q24) \
     X(refm11_q24) X(refm12_q24) X(refm21_q24) X(refm22_q24) X(refh1_q24) X(refh2_q24) \
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \

@@ -62,8 +62,6 @@ def transient(r: CaseRun) -> dict:
     margin = metrics.surge_margin_at(
         p.ambient_temperature_K, p.ambient_pressure_Pa, p.flight_speed_m_s
     )
-    if p.model != "aero":  # the fast plant has no compressor
-        margin = lambda p3, n: np.full(len(p3), np.nan)  # noqa: E731
     out = metrics.transient(trace, r.params.egt_limit_k, margin)
     return {k: (math.nan if v is None else v) for k, v in out.items()}
 
