@@ -19,6 +19,7 @@ ESTIMATES = {
     "Kr": ("Gain_Kr",),
     "Kf": ("Gain_Kf1", "Gain_Kf2"),
 }
+LOOP_OWNER_SPEED = 0  # ecu.limiters.OWNER_SPEED: the control law owns the pump command
 LOOP_OWNER_EGT = 1
 STEP_MIN_PCT = 1.0  # a demand change at least this large is a step
 SETTLED_S = 1.0  # the final thrust of a step: its mean over this long before the next change
@@ -69,6 +70,14 @@ def tracking_rms_pct(trace: dict[str, np.ndarray], t0: float = 0.0, t1: float = 
     return _rms(trace["speed_true"][window] - trace["ReferenceSpeed"][window])
 
 
+def speed_loop_rms_pct(trace: dict[str, np.ndarray]) -> float:
+    """Tracking RMS over the ticks where the control law owned the pump command: the tracking
+    itself, without the time a protection (EGT, acceleration, overspeed, floor) held the engine
+    off its reference."""
+    free = trace["LoopOwner"] == LOOP_OWNER_SPEED
+    return _rms(trace["speed_true"][free] - trace["ReferenceSpeed"][free])
+
+
 def fault_events(trace: dict[str, np.ndarray], bit_names: dict[int, str]) -> list[dict]:
     """Each fault bit's rising edges with their times."""
     words = np.nan_to_num(trace["FaultWord"]).astype(np.int64)
@@ -93,6 +102,7 @@ def summarize(trace: dict[str, np.ndarray], period_s: float, bit_names: dict[int
     owner = trace["LoopOwner"]
     return {
         "tracking_rms_pct": tracking_rms_pct(trace),
+        "tracking_speed_loop_rms_pct": speed_loop_rms_pct(trace),
         "max_egt_K": float(np.nanmax(egt)) if np.isfinite(egt).any() else math.nan,
         "egt_limit_time_s": float(np.sum(owner == LOOP_OWNER_EGT) * period_s),
         "faults": fault_events(trace, bit_names),

@@ -27,8 +27,9 @@ from sil.campaign.spec import Campaign, Case, Invariants
 from sil.parent_death import die_with_parent
 
 FIGURES = (
-    "ticks", "wall_s", "tracking_rms_pct", "tracking_mean_pct", "max_n_pct", "max_egt_K",
-    "max_egt_time_s", "egt_limit_time_s", "pump_v_min", "pump_v_max", "final_mode", "fault_bits",
+    "ticks", "wall_s", "tracking_rms_pct", "tracking_speed_loop_rms_pct", "tracking_mean_pct",
+    "max_n_pct", "max_egt_K", "max_egt_time_s", "egt_limit_time_s", "protection_time_s",
+    "pump_v_min", "pump_v_max", "final_mode", "fault_bits",
     "stalls", "step_pct", "thrust_rise_s", "egt_overshoot_K", "min_surge_margin_pct",
     "flameouts", "min_speed_pct",
 )  # fmt: skip

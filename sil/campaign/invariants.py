@@ -34,7 +34,7 @@ from sil.campaign.case import CaseRun
 from sil.campaign.spec import Invariants
 
 BIT = {name: bit for bit, name in ecu_faults.NAMES.items()}
-OWNER_EGT = 1
+OWNER_SPEED, OWNER_EGT = metrics.LOOP_OWNER_SPEED, metrics.LOOP_OWNER_EGT
 
 
 def _rms(x: np.ndarray) -> float:
@@ -72,15 +72,20 @@ def figures(r: CaseRun) -> dict:
     v, words = r.column("pump_v"), r.column("fault_word")
     seen = int(np.bitwise_or.reduce(words)) if words.size else 0
     error = r.column("speed_pct") - r.column("ref_pct")  # speed minus reference model, %N
+    owner = r.column("owner")
+    running = mode == ecu_modes.RUN
     return {
         "ticks": p.tick,
         "wall_s": r.wall_s,
         "tracking_rms_pct": _rms(error),
+        "tracking_speed_loop_rms_pct": _rms(error[owner == OWNER_SPEED]),
         "tracking_mean_pct": float(np.mean(error[np.isfinite(error)])) if error.size else math.nan,
         "max_n_pct": float(n.max()) if n.size else math.nan,
         "max_egt_K": float(egt.max()) if egt.size else math.nan,
         "max_egt_time_s": float(egt.argmax()) / r.scenario.ecu_rate_hz if egt.size else math.nan,
-        "egt_limit_time_s": float(np.sum(r.column("owner") == OWNER_EGT)) / r.scenario.ecu_rate_hz,
+        "egt_limit_time_s": float(np.sum(owner == OWNER_EGT)) / r.scenario.ecu_rate_hz,
+        "protection_time_s": float(np.sum(running & (owner != OWNER_SPEED)))
+        / r.scenario.ecu_rate_hz,
         "pump_v_min": float(v.min()) if v.size else math.nan,
         "pump_v_max": float(v.max()) if v.size else math.nan,
         "final_mode": ecu_modes.NAMES[int(mode[-1])] if mode.size else "",

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 CONTROLLER = "controller.kind"
+HELD_S = 1.0  # a protection owning the fuel this long holds the engine off its demand (a step's
+# brush with the acceleration line lasts tenths of a second)
 
 
 def load(path: Path) -> list[dict]:
@@ -58,9 +60,9 @@ def tracking(rows: list[dict]) -> dict[str, dict]:
     for name, rs in sorted(groups.items()):
         engines = [r for r in rs if r["sample"] != "-1"]
         varied = np.array([_float(r["tracking_rms_pct"]) for r in engines])
-        # engines on which the EGT limiter owned the fuel at some time: held below the demand
+        # engines a protection held off the demand: it owned the fuel for HELD_S or more
         limited = np.array(
-            [_float(r.get("egt_limit_time_s", "")) > 0.0 for r in engines], dtype=bool
+            [_float(r.get("protection_time_s", "")) >= HELD_S for r in engines], dtype=bool
         )
         free = varied[~limited & np.isfinite(varied)]
         limited &= np.isfinite(varied)
@@ -295,8 +297,9 @@ def _targets(track: dict) -> list[str]:
         n, held = mrac["runs"], mrac["limited"]
         free = mrac["p95_free"] / mrac["nominal"] if mrac["nominal"] else math.nan
         out.append(
-            f"  On {held} of the {n} engines the EGT limiter owned the fuel at some time, holding"
-            " the engine below the demand (the protection, not the tracking, sets their error);"
+            f"  On {held} of the {n} engines a protection (EGT, acceleration, topping, floor)"
+            f" owned the fuel for {HELD_S:g} s or more, holding the engine off the demand (the"
+            " protection, not the tracking, sets their error);"
             f" over the other {n - held} the 95th percentile is {_fmt(mrac['p95_free'])} %N,"
             f" {_fmt(free, '.2f')}x the nominal's."
         )

@@ -22,6 +22,7 @@ FIELDS = (
     "sim_time_s",
     "realtime_factor",
     "tracking_rms_pct",
+    "tracking_speed_loop_rms_pct",
     "max_egt_K",
     "egt_limit_time_s",
     "missed_ticks",

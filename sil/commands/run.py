@@ -92,6 +92,8 @@ def print_summary(summary: dict, out: Path) -> None:
         "bus_load_pct",
         "missed_ticks",
         "tracking_rms_pct",
+        "tracking_speed_loop_rms_pct",
+        "tracking_speed_loop_rms_pct",
         "max_egt_K",
         "egt_limit_time_s",
     )
