@@ -167,10 +167,14 @@ class EcuParams:
     flameout_time_s: float = 3.0
     v_min: float = 1.0
     v_max: float = 20.0  # within 95 % duty of a sagging 6S pack (22.2 V nominal)
-    v_slew_v_s: float = 20.0
+    # the fastest the pump command may move: at 20 V/s the gas of a hot engine with a strong pump
+    # overshoots its limit by 70 K within 0.15 s of a step, before the EGT loop's probe can show
+    # it; at 12 V/s its EGT loop holds it (engine-variation campaign)
+    v_slew_v_s: float = 12.0
     # fuel schedules against corrected speed N / sqrt(inlet_temp_k / 288.15), at SCHED_N0_PCT +
     # k SCHED_STEP_PCT, as the pump voltage of a commissioned pump (`sil schedules` on our plant:
-    # EGT 1280 K, surge margin 10 %, lean blow-out margin 30 %); with pump_scaling_on the ECU
+    # EGT 1280 K, surge margin 10 %, lean blow-out margin 30 %, for every engine within +-5 %
+    # health); with pump_scaling_on the ECU
     # moves them with its pump: V_d + (V - V_d) Lambda_c / Lambda-hat, the same fuel, Lambda-hat
     # taken within schedule_pump_range of Lambda_c (an estimate in a transient must not raise the
     # floor into an over-temperature). Within the limit loops (limiters_on): the acceleration
@@ -178,10 +182,10 @@ class EcuParams:
     fuel_schedules_on: bool = True
     schedule_pump_range: tuple[float, float] = (0.7, 1.3)
     accel_line_v: tuple[float, ...] = (
-        6.17, 7.34, 8.29, 9.29, 10.31, 11.37, 12.46, 13.57, 14.7, 15.85, 17.01, 18.18,
+        5.34, 6.91, 7.96, 8.9, 9.88, 10.88, 11.91, 12.96, 14.03, 15.28, 16.41, 17.96,
     )  # fmt: skip
     decel_floor_v: tuple[float, ...] = (
-        2.78, 2.99, 3.22, 3.46, 3.71, 3.97, 4.25, 4.54, 4.83, 5.14, 5.46, 5.78,
+        2.83, 3.06, 3.3, 3.55, 3.82, 4.1, 4.39, 4.69, 5.0, 5.32, 5.65, 5.99,
     )  # fmt: skip
     inlet_temp_k: float = 288.15  # no inlet sensor: the day's temperature, set by the operator
 

@@ -15,14 +15,24 @@ sits on its frozen-speed state while the speed lags):
 
 Voltages are what the plant's pump needs to deliver that fuel against the frozen state's P3. The
 shaft's acceleration on each line is reported too: what the schedule lets the engine do.
+
+No two engines are alike, and the ECU's schedules must hold for every engine it may be fitted to:
+`fleet_schedule` takes the lowest acceleration line and the highest deceleration floor over the
+nominal engine and every corner of a health spread (each of the compressor's and the turbine's
+efficiency and flow scalars at 1 +- spread). A corner that cannot run at a speed within the limits
+is left out there (its EGT loop holds it below that speed). The fleet line keeps at least
+KEEP_ACCEL of the nominal engine's own fuel margin over its steady line, so that the nominal
+engine still accelerates at every speed (near full speed a hot corner's line falls under its
+steady line).
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +50,8 @@ SURGE_MARGIN = 0.10  # surge pressure ratio / working pressure ratio - 1, at lea
 LEAN_MARGIN = 0.30  # fuel-air ratio at least (1 + margin) times the lean limit
 RICH_FAR = 0.05  # fuel-air ratio the burner must stay under
 MAX_FUEL_FACTOR = 4.0  # the acceleration line is searched up to this times the steady fuel
+HEALTH_SPREAD = 0.05  # the fleet: every corner of +-5 % on the four health scalars
+KEEP_ACCEL = 0.5  # the fleet line keeps at least this of the nominal's fuel margin over steady
 
 
 class ScheduleError(ValueError):
@@ -220,6 +232,92 @@ def schedule(
     return out
 
 
+def health_corners(model: EngineModel, spread: float) -> list[EngineModel]:
+    """The engine at each corner of the health spread (efficiency and flow scalars of the
+    compressor and the turbine at 1 +- spread)."""
+    levels = (1.0 - spread, 1.0 + spread)
+    return [
+        model._replace(
+            params=model.params._replace(
+                comp_eff_scale=ce, comp_flow_scale=cf, turb_eff_scale=te, turb_flow_scale=tf
+            )
+        )
+        for ce, cf, te, tf in itertools.product(levels, repeat=4)
+    ]
+
+
+def kept_point(model: EngineModel, point: SchedulePoint) -> SchedulePoint:
+    """The point with its acceleration line lowered to KEEP_ACCEL of its fuel margin over the
+    steady line, with the frozen-speed figures there."""
+    g_ss, steady = steady_at_speed(model, point.n_pct, running_line(model))
+    g = g_ss + KEEP_ACCEL * (point.accel_fuel_kg_s - g_ss)
+    x = frozen_state(model, steady.x, g)
+    return replace(
+        point,
+        accel_fuel_kg_s=g,
+        accel_v=pump_voltage_for(model, x, g),
+        accel_limited_by="keep",
+        accel_egt_k=_stations(model, x, g).t5,
+        accel_surge_margin=surge_margin(model, x),
+        accel_rate_pct_s=float(_rates(model, x, g)[3]),
+    )
+
+
+def fleet_point(
+    model: EngineModel, nominal: SchedulePoint, corners: list[SchedulePoint]
+) -> SchedulePoint:
+    """The nominal point with the lowest acceleration line and the highest deceleration floor of
+    the nominal engine and its corners (their other acceleration and deceleration figures with
+    them); the line no lower than the nominal's kept point (kept_point)."""
+    acc = min([nominal, *corners], key=lambda p: p.accel_v)
+    dec = max([nominal, *corners], key=lambda p: p.decel_v)
+    if acc is not nominal:
+        kept = kept_point(model, nominal)
+        acc = kept if kept.accel_v > acc.accel_v else acc
+    return replace(
+        nominal,
+        accel_fuel_kg_s=acc.accel_fuel_kg_s,
+        accel_v=acc.accel_v,
+        accel_limited_by=acc.accel_limited_by,
+        accel_egt_k=acc.accel_egt_k,
+        accel_surge_margin=acc.accel_surge_margin,
+        accel_rate_pct_s=acc.accel_rate_pct_s,
+        decel_fuel_kg_s=dec.decel_fuel_kg_s,
+        decel_v=dec.decel_v,
+        decel_far=dec.decel_far,
+        decel_rate_pct_s=dec.decel_rate_pct_s,
+    )
+
+
+def fleet_schedule(
+    model: EngineModel,
+    speeds_pct: tuple[float, ...] = SPEEDS_PCT,
+    spread: float = HEALTH_SPREAD,
+    egt_limit_k: float = EGT_LIMIT_K,
+    surge_margin_min: float = SURGE_MARGIN,
+    lean_margin: float = LEAN_MARGIN,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[SchedulePoint]:
+    """The schedule that holds for the nominal engine and every corner of the health spread
+    (the nominal engine's alone with spread 0)."""
+    limits = (egt_limit_k, surge_margin_min, lean_margin)
+    engines = health_corners(model, spread) if spread > 0.0 else []
+    nominal = schedule(model, speeds_pct, *limits)
+    at_speed: dict[float, list[SchedulePoint]] = {p.n_pct: [] for p in nominal}
+    for k, corner in enumerate(engines):
+        line = running_line(corner)
+        for n in at_speed:
+            if n < line["N_pct"][0]:
+                continue  # slower than this engine runs
+            try:
+                at_speed[n].append(schedule_point(corner, n, line, *limits))
+            except ScheduleError:
+                continue  # over a limit in steady state there: its EGT loop holds it lower
+        if progress is not None:
+            progress(k + 1, len(engines))
+    return [fleet_point(model, p, at_speed[p.n_pct]) for p in nominal]
+
+
 def write_csv(points: list[SchedulePoint], path: Path) -> None:
     names = list(asdict(points[0]))
     with path.open("w", newline="") as f:
@@ -271,9 +369,11 @@ def plot(points: list[SchedulePoint], settings: dict, path: Path) -> None:
     ax[2].set_ylabel("shaft acceleration at frozen speed [%N/s]")
     ax[2].grid(True)
     ax[2].legend()
+    fleet = settings.get("health_spread", 0.0)
     fig.suptitle(
         f"Fuel schedules: EGT <= {settings['egt_limit_k']:g} K, surge margin >= "
         f"{settings['surge_margin']:.0%}, lean blow-out margin {settings['lean_margin']:.0%}"
+        + (f", for every engine within +-{fleet:.0%} health" if fleet else "")
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -41,10 +41,17 @@ DEFAULT_FUEL_KG_S = np.round(np.arange(0.0015, 0.0125001, 0.0005), 6)
 def running_line(
     model: EngineModel, fuel_kg_s: np.ndarray = DEFAULT_FUEL_KG_S
 ) -> dict[str, np.ndarray]:
-    """Steady states at each fuel flow, continued outwards from the eq. 2.32 trim."""
+    """Steady states at each fuel flow, continued outwards from the eq. 2.32 trim; downwards as
+    far as the engine keeps running (a weak engine's line ends at its slowest steady state)."""
     fuel = np.sort(np.asarray(fuel_kg_s, dtype=float))
     trim = solve_steady(model, TRIM_FUEL_KG_S)
-    down = steady_line(model, fuel[fuel < TRIM_FUEL_KG_S][::-1], start=trim)[::-1]
+    down: list[SteadyState] = []
+    for g in fuel[fuel < TRIM_FUEL_KG_S][::-1]:
+        try:
+            down += steady_line(model, np.array([g]), start=down[-1] if down else trim)
+        except ValueError:  # no running engine at this fuel flow, nor at any lower
+            break
+    down.reverse()
     up = steady_line(model, fuel[fuel >= TRIM_FUEL_KG_S], start=trim)
     rows = [_row(model, s) for s in down + up]
     return {c: np.array([r[i] for r in rows]) for i, c in enumerate(COLUMNS)}

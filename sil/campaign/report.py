@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 CONTROLLER = "controller.kind"
-HELD_S = 1.0  # a protection owning the fuel this long holds the engine off its demand (a step's
-# brush with the acceleration line lasts tenths of a second)
+HELD_S = 5.0  # a protection owning the fuel this long in a run holds the engine off its demand
+# (each step's brush with the acceleration line or a rate loop lasts tenths of a second)
 
 
 def load(path: Path) -> list[dict]:

@@ -63,6 +63,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--lean-margin", type=_fraction, default=s.LEAN_MARGIN, metavar="F",
         help=f"lean blow-out margin of the deceleration floor (default {s.LEAN_MARGIN:g})",
     )  # fmt: skip
+    parser.add_argument(
+        "--health-spread", type=_fraction, default=s.HEALTH_SPREAD, metavar="F",
+        help="the engines to cover: the nominal and every corner of 1 +- F on the compressor's"
+        f" and turbine's efficiency and flow (default {s.HEALTH_SPREAD:g}; 0: the nominal alone)",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="print the table as JSON")
 
 
@@ -81,15 +86,20 @@ def run(args: argparse.Namespace) -> int:
         "surge_margin": args.surge_margin,
         "lean_margin": args.lean_margin,
         "far_lean": model.params.far_lean,
+        "health_spread": args.health_spread,
+        "keep_accel": s.KEEP_ACCEL,
     }
 
     def progress(done: int, total: int) -> None:
-        print(f"\rsil schedules: {done}/{total} speeds", end="", file=sys.stderr, flush=True)
+        print(
+            f"\rsil schedules: {done}/{total} engine corners", end="", file=sys.stderr, flush=True
+        )
 
     try:
-        points = s.schedule(
-            model, args.speeds, args.egt_limit, args.surge_margin, args.lean_margin, progress
-        )
+        points = s.fleet_schedule(
+            model, args.speeds, args.health_spread, args.egt_limit, args.surge_margin,
+            args.lean_margin, progress,
+        )  # fmt: skip
     except s.ScheduleError as exc:
         print(f"\nsil schedules: {exc}", file=sys.stderr)
         return 1

@@ -23,8 +23,7 @@ from ecu.params import (
 )
 from ecu.state import LAM, EcuState
 from plant.aerothermal import make_model
-from plant.schedules import schedule_point
-from plant.steady_line import running_line
+from plant.schedules import fleet_schedule
 
 Q = float(1 << 24)
 SPEEDS = SCHED_N0_PCT + SCHED_STEP_PCT * np.arange(SCHED_POINTS)
@@ -42,12 +41,11 @@ def _expected(p: EcuParams, table: tuple[float, ...], n: float, lam: float) -> f
     return p.pump_dead_v + (v - p.pump_dead_v) * p.lambda_commissioned / min(max(lam, lo), hi)
 
 
-def test_defaults_are_what_the_plant_allows() -> None:
+def test_defaults_are_what_the_plant_allows_its_fleet() -> None:
     p = EcuParams()
-    model = make_model()
-    line = running_line(model)
-    for k in (1, 6, 11):  # 50, 75 and 100 %N
-        pt = schedule_point(model, float(SPEEDS[k]), line, egt_limit_k=p.egt_limit_k)
+    speeds = tuple(float(SPEEDS[k]) for k in (1, 6, 11))  # 50, 75 and 100 %N
+    fleet = fleet_schedule(make_model(), speeds, egt_limit_k=p.egt_limit_k)
+    for k, pt in zip((1, 6, 11), fleet, strict=True):
         assert abs(pt.accel_v - p.accel_line_v[k]) < 0.006
         assert abs(pt.decel_v - p.decel_floor_v[k]) < 0.006
 

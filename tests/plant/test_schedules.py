@@ -11,9 +11,15 @@ import pytest
 from plant.aerothermal import make_model
 from plant.engine import engine_rates, pump_fuel_flow, stations
 from plant.schedules import (
+    HEALTH_SPREAD,
+    KEEP_ACCEL,
     LEAN_MARGIN,
     SURGE_MARGIN,
+    ScheduleError,
+    fleet_schedule,
     frozen_state,
+    health_corners,
+    schedule,
     schedule_point,
     steady_at_speed,
 )
@@ -102,12 +108,14 @@ def test_lines_are_ordered_and_rise_with_speed(model_and_points):
 
 def test_command_writes_its_table_and_refuses_bad_options(tmp_path, capsys):
     out = tmp_path / "sched"
-    assert main(["schedules", "--speeds", "70,95", "--out", str(out), "--json"]) == 0
+    argv = ["schedules", "--speeds", "70,95", "--health-spread", "0", "--out", str(out), "--json"]
+    assert main(argv) == 0
     data = json.loads(capsys.readouterr().out)
     assert [p["n_pct"] for p in data["points"]] == [70.0, 95.0]
-    assert data["settings"]["egt_limit_k"] == 1280.0
+    assert data["settings"]["egt_limit_k"] == 1280.0 and data["settings"]["health_spread"] == 0
     assert {f.name for f in out.iterdir()} == {"schedules.csv", "schedules.json", "schedules.png"}
-    for bad in (["--surge-margin", "1.5"], ["--speeds", "20"], ["--egt-limit", "nan"]):
+    bads = (["--surge-margin", "1.5"], ["--speeds", "20"], ["--egt-limit", "nan"])
+    for bad in (*bads, ["--health-spread", "-0.1"]):
         with pytest.raises(SystemExit) as exc:
             main(["schedules", "--out", str(out), *bad])
         assert exc.value.code == 2
@@ -116,3 +124,30 @@ def test_command_writes_its_table_and_refuses_bad_options(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["schedules", "--speeds", "70", "--out", str(blocker / "sub")])
     assert exc.value.code == 2
+
+
+def test_fleet_line_holds_for_every_corner_that_runs_and_keeps_the_nominal_accelerating():
+    model = make_model()
+    speeds = (70.0, 100.0)
+    fleet = fleet_schedule(model, speeds)
+    nominal = schedule(model, speeds)
+    corners = health_corners(model, HEALTH_SPREAD)
+    assert len(corners) == 16
+    for corner in corners:
+        line = running_line(corner)
+        for n, pt in zip(speeds, fleet, strict=True):
+            try:
+                own = schedule_point(corner, n, line)
+            except ScheduleError:
+                continue  # over a limit in steady state there: its EGT loop holds it lower
+            assert pt.accel_v <= own.accel_v + 1e-9 or pt.accel_limited_by == "keep"
+            assert pt.decel_v >= own.decel_v - 1e-9
+    for pt, nom in zip(fleet, nominal, strict=True):
+        assert pt.steady_v == nom.steady_v
+        kept = nom.steady_v + KEEP_ACCEL * (nom.accel_v - nom.steady_v)
+        assert kept - 0.05 < pt.accel_v <= nom.accel_v  # (kept in fuel, about in voltage)
+        assert pt.decel_v >= nom.decel_v
+    # at 70 %N a hot corner sets the line; at 100 %N the nominal's kept margin does
+    assert fleet[0].accel_limited_by == "egt" and fleet[0].accel_v < nominal[0].accel_v - 0.3
+    assert fleet[1].accel_limited_by == "keep"
+    assert nominal[1].steady_fuel_kg_s < fleet[1].accel_fuel_kg_s < nominal[1].accel_fuel_kg_s
