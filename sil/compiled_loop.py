@@ -50,7 +50,7 @@ from plant.node import (
 from plant.periphery import OUT, OUT_FIELDS
 from protocol.lockstep import TICK_MODULO
 from sil.command_node import CommandNode
-from sil.recorder import ACTUATOR, SENSORS
+from sil.ticks import ACTUATOR, SENSORS
 
 _HERE = Path(__file__).resolve()
 # the loop links the plant's compiled functions: its cached machine code goes with their sources
