@@ -41,8 +41,8 @@ from __future__ import annotations
 
 from array import array
 
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import acc_q40, mul_q24, sat32, sub_sat
-from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
 
 R32 = 1 << 31  # adds half an LSB before a >> 32: round to nearest (ties up), not down

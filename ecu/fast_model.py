@@ -15,8 +15,8 @@ from __future__ import annotations
 from array import array
 
 from ecu.estimator import fuel_shape_q24, pump_bias_q16
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import sat32
-from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
 
 

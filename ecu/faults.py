@@ -8,8 +8,8 @@ relative to its commissioning value, alarm below a threshold.
 
 from __future__ import annotations
 
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import div_trunc
-from ecu.params import FirmwareParams
 from ecu.state import EcuState
 
 SPEED_RANGE = 1 << 0  # speed reading out of range

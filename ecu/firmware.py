@@ -24,18 +24,11 @@ from ecu import faults as F
 from ecu import modes as M
 from ecu.estimator import estimator_step
 from ecu.fast_model import observer_step
+from ecu.firmware_params import FirmwareParams, compile_params
 from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, sub_sat, take_sat_events
 from ecu.limiters import OWNER_SPEED, egt_lead_step, reset_loops, select_voltage
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
-from ecu.params import (
-    CTRL_MRAC,
-    CTRL_PI,
-    CTRL_PID,
-    RATE_BUF_LEN,
-    EcuParams,
-    FirmwareParams,
-    compile_params,
-)
+from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, RATE_BUF_LEN, EcuParams
 from ecu.pi import pi_control, pi_track
 from ecu.pid import pid_control, pid_track
 from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv

@@ -20,7 +20,7 @@ Conventions (CMSIS-DSP style, portable to C line by line):
   use a split accumulator: a Q7.24 word plus a 16-bit extension word, i.e. Q7.40 in two
   int32 words, so small increments are never lost to truncation (see :func:`acc_q40`).
 
-No float appears here; conversion from engineering units lives in :mod:`ecu.params`.
+No float appears here; conversion from engineering units lives in :mod:`ecu.firmware_params`.
 """
 
 from __future__ import annotations

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ecu.firmware import Ecu, EcuInputs, EcuOutputs
-from ecu.params import EcuParams, FirmwareParams
+from ecu.firmware_params import FirmwareParams
+from ecu.params import EcuParams
 from ecu.port.core import param_words
 from ecu.state import EcuState
 

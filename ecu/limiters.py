@@ -22,8 +22,8 @@ loop's own tracking is done by the controller (PID back-calculation; MRAC has no
 
 from __future__ import annotations
 
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import add_sat, clamp, div_trunc, sat32, sub_sat
-from ecu.params import FirmwareParams
 from ecu.state import LAM, EcuState
 from ecu.tables import interp_uniform
 

@@ -22,8 +22,8 @@ The reference model x_m' = A_m x_m + B_m r is discretised by the trapezoidal rul
 from __future__ import annotations
 
 from ecu.estimator import pump_bias_q16
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import acc_q40, add_sat, div_trunc, sat32
-from ecu.params import FirmwareParams
 from ecu.state import AP21, AP22, KB, KF1, KF2, KR, KX1, KX2, LAM, TH1, TH2, EcuState
 
 

@@ -20,7 +20,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, Ecu, EcuInputs
-from ecu.params import EcuParams, FirmwareParams
+from ecu.firmware_params import FirmwareParams
+from ecu.params import EcuParams
 from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, every_ticks
 from protocol.node import SendFn

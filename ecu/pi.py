@@ -10,8 +10,8 @@ I = u_applied - Kp e, so the loop resumes bumplessly when a limit loop lets go.
 
 from __future__ import annotations
 
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import acc_q40, sat32
-from ecu.params import FirmwareParams
 from ecu.state import PID_I, EcuState
 from ecu.tables import interp_uniform
 

@@ -8,8 +8,8 @@ the PID output equals the voltage actually applied (back-calculation with infini
 
 from __future__ import annotations
 
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import acc_q40, sat32
-from ecu.params import FirmwareParams
 from ecu.state import PID_I, EcuState
 
 

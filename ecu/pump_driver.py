@@ -7,8 +7,8 @@ compensation), within duty limits; pump current checks for a stalled or dry-runn
 from __future__ import annotations
 
 from ecu.faults import PUMP_DRY, PUMP_STALL, persist
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import clamp, div_trunc
-from ecu.params import FirmwareParams
 from ecu.state import EcuState
 
 

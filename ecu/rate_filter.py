@@ -20,8 +20,8 @@ rate_filter_bw): det(zI - A + K C) = (z - 1 + c)^3.
 from __future__ import annotations
 
 from ecu.fast_model import input_accel_q16
+from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import sat32
-from ecu.params import FirmwareParams
 from ecu.state import EcuState
 
 

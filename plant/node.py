@@ -15,9 +15,10 @@ driver's watchdog removes pump power, as a real one would; a valid frame restore
 FaultInject frames schedule faults at their FaultTick (at once when that tick has passed);
 a fault the plant cannot represent, or a value out of range, is counted and ignored.
 The node reuses its buffers: nothing it keeps grows per frame or per tick. With a plant of
-plant/periphery.py the frames of a tick are packed by one compiled call (``pack_plant_frames``:
-the codec's layout, saturation, alive counters and E2E CRC, from the plant's state array), which
-gives the bytes the codec's ``pack_raw`` gives; any other plant goes through the codec.
+plant/periphery.py the frames of a tick are packed by one compiled call (plant/frames.py:
+``pack_plant_frames``, the codec's layout, saturation, alive counters and E2E CRC, from the
+plant's state array), which gives the bytes the codec's ``pack_raw`` gives; any other plant goes
+through the codec. In lockstep the node has a compiled twin (plant/node_compiled.py).
 """
 
 from __future__ import annotations
@@ -25,17 +26,44 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from numba import njit
 
 from plant import flags as fl
-from plant.aerothermal import aero_period
-from plant.fast_plant import fast_period
 from plant.faults import Fault, FaultKind
+from plant.frames import DUE_ANALOG, DUE_TRUTH, FRAMES, frame_layout, pack_plant_frames
 from plant.interface import Plant
-from plant.jit import EXACT
-from plant.periphery import OUT, PlantBase
-from protocol.codec import Codec, MessageCodec
-from protocol.e2e import COUNTER_MODULO, E2EStatus, crc8
+from plant.node_compiled import (
+    KERNELS,
+    NF_DUTY,
+    NF_FAULT_NEXT_S,
+    NF_PERIOD,
+    NO_TICK,
+    NS_AHEAD,
+    NS_CHECK_COUNTS,
+    NS_CHECK_CRC,
+    NS_CHECK_LAST,
+    NS_CHECK_STATUS,
+    NS_EVERY_ANALOG,
+    NS_EVERY_TRUTH,
+    NS_FAULT_TICK,
+    NS_FIELDS,
+    NS_FINISHED,
+    NS_FLAGS,
+    NS_FRESH,
+    NS_KERNEL,
+    NS_LATE,
+    NS_MAX_TICKS,
+    NS_MISSED,
+    NS_NOISE_LEFT,
+    NS_PLANT_TICK,
+    NS_PUMP_ENABLED,
+    NS_REJECTED,
+    NS_TICK,
+    NS_TRIPS,
+    NS_WATCHDOG,
+)
+from plant.periphery import PlantBase
+from protocol.codec import Codec
+from protocol.e2e import E2EStatus
 from protocol.lockstep import TICK_MODULO, every_ticks
 from protocol.node import SendFn
 
@@ -66,261 +94,6 @@ DEFAULT_WATCHDOG_TICKS = 10
 
 def _clamp(x: int, lo: int, hi: int) -> int:
     return lo if x < lo else hi if x > hi else x
-
-
-# ---- compiled packing of the plant's frames ---------------------------------------------------
-# messages in the order they go out at a tick; their payloads are 8 bytes each of one buffer
-FRAMES = ("PlantTruthA", "PlantTruthB", "PlantAnalog", "PlantSensors")
-DUE_TRUTH, DUE_ANALOG = 1, 2
-MAX_FIELDS = 8
-# the int64 layout array: the CRC-8 table, then per message its alive counter, the CRC register
-# after its data ID, its number of fields and (start, mask, raw_min, raw_max) per field
-CRC_TABLE = 0
-MESSAGE = 256
-MESSAGE_SLOTS = 3 + 4 * MAX_FIELDS
-COUNTER, CRC_START, N_FIELDS, FIELDS = range(4)
-_O_TIME, _O_SPEED, _O_EGT, _O_SUPPLY, _O_CURRENT, _O_N_RPM = range(OUT, OUT + 6)
-_O_P3, _O_P5, _O_T4, _O_FUEL, _O_THRUST = OUT + 7, OUT + 8, OUT + 9, OUT + 11, OUT + 13
-_CLAMPED = fl.COMPRESSOR_MAP_CLAMPED | fl.TURBINE_MAP_CLAMPED | fl.PUMP_MAP_CLAMPED
-
-
-def frame_layout(messages: list[MessageCodec]) -> np.ndarray:
-    """The int64 layout array of ``pack_plant_frames`` for these messages (counters as now)."""
-    lay = np.zeros(MESSAGE + MESSAGE_SLOTS * len(messages), dtype=np.int64)
-    lay[CRC_TABLE : CRC_TABLE + 256] = [crc8(bytes((i,)), 0) for i in range(256)]
-    for k, m in enumerate(messages):
-        if not m.protected or m.multiplexed or len(m._fields) > MAX_FIELDS:
-            raise ValueError(f"{m.name}: not a plain E2E-protected message")
-        b = MESSAGE + MESSAGE_SLOTS * k
-        lay[b + COUNTER], lay[b + CRC_START], lay[b + N_FIELDS] = (
-            m.counter,
-            m._crc_start,
-            len(m._fields),
-        )
-        for i, (start, mask, _sign, raw_min, raw_max) in enumerate(m._fields):
-            lay[b + FIELDS + 4 * i : b + FIELDS + 4 * i + 4] = (start, mask, raw_min, raw_max)
-    return lay
-
-
-@njit(**EXACT, inline="always")
-def _field(lay: np.ndarray, b: int, i: int, raw: int) -> int:
-    """One raw value saturated to its range and shifted into place (MessageCodec.pack_raw)."""
-    f = b + FIELDS + 4 * i
-    if raw < lay[f + 2]:
-        raw = lay[f + 2]
-    elif raw > lay[f + 3]:
-        raw = lay[f + 3]
-    return (raw & lay[f + 1]) << lay[f]
-
-
-@njit(**EXACT, inline="always")
-def _rounded(lay: np.ndarray, b: int, i: int, value: float) -> int:
-    """round(value) (half to even) saturated to field i's range, shifted into place."""
-    f = b + FIELDS + 4 * i
-    r = np.rint(value)
-    if r < lay[f + 2]:
-        raw = lay[f + 2]
-    elif r > lay[f + 3]:
-        raw = lay[f + 3]
-    else:
-        raw = int(r)
-    return (raw & lay[f + 1]) << lay[f]
-
-
-@njit(**EXACT, inline="always")
-def _finish(lay: np.ndarray, k: int, word: int, buf: np.ndarray) -> None:
-    """Alive counter, little-endian bytes and CRC of message k into buf[8k:8k+8]."""
-    b = MESSAGE + MESSAGE_SLOTS * k
-    counter = lay[b + COUNTER]
-    word |= counter << 8
-    lay[b + COUNTER] = counter + 1 if counter < COUNTER_MODULO - 1 else 0
-    at = 8 * k
-    crc = lay[b + CRC_START]
-    for i in range(1, 8):
-        byte = (word >> (8 * i)) & 0xFF
-        buf[at + i] = byte
-        crc = lay[CRC_TABLE + (crc ^ byte)]
-    buf[at] = crc
-
-
-@njit(**EXACT)
-def pack_plant_frames(
-    s: np.ndarray, lay: np.ndarray, buf: np.ndarray, flags: int, tick16: int, due: int
-) -> None:
-    """Pack the frames due at this tick (FRAMES order; PlantSensors always) from the plant's
-    outputs in its state array s, as PlantNode packs them through the codec."""
-    if due & DUE_TRUTH:
-        b = MESSAGE
-        word = _field(lay, b, 0, 1 if flags & fl.FLAMEOUT else 0)
-        word |= _field(lay, b, 1, 1 if flags & _CLAMPED else 0)
-        word |= _field(lay, b, 2, 1 if flags & fl.OVERSPEED else 0)
-        word |= _field(lay, b, 3, 1 if flags & fl.OVERTEMPERATURE else 0)
-        word |= _rounded(lay, b, 4, s[_O_P3] * 0.1)
-        word |= _rounded(lay, b, 5, s[_O_P5] * 0.1)
-        word |= _rounded(lay, b, 6, s[_O_T4] * 10.0)
-        _finish(lay, 0, word, buf)
-        b = MESSAGE + MESSAGE_SLOTS
-        word = _rounded(lay, b, 0, s[_O_FUEL] * 1e6)
-        word |= _rounded(lay, b, 1, s[_O_THRUST] * 20.0)
-        word |= _rounded(lay, b, 2, s[_O_N_RPM])
-        _finish(lay, 1, word, buf)
-    if due & DUE_ANALOG:
-        b = MESSAGE + 2 * MESSAGE_SLOTS
-        word = _field(lay, b, 0, tick16)
-        word |= _rounded(lay, b, 1, s[_O_SUPPLY] * 1000.0)
-        word |= _rounded(lay, b, 2, s[_O_CURRENT] * 1000.0)
-        _finish(lay, 2, word, buf)
-    b = MESSAGE + 3 * MESSAGE_SLOTS
-    word = _field(lay, b, 0, tick16)
-    word |= _rounded(lay, b, 1, s[_O_SPEED])
-    word |= _rounded(lay, b, 2, s[_O_EGT] * 10.0)
-    _finish(lay, 3, word, buf)
-
-
-# ---- the lockstep node compiled, for a run in one compiled loop (sil/compiled_loop.py) ---------
-# PlantNode's lockstep handling of EcuActuator and its advance, operation for operation, on an
-# int64 state array (the NS_ slots) and a float64 one (NF_): the Python parts of a period (faults
-# falling due, noise blocks) stay in Python (PlantNode.python_part), which the caller runs when
-# ``python_due`` says so. PlantNode.compiled_state() and take_compiled_state() move the node's
-# and its plant's state in and out.
-(
-    NS_TICK,  # PlantNode.tick
-    NS_PLANT_TICK,  # the plant's ticks stepped (PlantBase._tick)
-    NS_NOISE_LEFT,  # samples left in the noise blocks (PlantBase._noise_left)
-    NS_FAULT_TICK,  # the earliest tick of the faults the node holds (pending), else NO_TICK
-    NS_FLAGS,  # the plant's flags after its last period (plant.outputs.flags)
-    NS_FRESH,
-    NS_MISSED,
-    NS_WATCHDOG,  # watchdog_ticks
-    NS_TRIPS,  # watchdog_trips
-    NS_PUMP_ENABLED,
-    NS_REJECTED,  # actuator_rejected
-    NS_LATE,  # actuator_late
-    NS_AHEAD,  # actuator_ahead
-    NS_MAX_TICKS,  # max_ticks, or -1
-    NS_FINISHED,
-    NS_EVERY_TRUTH,
-    NS_EVERY_ANALOG,
-    NS_KERNEL,  # index of the plant's kernel in KERNELS
-    NS_CHECK_LAST,  # the actuator checker's last accepted counter (-1: none)
-    NS_CHECK_STATUS,  # its last status
-    NS_CHECK_CRC,  # its CRC register after the data ID
-) = range(21)
-NS_CHECK_COUNTS = 21  # its counts per E2EStatus
-NS_FIELDS = NS_CHECK_COUNTS + len(E2EStatus)  # (start, mask, sign bit) per EcuActuator field
-NS_SIZE = NS_FIELDS + 3 * 5
-NF_DUTY, NF_FAULT_NEXT_S, NF_PERIOD, NF_SIZE = 0, 1, 2, 3
-NO_TICK = 1 << 62
-KERNELS = (aero_period, fast_period)  # the plants' compiled periods, by NS_KERNEL
-_OK, _WRONGCRC, _REPEATED, _WRONGSEQUENCE = (
-    int(E2EStatus.OK),
-    int(E2EStatus.WRONGCRC),
-    int(E2EStatus.REPEATED),
-    int(E2EStatus.WRONGSEQUENCE),
-)
-_ACTUATOR_MAX_DELTA = 2  # PlantNode.actuator_check
-
-
-@njit(**EXACT, inline="always")
-def _actuator_check(ns: np.ndarray, lay: np.ndarray, data: np.ndarray) -> int:
-    """E2EChecker.check of the node's actuator checker."""
-    crc = ns[NS_CHECK_CRC]
-    for i in range(1, 8):
-        crc = lay[CRC_TABLE + (crc ^ data[i])]
-    counter = data[1] & 0x0F
-    if counter >= COUNTER_MODULO or crc != data[0]:
-        status = _WRONGCRC
-    else:
-        last = ns[NS_CHECK_LAST]
-        if last < 0:
-            status = _OK
-        else:
-            delta = (counter - last) % COUNTER_MODULO
-            if delta == 0:
-                status = _REPEATED
-            elif delta <= _ACTUATOR_MAX_DELTA:
-                status = _OK
-            else:
-                status = _WRONGSEQUENCE
-        if status != _REPEATED:
-            ns[NS_CHECK_LAST] = counter
-    ns[NS_CHECK_STATUS] = status
-    ns[NS_CHECK_COUNTS + status] += 1
-    return status
-
-
-@njit(**EXACT, inline="always")
-def _raw(ns: np.ndarray, word: int, i: int) -> int:
-    """Field i of EcuActuator from the frame's 64-bit word (MessageCodec.unpack_raw)."""
-    f = NS_FIELDS + 3 * i
-    raw = (word >> ns[f]) & ns[f + 1]
-    sign = ns[f + 2]
-    return raw - (sign << 1) if sign and raw & sign else raw
-
-
-@njit(**EXACT)
-def actuator_compiled(ns: np.ndarray, nf: np.ndarray, lay: np.ndarray, data: np.ndarray) -> bool:
-    """PlantNode._on_actuator in lockstep, to the advance: True when ``data`` (uint8[8]) answers
-    this tick (the command taken and the watchdog counted, as _advance begins); the period
-    itself is advance_compiled, after PlantNode.python_part when python_due."""
-    if _actuator_check(ns, lay, data) != _OK:
-        ns[NS_REJECTED] += 1
-        return False
-    word = 0
-    for i in range(8):
-        word |= np.int64(data[i]) << (8 * i)
-    behind = (ns[NS_TICK] - _raw(ns, word, 2)) % TICK_MODULO
-    if behind != 0:
-        if behind < TICK_MODULO // 2:
-            ns[NS_LATE] += 1
-        else:
-            ns[NS_AHEAD] += 1
-        return False
-    ns[NS_PUMP_ENABLED] = 1 if _raw(ns, word, 0) != 0 else 0  # _command
-    duty = _raw(ns, word, 3)
-    nf[NF_DUTY] = (0 if duty < 0 else 10000 if duty > 10000 else duty) * 1e-4
-    ns[NS_MISSED] = 0  # _advance with a fresh command
-    ns[NS_FRESH] = 0
-    return True
-
-
-@njit(**EXACT)
-def python_due(ns: np.ndarray, nf: np.ndarray) -> bool:
-    """Before the period: PlantNode.python_part has something to do (a fault the node holds
-    falls due, the plant's fault schedule, the noise blocks run out)."""
-    return (
-        ns[NS_FAULT_TICK] <= ns[NS_TICK]
-        or nf[NF_FAULT_NEXT_S] <= ns[NS_PLANT_TICK] * nf[NF_PERIOD] + 1e-9
-        or ns[NS_NOISE_LEFT] == 0
-    )
-
-
-@njit(**EXACT)
-def advance_compiled(
-    s: np.ndarray, tables: np.ndarray, ns: np.ndarray, nf: np.ndarray, lay: np.ndarray,
-    buf: np.ndarray,
-) -> int:  # fmt: skip
-    """The rest of PlantNode._advance: the plant's period (PlantBase._period_with) and the next
-    tick's frames packed into buf (FRAMES order); returns which are due (DUE_ bits)."""
-    powered = ns[NS_PUMP_ENABLED] != 0 and ns[NS_MISSED] <= ns[NS_WATCHDOG]
-    u = nf[NF_DUTY] if powered else 0.0
-    tick = ns[NS_PLANT_TICK] + 1
-    if ns[NS_KERNEL] == 0:
-        flags = aero_period(s, tables, u, powered, tick, True)
-    else:
-        flags = fast_period(s, tables, u, powered, tick, True)
-    ns[NS_NOISE_LEFT] -= 1
-    ns[NS_PLANT_TICK] = tick
-    ns[NS_FLAGS] = flags
-    k = ns[NS_TICK] + 1
-    ns[NS_TICK] = k
-    if ns[NS_MAX_TICKS] >= 0 and k >= ns[NS_MAX_TICKS]:
-        ns[NS_FINISHED] = 1
-    due = (DUE_TRUTH if k % ns[NS_EVERY_TRUTH] == 0 else 0) | (
-        DUE_ANALOG if k % ns[NS_EVERY_ANALOG] == 0 else 0
-    )
-    pack_plant_frames(s, lay, buf, flags, k % TICK_MODULO, due)
-    return due
 
 
 class PlantNode:
@@ -444,7 +217,7 @@ class PlantNode:
         """Real time: one ECU period per period of the node's clock."""
         self._advance(send)
 
-    # -- the compiled twin (see advance_compiled) ------------------------------------------------
+    # -- the compiled twin (plant/node_compiled.py) ---------------------------------------------
     def compiled(self) -> bool:
         """The compiled lockstep functions can stand in for this node: lockstep, and a plant of
         plant/periphery.py whose period is one of KERNELS."""

@@ -23,9 +23,10 @@ from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO, demand_lead_ticks, every_ticks
 from protocol.node import SendFn
 from protocol.run_bus import SIMRUN_ID, simrun_payload
-from sil.recorder import SENSORS, Recorder
+from sil.recorder import Recorder
 from sil.recorder_process import RecorderProcess
 from sil.scenario import Fault, fault_targets
+from sil.ticks import SENSORS
 
 
 class CommandNode:

@@ -12,8 +12,8 @@ a time, with the same nodes and in the same order:
   beforehand by the command node itself (:meth:`CommandNode.frames_at`), and played here on
   each PlantSensors frame as it would play them; the frames it records go into arrays;
 - the ECU: the C node (``ecu/port/ecu_node.c``, the twin of ecu/node.py) called by its address;
-- the plant: the compiled twin of the plant node (:func:`plant.node.actuator_compiled`,
-  :func:`plant.node.advance_compiled`).
+- the plant: the compiled twin of the plant node (:func:`plant.node_compiled.actuator_compiled`,
+  :func:`plant.node_compiled.advance_compiled`).
 
 It returns to Python for what stays there: a FaultInject frame for the plant, the Python part
 of a plant period (faults falling due, noise blocks: :meth:`PlantNode.python_part`), and a full
@@ -35,14 +35,13 @@ from numba import njit, types
 from numba.extending import intrinsic
 
 from ecu.port.node import CEcuNode, frame_fn_address, node_library
+from plant.frames import DUE_ANALOG, DUE_TRUTH
 from plant.jit import PLANT_DIR, keep_cache_fresh
-from plant.node import (
-    DUE_ANALOG,
-    DUE_TRUTH,
+from plant.node import PlantNode
+from plant.node_compiled import (
     NF_SIZE,
     NS_FLAGS,
     NS_SIZE,
-    PlantNode,
     actuator_compiled,
     advance_compiled,
     python_due,
@@ -50,7 +49,7 @@ from plant.node import (
 from plant.periphery import OUT, OUT_FIELDS
 from protocol.lockstep import TICK_MODULO
 from sil.command_node import CommandNode
-from sil.recorder import ACTUATOR, SENSORS
+from sil.ticks import ACTUATOR, SENSORS
 
 _HERE = Path(__file__).resolve()
 # the loop links the plant's compiled functions: its cached machine code goes with their sources

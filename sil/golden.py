@@ -24,9 +24,10 @@ from pathlib import Path
 
 from ecu import modes
 from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, EcuInputs
+from ecu.firmware_params import compile_params
 from ecu.golden import Golden, RecordingEcu, write
 from ecu.node import EcuNode
-from ecu.params import EcuParams, compile_params
+from ecu.params import EcuParams
 from plant.fast_model import FastEngine
 from plant.node import PlantNode
 from protocol.codec import Codec

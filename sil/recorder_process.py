@@ -44,7 +44,8 @@ import numpy as np
 
 from protocol.codec import Codec
 from sil.parent_death import die_with_parent
-from sil.recorder import InOrderTicks, Recorder, tick_block
+from sil.recorder import Recorder
+from sil.ticks import InOrderTicks, tick_block
 
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()

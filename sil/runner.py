@@ -38,8 +38,9 @@ import numpy as np
 
 from ecu import commissioning
 from ecu import faults as ecu_faults
+from ecu.firmware_params import compile_params
 from ecu.node import EcuNode
-from ecu.params import EcuParams, compile_params, preset
+from ecu.params import EcuParams, preset
 from ecu.port.core import make_ecu
 from ecu.port.node import CEcuNode
 from plant.aerothermal import AeroThermalPlant

@@ -15,7 +15,8 @@ import struct
 from functools import cache
 
 from ecu.firmware import EcuInputs, EcuOutputs
-from ecu.params import EcuParams, FirmwareParams, compile_params
+from ecu.firmware_params import FirmwareParams, compile_params
+from ecu.params import EcuParams
 from ecu.port.build import host_library
 from ecu.state import EcuState
 

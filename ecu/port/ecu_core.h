@@ -25,7 +25,7 @@
  * DBC ranges (speed 0..262143 rpm, EGT 0..16383 dK, supply and current 0..65535, demand
  * 0..65535); within them no intermediate overflows 64 bits.
  *
- * Parameters are the integer constants that ecu.params.compile_params computes from the
+ * Parameters are the integer constants that ecu.firmware_params.compile_params computes from the
  * engineering-unit calibration (the one place where floats become Q formats); they are loaded
  * as ECU_PARAM_WORDS int32 words in the order of ECU_PARAM_FIELDS.
  *
@@ -74,7 +74,8 @@ enum {
  * X(name) is one int32 field; A(name, n) an int32 array.
  */
 
-/* ecu.params.FirmwareParams, in its order; init_theta_q24 holds the ECU_N_THETA start values */
+/* ecu.firmware_params.FirmwareParams, in its order; init_theta_q24 holds the ECU_N_THETA start
+ * values */
 #define ECU_PARAM_FIELDS(X, A) \
     X(rate_hz) X(controller) X(dt_q24) X(n_max_rpm) X(rpm_to_q24_k) X(trim_n_q24) \
     X(trim_v_q24) X(entry_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) \

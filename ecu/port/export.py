@@ -11,7 +11,8 @@ import argparse
 import sys
 from dataclasses import fields
 
-from ecu.params import EcuParams, FirmwareParams, ParamError, compile_params, preset
+from ecu.firmware_params import FirmwareParams, compile_params
+from ecu.params import EcuParams, ParamError, preset
 from ecu.port.core import param_words
 
 

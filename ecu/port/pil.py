@@ -36,7 +36,7 @@ from pathlib import Path
 
 import can
 
-from ecu.params import FirmwareParams
+from ecu.firmware_params import FirmwareParams
 from ecu.port import build, qemu
 from ecu.port.core import param_words
 from ecu.port.eth_can import EthCanBus

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecu.params import EcuParams, _tustin, firmware_convention
+from ecu.firmware_params import _tustin
+from ecu.params import EcuParams, firmware_convention
 from ecu.reference.estimator import FloatEstimator
 
 

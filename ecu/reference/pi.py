@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ecu.params import EcuParams, pi_schedule
+from ecu.firmware_params import pi_schedule
+from ecu.params import EcuParams
 
 
 @dataclass

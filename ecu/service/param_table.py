@@ -5,8 +5,8 @@ element of a pair). On the wire a value is its raw Q-format integer ``round(valu
 the entry's limits are checked on that integer. A write is refused when it is out of limits, when
 the parameter is unsafe to change while the engine runs and the ECU is in RUN, or when the whole
 set then fails :func:`ecu.params.validate` (a cross-field rule, named in the message). An accepted
-write recompiles the firmware constants (:func:`ecu.params.compile_params`), which apply from
-the next tick. This is configuration-time code (floats), outside the control tick.
+write recompiles the firmware constants (:func:`ecu.firmware_params.compile_params`), which
+apply from the next tick. This is configuration-time code (floats), outside the control tick.
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ from dataclasses import dataclass, replace
 
 import msgpack
 
-from ecu.params import SCHED_POINTS, EcuParams, FirmwareParams, compile_params
+from ecu.firmware_params import FirmwareParams, compile_params
+from ecu.params import SCHED_POINTS, EcuParams
 from ecu.service.crc import crc16
 
 

@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ecu.firmware_params import compile_params
 from ecu.node import EcuNode
-from ecu.params import EcuParams, compile_params
+from ecu.params import EcuParams
 from ecu.port.core import make_ecu
 from ecu.port.node import CEcuNode
 from plant.node import PlantNode

@@ -20,7 +20,8 @@ from collections.abc import Callable
 import numpy as np
 
 from protocol.codec import Codec
-from sil.recorder import ACTUATOR, N_MAX_RPM, InOrderTicks, raw_field
+from sil.ticks import ACTUATOR, InOrderTicks
+from sil.trace_writer import N_MAX_RPM, raw_field
 
 Truth = Callable[[], tuple[float, float, float, float, int]]  # (N %, EGT K, P3 Pa, thrust N, flags)
 

@@ -124,8 +124,9 @@ def _param(text: str) -> tuple[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     from ecu import commissioning
+    from ecu.firmware_params import compile_params
     from ecu.node import EcuNode
-    from ecu.params import ParamError, compile_params, preset
+    from ecu.params import ParamError, preset
     from protocol.bus import BusSpecError, open_bus
     from protocol.node import realtime_scheduling, run_lockstep, run_realtime
     from protocol.run_bus import RunBus

@@ -107,8 +107,9 @@ def _dry_run(args: argparse.Namespace, keep) -> int:
 def _into_ecu(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from ecu.firmware_params import compile_params
     from ecu.node import EcuNode
-    from ecu.params import ParamError, compile_params
+    from ecu.params import ParamError
     from sil import scenario as scenarios
     from sil.commands.ecu import _param
     from sil.runner import build_plant, ecu_params

@@ -27,9 +27,10 @@ import numpy as np
 
 from ecu.estimator import estimator_step
 from ecu.firmware import Ecu, EcuInputs
+from ecu.firmware_params import compile_params
 from ecu.modes import RUN
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
-from ecu.params import CTRL_MRAC, EcuParams, compile_params, preset
+from ecu.params import CTRL_MRAC, EcuParams, preset
 from ecu.reference.loop import FloatLoop
 from ecu.state import AP21, AP22, KF1, KF2, KR, KX1, KX2, LAM, N_THETA, TH1, TH2, EcuState
 from plant.fast_model import FastEngine

@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from ecu.firmware_params import compile_params
 from ecu.limiters import egt_lead_step
-from ecu.params import EcuParams, compile_params
+from ecu.params import EcuParams
 from ecu.state import EcuState
 
 DT = 0.01

@@ -11,16 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from ecu.firmware_params import compile_params
 from ecu.limiters import OWNER_ACCEL, OWNER_DECEL, schedule_v
-from ecu.params import (
-    SCHED_N0_PCT,
-    SCHED_POINTS,
-    SCHED_STEP_PCT,
-    EcuParams,
-    ParamError,
-    compile_params,
-    preset,
-)
+from ecu.params import SCHED_N0_PCT, SCHED_POINTS, SCHED_STEP_PCT, EcuParams, ParamError, preset
 from ecu.state import LAM, EcuState
 from plant.aerothermal import make_model
 from plant.schedules import fleet_schedule

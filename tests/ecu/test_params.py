@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ecu.params import PRESETS, EcuParams, ParamError, _tustin, compile_params, preset
+from ecu.firmware_params import _tustin, compile_params
+from ecu.params import PRESETS, EcuParams, ParamError, preset
 
 REF = Path(__file__).resolve().parents[3] / "shared" / "reference" / "thesis_reference.json"
 

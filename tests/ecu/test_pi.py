@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from ecu.params import ParamError, compile_params, pi_schedule, preset
+from ecu.firmware_params import compile_params, pi_schedule
+from ecu.params import ParamError, preset
 from ecu.pi import pi_control, pi_track, scheduled
 from ecu.pi_design import MIN_MARGIN_DEG, plant_response
 from ecu.reference.pi import FloatPi

@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ecu.params import ParamError, compile_params, preset
+from ecu.firmware_params import compile_params
+from ecu.params import ParamError, preset
 from ecu.rate_filter import rate_filter_start, rate_filter_step
 from ecu.reference.rate_filter import FloatRateFilter
 from ecu.state import EcuState

@@ -10,8 +10,9 @@ from typing import Any
 import pytest
 
 from ecu.estimator import estimator_step
+from ecu.firmware_params import compile_params
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
-from ecu.params import EcuParams, compile_params, preset
+from ecu.params import EcuParams, preset
 from ecu.pid import pid_control
 from ecu.reference.estimator import FloatEstimator
 from ecu.reference.mrac import FloatMrac

@@ -16,8 +16,8 @@ from plant import flags as fl
 from plant.aerothermal import AeroThermalPlant, default_maps
 from plant.fast_plant import FastPlant, _interp_at, _locate
 from plant.faults import Fault, FaultKind
+from plant.frames import frame_layout
 from plant.interface import PlantConfig
-from plant.node import frame_layout
 from plant.periphery import (
     BATTERY_R,
     BATTERY_V,
@@ -165,7 +165,7 @@ def test_a_copied_plant_goes_on_as_the_original(cls):
 
 
 def test_compiled_frames_are_the_codec_frames_also_when_saturated():
-    from plant.node import FRAMES, pack_plant_frames
+    from plant.frames import FRAMES, pack_plant_frames
 
     codec, packed = Codec(), Codec()
     messages = [codec[name] for name in FRAMES]

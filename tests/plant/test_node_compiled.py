@@ -1,4 +1,4 @@
-"""The plant node's compiled lockstep twin (plant.node.actuator_compiled, python_due,
+"""The plant node's compiled lockstep twin (plant.node_compiled.actuator_compiled, python_due,
 advance_compiled) against PlantNode itself: the same frames out, byte for byte, and the same
 state, on streams of actuator frames that answer, repeat, skip, run ahead, carry a bad CRC or an
 old alive counter, switch the pump off, and inject faults (FaultInject stays in Python)."""
@@ -12,18 +12,10 @@ import pytest
 
 from plant.aerothermal import AeroThermalPlant
 from plant.fast_plant import FastPlant
+from plant.frames import DUE_ANALOG, DUE_TRUTH, FRAMES
 from plant.interface import PlantConfig
-from plant.node import (
-    DUE_ANALOG,
-    DUE_TRUTH,
-    FRAMES,
-    NF_SIZE,
-    NS_SIZE,
-    PlantNode,
-    actuator_compiled,
-    advance_compiled,
-    python_due,
-)
+from plant.node import PlantNode
+from plant.node_compiled import NF_SIZE, NS_SIZE, actuator_compiled, advance_compiled, python_due
 from protocol.codec import Codec
 from protocol.lockstep import TICK_MODULO
 

@@ -8,7 +8,8 @@ from array import array
 import pytest
 
 from ecu.firmware import Ecu, EcuInputs
-from ecu.params import RATE_BUF_LEN, EcuParams, compile_params
+from ecu.firmware_params import compile_params
+from ecu.params import RATE_BUF_LEN, EcuParams
 from ecu.port import build, core
 from ecu.state import EcuState
 

@@ -6,7 +6,8 @@ import sys
 
 import pytest
 
-from ecu.params import compile_params, preset
+from ecu.firmware_params import compile_params
+from ecu.params import preset
 from ecu.port import build, export
 from ecu.port.core import param_words
 

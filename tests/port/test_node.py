@@ -23,9 +23,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ecu.firmware import E2E_OK, E2E_REPEATED, E2E_WRONGCRC, E2E_WRONGSEQUENCE, EcuInputs
+from ecu.firmware_params import FirmwareParams, compile_params
 from ecu.modes import FAULT, RUN
 from ecu.node import _TELEMETRY_FIELDS, EcuNode
-from ecu.params import PRESETS, EcuParams, FirmwareParams, compile_params
+from ecu.params import PRESETS, EcuParams
 from ecu.port import build
 from ecu.port.core import CEcu, library
 from ecu.port.node import CEcuNode, every, frame_fn_address, node_library

@@ -14,7 +14,8 @@ import zlib
 import can
 import pytest
 
-from ecu.params import compile_params, preset
+from ecu.firmware_params import compile_params
+from ecu.params import preset
 from ecu.port import build
 from ecu.port.core import make_ecu
 from ecu.port.node import CEcuNode

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 from ecu import faults as F
 from ecu import modes as M
 from ecu.firmware import Ecu, EcuInputs
-from ecu.params import EcuParams, compile_params
+from ecu.firmware_params import compile_params
+from ecu.params import EcuParams
 from ecu.service import fault_log, live
 from ecu.service.framing import MAX_ENCODED, encode_frame
 from ecu.service.message import Kind, Message, Service, Status, pack, unpack

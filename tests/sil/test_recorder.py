@@ -14,6 +14,7 @@ from protocol.e2e import crc8, crc8_rows, data_id_crc_start
 from sil.canlog import CandumpWriter, fixed6
 from sil.metrics import load_trace, summarize, tracking_rms_pct
 from sil.recorder import Recorder
+from sil.trace_writer import TraceWriter
 
 
 def _tick(
@@ -288,7 +289,7 @@ def test_ctrl_c_while_a_chunk_is_written_leaves_no_gap(tmp_path, monkeypatch):
     """The interrupt waits until the chunk is on disk; close() then writes the rest."""
     monkeypatch.setattr(recorder_module, "CHUNK_ROWS", 5)
     frames = _messy_stream(11)
-    original = Recorder._write_rows
+    original = TraceWriter.write_rows
     interrupted = []
 
     def write_rows(self, *args):
@@ -297,7 +298,7 @@ def test_ctrl_c_while_a_chunk_is_written_leaves_no_gap(tmp_path, monkeypatch):
             signal.raise_signal(signal.SIGINT)
         original(self, *args)
 
-    monkeypatch.setattr(Recorder, "_write_rows", write_rows)
+    monkeypatch.setattr(TraceWriter, "write_rows", write_rows)
     (tmp_path / "a").mkdir()
     rec = Recorder(tmp_path / "a", Codec(), period_s=0.01)
     heard = 0
@@ -307,7 +308,7 @@ def test_ctrl_c_while_a_chunk_is_written_leaves_no_gap(tmp_path, monkeypatch):
             rec.record(frame_id, data)
     rec.close()
     assert interrupted and 0 < heard < len(frames)
-    monkeypatch.setattr(Recorder, "_write_rows", original)
+    monkeypatch.setattr(TraceWriter, "write_rows", original)
     (tmp_path / "b").mkdir()
     reference = Recorder(tmp_path / "b", Codec(), period_s=0.01)
     for frame_id, data in frames[:heard]:

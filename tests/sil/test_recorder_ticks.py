@@ -14,9 +14,11 @@ import sil.recorder as recorder_module
 from protocol.codec import Codec
 from protocol.e2e import crc8, data_id_crc_start
 from sil import runner, scenario
-from sil.recorder import ACTUATOR, SENSORS, InOrderTicks, Recorder
+from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.runner import RunOptions
+from sil.ticks import ACTUATOR, SENSORS, InOrderTicks
+from sil.trace_writer import TraceWriter
 
 COMMANDS = (0x080, 0x310)  # the command node's frames: Demand, FaultInject
 PERIOD_S = 0.01
@@ -360,7 +362,7 @@ def test_ctrl_c_while_a_block_is_written_keeps_whole_ticks(tmp_path, runs, monke
     recorded, the rest not; close() writes them: the files of those ticks one by one."""
     frames, _ = runs["thesis-5.2-mrac-fast"]
     monkeypatch.setattr(recorder_module, "CHUNK_ROWS", 500)
-    original = Recorder._write_rows
+    original = TraceWriter.write_rows
     calls = []
 
     def write_rows(self, *args):
@@ -369,14 +371,14 @@ def test_ctrl_c_while_a_block_is_written_keeps_whole_ticks(tmp_path, runs, monke
             signal.raise_signal(signal.SIGINT)
         original(self, *args)
 
-    monkeypatch.setattr(Recorder, "_write_rows", write_rows)
+    monkeypatch.setattr(TraceWriter, "write_rows", write_rows)
     rec = _fresh(tmp_path, frames, "a")
     lo, hi = frames.prefix, int(frames.ends[400])
     rec.record_ticks(frames.ids[lo:hi], frames.payload[lo:hi])  # ticks 1..400: no chunk yet
     with pytest.raises(KeyboardInterrupt):  # chunks at ticks 499 and 999, interrupted at 999
         rec.record_ticks(frames.ids[hi:], frames.payload[hi:])
     assert rec.tick == 1000 and len(calls) == 2
-    monkeypatch.setattr(Recorder, "_write_rows", original)
+    monkeypatch.setattr(TraceWriter, "write_rows", original)
     cut = int(frames.ends[999])
     assert rec.frames == cut
     a = _result(rec, tmp_path / "a")
