@@ -37,8 +37,9 @@ import subprocess
 import sys
 import threading
 from array import array
+from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, TypeVar
 
 import numpy as np
 
@@ -51,6 +52,7 @@ BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
 READY = b"R"  # the child to the parent: its Recorder is made (then, at the end, its figures)
 _TICKS = "ticks"  # tags a block of whole ticks: (_TICKS, int32 IDs, (frames, 8) uint8 payload)
+T = TypeVar("T")
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
 NICE = 19  # the child's niceness: it is on no node's critical path, so a node that wakes up
 # never waits for it (SCHED_IDLE did no better, and an unprivileged process could not leave it to
@@ -195,27 +197,36 @@ class RecorderProcess(InOrderTicks):
             "unknown_ids": {},
             "wrong_length": {},
         }
+        interrupted: list[KeyboardInterrupt] = []
         try:
             if self._ids:
                 self._send_batch()
             self._outbox.put(None)
-            self._feeder.join(CLOSE_TIMEOUT_S)
+            _patiently(lambda: self._feeder.join(CLOSE_TIMEOUT_S), interrupted)
             if self._feeder.is_alive():  # the child took nothing for a minute
                 self._child.kill()
                 raise RecorderFailed("the recorder process stopped taking frames")
-            stdout = self._child.stdout
-            assert stdout is not None
-            try:
-                if not self._ready and stdout.read(1) != READY:
-                    raise EOFError
-                self._totals = pickle.load(stdout)
-            except (EOFError, pickle.UnpicklingError):
-                raise RecorderFailed(self._failure()) from None
+            self._totals = _patiently(self._read_totals, interrupted)
         finally:
             if self._child.stdout is not None:
                 self._child.stdout.close()
             # its files are closed; its interpreter's teardown (0.1-0.3 s) is not waited for
             threading.Thread(target=self._reap, name="sil-recorder-reap", daemon=True).start()
+        if interrupted:  # the Ctrl-C that came while the child finished its files, now
+            raise interrupted[0]
+
+    def _read_totals(self) -> dict:
+        """The child's figures, sent once its files are closed."""
+        stdout = self._child.stdout
+        assert stdout is not None
+        try:
+            if not self._ready:
+                if stdout.read(1) != READY:
+                    raise EOFError
+                self._ready = True
+            return pickle.load(stdout)
+        except (EOFError, pickle.UnpicklingError):
+            raise RecorderFailed(self._failure()) from None
 
     def _reap(self) -> None:
         try:
@@ -229,6 +240,19 @@ class RecorderProcess(InOrderTicks):
         if self._totals is None:
             raise RuntimeError("RecorderProcess.totals() before close()")
         return self._totals
+
+
+def _patiently(wait: Callable[[], T], interrupted: list[KeyboardInterrupt]) -> T:
+    """wait(), and once more if a Ctrl-C cuts it short: the child is finishing the run's files
+    and stops on its own (the interrupt is kept in ``interrupted`` for the caller to raise); a
+    second Ctrl-C is not held off."""
+    try:
+        return wait()
+    except KeyboardInterrupt as exc:
+        if interrupted:
+            raise
+        interrupted.append(exc)
+        return wait()
 
 
 def _child_setup() -> None:

@@ -377,6 +377,9 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         except RecorderFailed as exc:
             state.status = "aborted"
             state.abort_reason = state.abort_reason or str(exc)
+        except KeyboardInterrupt as exc:  # came while the recorder finished its files: they stand
+            state.status = "aborted"
+            state.abort_reason = state.abort_reason or interrupt_reason(exc)
         gc.unfreeze()
     wall = time.perf_counter() - state.started
     return _finish(opts, s, seed, recorder, command, state, wall)
