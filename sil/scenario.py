@@ -22,7 +22,8 @@ Shipped scenarios live in ``sil/scenarios/`` and are found by name.
     preset = "sec5_3_mrac_aero"  # an ECU parameter preset (ecu.params.PRESETS; optional)
     reading = "printed"        # printed | reproducing: how the document's gains are read
                                # (ecu.params.READINGS; optional, default the preset's)
-    params = { }               # overrides of ECU parameters by name (optional)
+    params = { }               # overrides of ECU parameters by name (optional; a table such as
+                               # accel_line_v or a pair such as init_kx as a list of numbers)
 
     [command]                  # %N for mrac/pid, volts for open_loop
     base = "trim"              # a number, or "trim": 89.68 %N, or the trim pump voltage
@@ -129,7 +130,7 @@ HEALTH = ("compressor_efficiency", "compressor_flow", "turbine_efficiency", "tur
 class ControllerSettings:
     kind: str = "mrac"
     preset: str | None = None
-    params: dict[str, float] = field(default_factory=dict)
+    params: dict[str, float | tuple[float, ...]] = field(default_factory=dict)
     reading: str | None = None  # ecu.params.READINGS; None: the preset's
 
 
@@ -214,6 +215,18 @@ class _Reader:
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self.fail(key, f"a number in {lo}..{hi}", value)
         return float(value)
+
+    def numbers(self, key: str, length: int) -> tuple[float, ...]:
+        value = self.get(key, missing=f"a list of {length} numbers")
+        if (
+            not isinstance(value, list)
+            or len(value) != length
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        ):
+            raise self.fail(key, f"a list of {length} numbers", value)
+        if not all(math.isfinite(v) for v in value):
+            raise self.fail(key, f"a list of {length} finite numbers", value)
+        return tuple(float(v) for v in value)
 
     def text(self, key: str, default: Any = ..., *, choices: tuple[str, ...] | None = None) -> str:
         value = self.get(key, default, missing="a string")
@@ -434,7 +447,11 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
     for key in params_reader.table:
         if key not in known:
             raise params_reader.fail(key, "an ECU parameter (ecu.params.EcuParams field)", key)
-    params = {k: params_reader.number(k) for k in list(params_reader.table)}
+    lists = {f.name: len(f.default) for f in fields(EcuParams) if isinstance(f.default, tuple)}
+    params = {
+        k: params_reader.numbers(k, lists[k]) if k in lists else params_reader.number(k)
+        for k in list(params_reader.table)
+    }
     params_reader.done()
     c.done()
 

@@ -64,7 +64,7 @@ def test_vectors_cover_controllers_modes_limiters_and_faults(vectors):
         assert word & bit, F.NAMES[bit]
     statuses = {s for g in gs for s in _column(g, IN["sensor_status"])}
     assert statuses >= {0, 3, 4}  # OK, WRONGCRC, NONEWDATA
-    assert max(_column(vectors["mrac-aero"][1], OUT["sat_events"])) > 0  # saturation counted
+    assert max(_column(vectors["mrac-reproducing"][1], OUT["sat_events"])) > 0  # saturation counted
 
 
 def test_replayer_reports_the_first_differing_integer(vectors, tmp_path):

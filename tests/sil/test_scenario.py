@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+from ecu.params import preset
 from sil import profiles, scenario
 
 REQUIRED = [
@@ -74,6 +75,18 @@ MINIMAL = "duration_s = 10\n[command]\nbase = 90\n"
         (
             "duration_s = 10\n[controller.params]\nwarp = 9\n[command]\n",
             "field 'controller.params.warp': expected an ECU parameter",
+        ),
+        (
+            "duration_s = 10\n[controller.params]\ninit_kx = [-4.8]\n[command]\n",
+            "field 'controller.params.init_kx': expected a list of 2 numbers",
+        ),
+        (
+            "duration_s = 10\n[controller.params]\ninit_kx = [-4.8, nan]\n[command]\n",
+            "field 'controller.params.init_kx': expected a list of 2 finite numbers",
+        ),
+        (
+            "duration_s = 10\n[controller.params]\nref_wn = [5]\n[command]\n",
+            "field 'controller.params.ref_wn': expected a number",
         ),
         (
             MINIMAL + "[[command.component]]\nkind = 'staircase'\nlevels = []\nstep_s = 1\n",
@@ -157,3 +170,15 @@ def test_a_start_speed_is_the_plants_not_the_ecus(tmp_path):
     assert plant.outputs.n_pct == pytest.approx(75.0, abs=0.05)
     nominal = build_plant(scenario.load(scenario.SCENARIO_DIR / "thesis-5.4-staircase.toml"), 0)
     assert ecu_trim_voltage(s, plant) == nominal.trim_pump_voltage != plant.trim_pump_voltage
+
+
+def test_table_and_pair_parameters_are_lists_of_numbers(tmp_path):
+    path = tmp_path / "s.toml"
+    line = [round(5.0 + k, 2) for k in range(12)]
+    path.write_text(
+        "duration_s = 10\n[controller.params]\n"
+        f"accel_line_v = {line}\ninit_kx = [-1, -0.5]\nv_slew_v_s = 20\n[command]\n"
+    )
+    params = preset("default", **scenario.load(path).controller.params)  # validated
+    assert params.accel_line_v == tuple(float(v) for v in line) and params.init_kx == (-1.0, -0.5)
+    assert params.v_slew_v_s == 20.0
