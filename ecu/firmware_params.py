@@ -82,7 +82,7 @@ class FirmwareParams:
         "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
         "pi_n0_q24", "pi_step_q24", "pi_kp_q24", "pi_ki_dt_q28",
         "fuel_schedules_on", "sched_n0_q24", "sched_step_q24", "ncor_k_q24",
-        "accel_line_q24", "decel_floor_q24", "pump_dead_q24", "sched_lam_lo_q24",
+        "accel_line_q24", "decel_floor_q24", "accel_rate_q24", "pump_dead_q24", "sched_lam_lo_q24",
         "sched_lam_hi_q24",
         "idle_q24", "demand_max_q24",
         "limiters_on", "egt_limit_dk", "egt_engage_q24", "rate_engage_q24", "n_limit_engage_q24",
@@ -242,6 +242,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         sched_step_q24=_q(SCHED_STEP_PCT, Q24, "accel_line_v"),
         ncor_k_q24=_q(math.sqrt(T_STD_K / p.inlet_temp_k), Q24, "inlet_temp_k"),
         accel_line_q24=tuple(_q(v, Q24, "accel_line_v") for v in p.accel_line_v),
+        accel_rate_q24=tuple(_q(r, Q24, "accel_rate_pct_s") for r in p.accel_rate_pct_s),
         decel_floor_q24=tuple(_q(v, Q24, "decel_floor_v") for v in p.decel_floor_v),
         pump_dead_q24=_q(p.pump_dead_v, Q24, "pump_dead_v"),
         sched_lam_lo_q24=_q(

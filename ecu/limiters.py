@@ -4,6 +4,9 @@ selection.
     V = max( V_floor(Nc), V_decel, min( V_speed, V_egt, V_accel, V_nlimit, V_line(Nc) ) ),
     then [V_min, V_max] and slew.
 
+V_accel holds the shaft's acceleration under the acceleration schedule Ndot_max(Nc) (and under
+accel_max_pct_s); V_decel its deceleration under decel_max_pct_s.
+
 V_line and V_floor are the fuel schedules (acceleration line, deceleration floor) against
 corrected speed Nc, moved with the estimated pump in the safe direction only (the line down for a
 stronger pump, the floor up for a weaker one: an estimate thrown off by a transient or by the fast
@@ -49,14 +52,19 @@ def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
     s.egt_lead_q12 = sat32(y + ((p.egt_lead_ctc_q16 * (egt_dk - s.egt_dk)) >> 4))
 
 
+def schedule_at(p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
+    """A schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24)."""
+    n_cor = sat32((n_q24 * p.ncor_k_q24) >> 24)
+    return interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
+
+
 def schedule_v(
     s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int, lam_lo: int, lam_hi: int
 ) -> int:
     """A fuel schedule's pump voltage at speed n_q24 (Q7.24): the table at corrected speed, for
     the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel, with
     Lambda-hat taken within [lam_lo, lam_hi] (Q24)."""
-    n_cor = sat32((n_q24 * p.ncor_k_q24) >> 24)
-    v = interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
+    v = schedule_at(p, table, n_q24)
     if not p.pump_scaling_on:
         return v
     lam = clamp(s.theta_q24[LAM], lam_lo, lam_hi)
@@ -93,7 +101,10 @@ def select_voltage(
                 v = v_egt
                 owner = OWNER_EGT
         s.egt_e_prev_q24 = e
-    e = sub_sat(p.accel_max_q24, rate_q24)
+    ndot_max = p.accel_max_q24
+    if p.fuel_schedules_on:  # the acceleration schedule, under the overall limit
+        ndot_max = min(ndot_max, schedule_at(p, p.accel_rate_q24, n_q24))
+    e = sub_sat(ndot_max, rate_q24)
     if e < p.rate_engage_q24:
         v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
         if v_acc < v:

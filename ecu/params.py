@@ -176,6 +176,12 @@ class EcuParams:
     decel_floor_v: tuple[float, ...] = (
         2.83, 3.06, 3.3, 3.55, 3.82, 4.1, 4.39, 4.69, 5.0, 5.32, 5.65, 5.99,
     )  # fmt: skip
+    # the acceleration schedule (Ndot limit), %N/s against the same corrected speeds: the rate
+    # loop holds the shaft's acceleration under it (and under accel_max_pct_s); `sil schedules`:
+    # 1.2 times the nominal engine's rate on the line, at least 5 %N/s
+    accel_rate_pct_s: tuple[float, ...] = (
+        5.0, 7.9, 10.1, 11.7, 12.9, 13.3, 13.7, 13.2, 11.6, 9.3, 5.1, 5.0,
+    )  # fmt: skip
     inlet_temp_k: float = 288.15  # no inlet sensor: the day's temperature, set by the operator
 
     # pump driver
@@ -453,6 +459,10 @@ def validate(p: EcuParams) -> None:
         _check(len(table) == SCHED_POINTS, name, table, f"needs {SCHED_POINTS} values")
         _check(all(0.0 <= v <= 30.0 for v in table), name, table, "every value in 0-30 V")
         _check(all(b >= a for a, b in itertools.pairwise(table)), name, table, "must not fall")
+    table = p.accel_rate_pct_s
+    _check(len(table) == SCHED_POINTS, "accel_rate_pct_s", table, f"needs {SCHED_POINTS} values")
+    _check(all(0.5 <= r <= 100.0 for r in table), "accel_rate_pct_s", table,
+           "every value in 0.5-100 %N/s")  # fmt: skip
     _check(
         all(d < a for d, a in zip(p.decel_floor_v, p.accel_line_v, strict=True)),
         "decel_floor_v",

@@ -24,6 +24,11 @@ is left out there (its EGT loop holds it below that speed). The fleet line keeps
 KEEP_ACCEL of the nominal engine's own fuel margin over its steady line, so that the nominal
 engine still accelerates at every speed (near full speed a hot corner's line falls under its
 steady line).
+
+The acceleration schedule (the ECU's Ndot limit) allows, at each speed, RATE_MARGIN more than the
+shaft acceleration the nominal engine has on the acceleration line, and at least NDOT_MIN_PCT_S:
+an engine that accelerates faster than that on the line gets more fuel than the line means (a
+pump stronger than the ECU has learnt), and the ECU's rate loop takes it back.
 """
 
 from __future__ import annotations
@@ -52,6 +57,8 @@ RICH_FAR = 0.05  # fuel-air ratio the burner must stay under
 MAX_FUEL_FACTOR = 4.0  # the acceleration line is searched up to this times the steady fuel
 HEALTH_SPREAD = 0.05  # the fleet: every corner of +-5 % on the four health scalars
 KEEP_ACCEL = 0.5  # the fleet line keeps at least this of the nominal's fuel margin over steady
+RATE_MARGIN = 0.2  # the acceleration schedule: the nominal's rate on the line, plus this
+NDOT_MIN_PCT_S = 5.0  # ... and never less (under it, speed noise would work the rate loop)
 
 
 class ScheduleError(ValueError):
@@ -74,6 +81,7 @@ class SchedulePoint:
     decel_v: float
     decel_far: float
     decel_rate_pct_s: float  # shaft deceleration on the floor (negative)
+    ndot_pct_s: float  # the acceleration schedule: the shaft acceleration the ECU allows here
 
 
 def _rates(model: EngineModel, x: np.ndarray, g_fuel: float) -> np.ndarray:
@@ -211,6 +219,7 @@ def schedule_point(
         decel_v=pump_voltage_for(model, x_dec, g_dec),
         decel_far=g_dec / st_dec.g3,
         decel_rate_pct_s=float(_rates(model, x_dec, g_dec)[3]),
+        ndot_pct_s=allowed_rate(float(_rates(model, x_acc, g_acc)[3])),
     )
 
 
@@ -230,6 +239,23 @@ def schedule(
         if progress is not None:
             progress(k + 1, len(speeds_pct))
     return out
+
+
+def allowed_rate(line_rate_pct_s: float) -> float:
+    """The acceleration schedule's point for the nominal engine's rate on the line."""
+    return max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * line_rate_pct_s)
+
+
+def rate_at_voltage(model: EngineModel, point: SchedulePoint, v: float) -> float:
+    """The shaft acceleration of the point's engine at frozen speed with the pump at v (V), at
+    most the acceleration line's fuel flow."""
+    _, steady = steady_at_speed(model, point.n_pct, running_line(model))
+
+    def under(g: float) -> bool:
+        return pump_voltage_for(model, frozen_state(model, steady.x, g), g) < v
+
+    g, _ = _bisect(under, point.steady_fuel_kg_s, point.accel_fuel_kg_s)
+    return float(_rates(model, frozen_state(model, steady.x, g), g)[3])
 
 
 def health_corners(model: EngineModel, spread: float) -> list[EngineModel]:
@@ -268,7 +294,8 @@ def fleet_point(
 ) -> SchedulePoint:
     """The nominal point with the lowest acceleration line and the highest deceleration floor of
     the nominal engine and its corners (their other acceleration and deceleration figures with
-    them); the line no lower than the nominal's kept point (kept_point)."""
+    them); the line no lower than the nominal's kept point (kept_point); the acceleration
+    schedule from the nominal engine's rate on that line."""
     acc = min([nominal, *corners], key=lambda p: p.accel_v)
     dec = max([nominal, *corners], key=lambda p: p.decel_v)
     if acc is not nominal:
@@ -286,6 +313,11 @@ def fleet_point(
         decel_v=dec.decel_v,
         decel_far=dec.decel_far,
         decel_rate_pct_s=dec.decel_rate_pct_s,
+        ndot_pct_s=allowed_rate(
+            nominal.accel_rate_pct_s
+            if acc is nominal
+            else rate_at_voltage(model, nominal, acc.accel_v)
+        ),
     )
 
 
@@ -364,6 +396,7 @@ def plot(points: list[SchedulePoint], settings: dict, path: Path) -> None:
         a.legend()
     ax[2].plot(n, [p.accel_rate_pct_s for p in points], "r-o", label="on the acceleration line")
     ax[2].plot(n, [p.decel_rate_pct_s for p in points], "b-o", label="on the deceleration floor")
+    ax[2].plot(n, [p.ndot_pct_s for p in points], "m--s", label="acceleration schedule (allowed)")
     ax[2].axhline(0.0, color="k", lw=0.8)
     ax[2].set_xlabel("shaft speed [%N]")
     ax[2].set_ylabel("shaft acceleration at frozen speed [%N/s]")

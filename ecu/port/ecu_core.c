@@ -425,13 +425,19 @@ static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_pre
     return sat32(e, v_prev + ((kp_q24 * (err - err_prev)) >> 24) + ((ki_dt_q24 * err) >> 24));
 }
 
+/* a schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24) */
+static int32_t schedule_at(ecu_t *e, const int32_t *table, int32_t n_q24)
+{
+    const ecu_params_t *p = e->p;
+    int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
+    return interp_uniform(e, table, ECU_SCHED_POINTS, p->sched_n0_q24, p->sched_step_q24, n_cor);
+}
+
 static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24, int32_t lam_lo,
                           int32_t lam_hi)
 {
     const ecu_params_t *p = e->p;
-    int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
-    int32_t v = interp_uniform(e, table, ECU_SCHED_POINTS, p->sched_n0_q24, p->sched_step_q24,
-                               n_cor);
+    int32_t v = schedule_at(e, table, n_q24);
     int32_t lam;
     if (!p->pump_scaling_on) {
         return v;
@@ -446,7 +452,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
 {
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
-    int32_t v_prev, v, owner, err, v_loop, v_lim;
+    int32_t v_prev, v, owner, err, v_loop, v_lim, ndot_max;
     if (!p->limiters_on) {
         s->owner = OWNER_SPEED;
         s->v_saturated = 0;
@@ -467,7 +473,12 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         }
         s->egt_e_prev_q24 = err;
     }
-    err = sat32(e, (int64_t)p->accel_max_q24 - rate_q24);
+    ndot_max = p->accel_max_q24;
+    if (p->fuel_schedules_on) { /* the acceleration schedule, under the overall limit */
+        int32_t sched = schedule_at(e, p->accel_rate_q24, n_q24);
+        ndot_max = sched < ndot_max ? sched : ndot_max;
+    }
+    err = sat32(e, (int64_t)ndot_max - rate_q24);
     if (err < p->rate_engage_q24) {
         v_loop = limit_loop(e, v_prev, err, s->acc_e_prev_q24, p->rate_kp_q24, p->rate_ki_dt_q24);
         if (v_loop < v) {

@@ -114,6 +114,7 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("inlet_temp_k", "K", Q16, 223.0, 333.0, False),
     *(_s(f"accel_line_v[{k}]", "V", Q24, 0.0, 30.0, False) for k in range(SCHED_POINTS)),
     *(_s(f"decel_floor_v[{k}]", "V", Q24, 0.0, 30.0, False) for k in range(SCHED_POINTS)),
+    *(_s(f"accel_rate_pct_s[{k}]", "%N/s", Q24, 0.5, 100.0, False) for k in range(SCHED_POINTS)),
 )
 BY_NAME = {spec.name: spec for spec in TABLE}
 

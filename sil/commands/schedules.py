@@ -113,11 +113,11 @@ def run(args: argparse.Namespace) -> int:
         print(paths["json"].read_text(), end="")
         return 0
     print(f"{'N %':>6} {'steady V':>9} {'accel V':>8} {'by':>6} {'SM':>6} {'dN/dt':>7} "
-          f"{'decel V':>8} {'dN/dt':>7}")  # fmt: skip
+          f"{'decel V':>8} {'dN/dt':>7} {'Ndot max':>9}")  # fmt: skip
     for p in points:
         print(f"{p.n_pct:6.1f} {p.steady_v:9.2f} {p.accel_v:8.2f} {p.accel_limited_by:>6} "
               f"{p.accel_surge_margin:6.1%} {p.accel_rate_pct_s:7.2f} {p.decel_v:8.2f} "
-              f"{p.decel_rate_pct_s:7.2f}")  # fmt: skip
+              f"{p.decel_rate_pct_s:7.2f} {p.ndot_pct_s:9.2f}")  # fmt: skip
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ecu.firmware_params import compile_params
-from ecu.limiters import OWNER_ACCEL, OWNER_DECEL, schedule_v
+from ecu.limiters import OWNER_ACCEL, OWNER_DECEL, OWNER_SPEED, schedule_v, select_voltage
 from ecu.params import SCHED_N0_PCT, SCHED_POINTS, SCHED_STEP_PCT, EcuParams, ParamError, preset
 from ecu.state import LAM, EcuState
 from plant.aerothermal import make_model
@@ -41,6 +41,7 @@ def test_defaults_are_what_the_plant_allows_its_fleet() -> None:
     for k, pt in zip((1, 6, 11), fleet, strict=True):
         assert abs(pt.accel_v - p.accel_line_v[k]) < 0.006
         assert abs(pt.decel_v - p.decel_floor_v[k]) < 0.006
+        assert abs(pt.ndot_pct_s - p.accel_rate_pct_s[k]) < 0.06
 
 
 @pytest.mark.parametrize(
@@ -94,9 +95,37 @@ def test_deceleration_floor_holds_a_large_cut(make_rig: Any) -> None:
     assert max(_expected(p, p.decel_floor_v, n, lam) - v for n, v, _, lam in free) > 1.0
 
 
+@pytest.mark.parametrize("n", [50.0, 72.5, 97.5])
+def test_rate_loop_holds_the_acceleration_under_its_schedule(n: float) -> None:
+    p = EcuParams()
+    allowed = float(np.interp(n, SPEEDS, p.accel_rate_pct_s))  # (a standard day: Nc = N)
+    for schedules_on, rate, owner in (
+        (True, allowed + 1.0, OWNER_ACCEL),  # over the schedule: the rate loop cuts the fuel
+        (True, allowed - 0.5, OWNER_SPEED),  # under it, and in its band: it tracks
+        (False, allowed + 1.0, OWNER_SPEED),  # without schedules, only accel_max_pct_s holds
+        (False, p.accel_max_pct_s + 1.0, OWNER_ACCEL),
+    ):
+        fw = compile_params(replace(p, fuel_schedules_on=schedules_on))
+        s = EcuState()
+        v_start = float(np.interp(n, SPEEDS, p.accel_line_v)) - 1.0  # under the line
+        v = int(v_start * Q)
+        s.v_applied_q24 = v
+        s.theta_q24[LAM] = fw.lambda_comm_q24
+        s.acc_e_prev_q24 = int((p.accel_max_pct_s - rate) * Q)  # no step in the rate's margin
+        if schedules_on:
+            s.acc_e_prev_q24 = int((allowed - rate) * Q)
+        got = select_voltage(s, fw, v, int(500 * Q), 1, int(n * Q), int(rate * Q))
+        assert s.owner == owner, (schedules_on, rate)
+        if owner == OWNER_ACCEL:  # its integrator alone: V - Ki dt (rate - allowed)
+            over = rate - (allowed if schedules_on else p.accel_max_pct_s)
+            assert got / Q == pytest.approx(v_start - p.rate_ki * fw.dt_q24 / Q * over, abs=2e-4)
+
+
 @pytest.mark.parametrize(
     ("field", "value", "why"),
     [
+        ("accel_rate_pct_s", (10.0,) * 11, "needs 12 values"),
+        ("accel_rate_pct_s", (10.0,) * 11 + (0.1,), "0.5-100 %N/s"),
         ("accel_line_v", (10.0,) * 11, "needs 12 values"),
         ("accel_line_v", (10.0,) * 11 + (9.0,), "must not fall"),
         ("decel_floor_v", (11.0,) * 12, "under accel_line_v"),

@@ -14,11 +14,14 @@ from plant.schedules import (
     HEALTH_SPREAD,
     KEEP_ACCEL,
     LEAN_MARGIN,
+    NDOT_MIN_PCT_S,
+    RATE_MARGIN,
     SURGE_MARGIN,
     ScheduleError,
     fleet_schedule,
     frozen_state,
     health_corners,
+    rate_at_voltage,
     schedule,
     schedule_point,
     steady_at_speed,
@@ -147,6 +150,13 @@ def test_fleet_line_holds_for_every_corner_that_runs_and_keeps_the_nominal_accel
         kept = nom.steady_v + KEEP_ACCEL * (nom.accel_v - nom.steady_v)
         assert kept - 0.05 < pt.accel_v <= nom.accel_v  # (kept in fuel, about in voltage)
         assert pt.decel_v >= nom.decel_v
+    # the acceleration schedule: 1.2 times the nominal engine's rate on the fleet line, >= 5 %N/s
+    for pt, nom in zip(fleet, nominal, strict=True):
+        rate = rate_at_voltage(model, nom, pt.accel_v)
+        assert 0.0 < rate < nom.accel_rate_pct_s  # a lower line: a slower nominal engine
+        assert pt.ndot_pct_s == pytest.approx(max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * rate))
+        assert nom.ndot_pct_s == max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * nom.accel_rate_pct_s)
+    assert fleet[0].ndot_pct_s > 10.0 and fleet[1].ndot_pct_s == NDOT_MIN_PCT_S
     # at 70 %N a hot corner sets the line; at 100 %N the nominal's kept margin does
     assert fleet[0].accel_limited_by == "egt" and fleet[0].accel_v < nominal[0].accel_v - 0.3
     assert fleet[1].accel_limited_by == "keep"
