@@ -206,6 +206,7 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
     for key, value in (speed or {}).items():
         lines.append(f"- {key}: {value}")
     lines.append("")
+    steps = transients(rows)
     if any(t["runs"] for t in track.values()):
         lines += ["## Tracking RMS across engine variation [%N]", "",
                   "| controller | engines | nominal | p5 | median | p95 | max | p95 / nominal "
@@ -218,9 +219,9 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
                 f"| {_fmt(t['offset'])} |"
             )
         lines.append("")
-        lines += _targets(track)
+        if not steps:  # the staircase's targets: of no meaning across idle-to-maximum steps
+            lines += _targets(track)
         lines += ["", "![tracking](tracking_rms.png)", ""]
-    steps = transients(rows)
     if steps:
         lines += ["## Transients", "",
                   "| controller | variant | step [%N] | runs | thrust rise [s] nominal / median / "
