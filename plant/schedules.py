@@ -76,7 +76,7 @@ class SchedulePoint:
     accel_limited_by: str  # "egt", "surge", "rich" or "search" (none within MAX_FUEL_FACTOR)
     accel_egt_k: float
     accel_surge_margin: float
-    accel_rate_pct_s: float  # shaft acceleration on the line at this speed
+    accel_rate_pct_s: float  # the (nominal) engine's shaft acceleration on the line at this speed
     decel_fuel_kg_s: float
     decel_v: float
     decel_far: float
@@ -293,14 +293,16 @@ def fleet_point(
     model: EngineModel, nominal: SchedulePoint, corners: list[SchedulePoint]
 ) -> SchedulePoint:
     """The nominal point with the lowest acceleration line and the highest deceleration floor of
-    the nominal engine and its corners (their other acceleration and deceleration figures with
-    them); the line no lower than the nominal's kept point (kept_point); the acceleration
-    schedule from the nominal engine's rate on that line."""
+    the nominal engine and its corners (with the EGT, surge margin, fuel-air ratio and floor rate
+    of the engine that sets each); the line no lower than the nominal's kept point (kept_point);
+    its rate, and the acceleration schedule, the nominal engine's on that line."""
     acc = min([nominal, *corners], key=lambda p: p.accel_v)
     dec = max([nominal, *corners], key=lambda p: p.decel_v)
+    rate = nominal.accel_rate_pct_s
     if acc is not nominal:
         kept = kept_point(model, nominal)
         acc = kept if kept.accel_v > acc.accel_v else acc
+        rate = rate_at_voltage(model, nominal, acc.accel_v)
     return replace(
         nominal,
         accel_fuel_kg_s=acc.accel_fuel_kg_s,
@@ -308,16 +310,12 @@ def fleet_point(
         accel_limited_by=acc.accel_limited_by,
         accel_egt_k=acc.accel_egt_k,
         accel_surge_margin=acc.accel_surge_margin,
-        accel_rate_pct_s=acc.accel_rate_pct_s,
+        accel_rate_pct_s=rate,
         decel_fuel_kg_s=dec.decel_fuel_kg_s,
         decel_v=dec.decel_v,
         decel_far=dec.decel_far,
         decel_rate_pct_s=dec.decel_rate_pct_s,
-        ndot_pct_s=allowed_rate(
-            nominal.accel_rate_pct_s
-            if acc is nominal
-            else rate_at_voltage(model, nominal, acc.accel_v)
-        ),
+        ndot_pct_s=allowed_rate(rate),
     )
 
 

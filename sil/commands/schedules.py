@@ -11,8 +11,9 @@ from sil.validation import folder_option
 
 NAME = "schedules"
 HELP = (
-    "fuel schedules from the plant: acceleration line, steady line and deceleration floor against "
-    "speed (fuel and pump voltage), with margins: CSV, JSON and a plot"
+    "fuel schedules from the plant for every engine of a health spread: acceleration line and "
+    "schedule (Ndot), steady line and deceleration floor against speed, with margins: CSV, JSON "
+    "and a plot"
 )
 
 

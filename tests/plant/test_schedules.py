@@ -154,6 +154,7 @@ def test_fleet_line_holds_for_every_corner_that_runs_and_keeps_the_nominal_accel
     for pt, nom in zip(fleet, nominal, strict=True):
         rate = rate_at_voltage(model, nom, pt.accel_v)
         assert 0.0 < rate < nom.accel_rate_pct_s  # a lower line: a slower nominal engine
+        assert pt.accel_rate_pct_s == pytest.approx(rate)
         assert pt.ndot_pct_s == pytest.approx(max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * rate))
         assert nom.ndot_pct_s == max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * nom.accel_rate_pct_s)
     assert fleet[0].ndot_pct_s > 10.0 and fleet[1].ndot_pct_s == NDOT_MIN_PCT_S
