@@ -36,6 +36,7 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -59,6 +60,8 @@ HEALTH_SPREAD = 0.05  # the fleet: every corner of +-5 % on the four health scal
 KEEP_ACCEL = 0.5  # the fleet line keeps at least this of the nominal's fuel margin over steady
 RATE_MARGIN = 0.2  # the acceleration schedule: the nominal's rate on the line, plus this
 NDOT_MIN_PCT_S = 5.0  # ... and never less (under it, speed noise would work the rate loop)
+IDLE_PCT = 55.0  # line_rise_s from here (the transients' idle: every engine of +-5 % runs there)
+THRUST_FRACTION = 0.95  # line_rise_s to this fraction of the thrust change (14 CFR 33.73)
 
 
 class ScheduleError(ValueError):
@@ -346,6 +349,26 @@ def fleet_schedule(
         if progress is not None:
             progress(k + 1, len(engines))
     return [fleet_point(model, p, at_speed[p.n_pct]) for p in nominal]
+
+
+def line_rise_s(
+    points: list[SchedulePoint], line: dict[str, np.ndarray], idle_pct: float = IDLE_PCT
+) -> float:
+    """The fastest acceleration the line allows the nominal engine: the time from steady idle to
+    95 % of the thrust change up to the schedule's highest speed, along the line's shaft
+    acceleration (frozen speed, interpolated between the points: the shaft's inertia, the gas
+    path's lags neglected). line: the engine's running line; inf if the line stalls on the way."""
+    n = np.array([p.n_pct for p in points])
+    rate = np.array([p.accel_rate_pct_s for p in points])
+    grid = np.linspace(idle_pct, n[-1], 2001)
+    thrust = np.interp(grid, line["N_pct"], line["thrust_N"])
+    target = thrust[0] + THRUST_FRACTION * (thrust[-1] - thrust[0])
+    way = grid[: int(np.argmax(thrust >= target)) + 1]
+    way = np.union1d(way, n[(n > way[0]) & (n < way[-1])])  # every point of the table on the way
+    r = np.interp(way, n, rate)
+    if np.any(r <= 0.0):
+        return math.inf
+    return float(np.trapezoid(1.0 / r, way))
 
 
 def write_csv(points: list[SchedulePoint], path: Path) -> None:

@@ -75,6 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from plant import schedules as s
     from plant.aerothermal import make_model
+    from plant.steady_line import running_line
 
     try:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -105,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"\nsil schedules: {exc}", file=sys.stderr)
         return 1
     print(file=sys.stderr)
+    if args.speeds[0] <= s.IDLE_PCT < args.speeds[-1]:
+        settings["line_rise_s"] = s.line_rise_s(points, running_line(model))
     paths = {"csv": args.out / "schedules.csv", "json": args.out / "schedules.json"}
     s.write_csv(points, paths["csv"])
     s.write_json(points, settings, paths["json"])
@@ -119,6 +122,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{p.n_pct:6.1f} {p.steady_v:9.2f} {p.accel_v:8.2f} {p.accel_limited_by:>6} "
               f"{p.accel_surge_margin:6.1%} {p.accel_rate_pct_s:7.2f} {p.decel_v:8.2f} "
               f"{p.decel_rate_pct_s:7.2f} {p.ndot_pct_s:9.2f}")  # fmt: skip
+    if "line_rise_s" in settings:
+        print(f"along the acceleration line, the nominal engine from {s.IDLE_PCT:g} %N to 95 % of "
+              f"the thrust at {args.speeds[-1]:g} %N: {settings['line_rise_s']:.2f} s at best "
+              "(frozen speed, lags neglected)")  # fmt: skip
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0

@@ -4,6 +4,8 @@ says it is, checked on the gas path's own balances and the component maps."""
 from __future__ import annotations
 
 import json
+import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,6 +23,7 @@ from plant.schedules import (
     fleet_schedule,
     frozen_state,
     health_corners,
+    line_rise_s,
     rate_at_voltage,
     schedule,
     schedule_point,
@@ -162,3 +165,24 @@ def test_fleet_line_holds_for_every_corner_that_runs_and_keeps_the_nominal_accel
     assert fleet[0].accel_limited_by == "egt" and fleet[0].accel_v < nominal[0].accel_v - 0.3
     assert fleet[1].accel_limited_by == "keep"
     assert nominal[1].steady_fuel_kg_s < fleet[1].accel_fuel_kg_s < nominal[1].accel_fuel_kg_s
+
+
+def test_line_rise_is_the_integral_of_the_lines_rate():
+    """Closed forms: a constant rate over a thrust linear in speed takes (N95 - idle) / rate; a
+    rate linear in speed, r = a N, takes ln(N95 / idle) / a; a stalled line never gets there."""
+    base = schedule_point(make_model(), 70.0, running_line(make_model()))
+    speeds = np.arange(45.0, 100.1, 5.0)
+    line = {"N_pct": speeds, "thrust_N": 2.0 * speeds}  # thrust 2 N per %N
+    n95 = 55.0 + 0.95 * 45.0
+
+    def points(rates):
+        return [
+            replace(base, n_pct=n, accel_rate_pct_s=r) for n, r in zip(speeds, rates, strict=True)
+        ]
+
+    assert line_rise_s(points(np.full(12, 8.0)), line) == pytest.approx(
+        (n95 - 55.0) / 8.0, rel=1e-6
+    )
+    rise = line_rise_s(points(0.1 * speeds), line)
+    assert rise == pytest.approx(math.log(n95 / 55.0) / 0.1, rel=1e-5)
+    assert line_rise_s(points(np.where(speeds == 80.0, 0.0, 5.0)), line) == math.inf
