@@ -125,9 +125,10 @@ def run(args: argparse.Namespace) -> int:
             )
         )
         return code
-    print(f"{'':<18} {names[0]:>28} {names[1]:>28}")
+    key = max(len(f) for f in FIELDS)
+    print(f"{'':<{key}} {names[0]:>28} {names[1]:>28}")
     for r in rows:
-        print(f"{r['field']:<18} {_fmt(r['a']):>28} {_fmt(r['b']):>28}")
+        print(f"{r['field']:<{key}} {_fmt(r['a']):>28} {_fmt(r['b']):>28}")
     print(f"plot: {out / 'compare.png'}")
     return code
 
