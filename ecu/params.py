@@ -157,8 +157,8 @@ class EcuParams:
     v_min: float = 1.0
     v_max: float = 20.0  # within 95 % duty of a sagging 6S pack (22.2 V nominal)
     # the fastest the pump command may move: at 20 V/s the gas of a hot engine with a strong pump
-    # overshoots its limit by 70 K within 0.15 s of a step, before the EGT loop's probe can show
-    # it; at 12 V/s its EGT loop holds it (engine-variation campaign)
+    # overshoots its limit by up to 86 K within 0.15 s of a step, before the EGT loop's probe can
+    # show it; at 12 V/s its EGT loop holds it (engine-variation campaign)
     v_slew_v_s: float = 12.0
     # fuel schedules against corrected speed N / sqrt(inlet_temp_k / 288.15), at SCHED_N0_PCT +
     # k SCHED_STEP_PCT, as the pump voltage of a commissioned pump (`sil schedules` on our plant:

@@ -207,6 +207,7 @@ def schedule_point(
     _, g_dec = _bisect(lambda g: not lean_ok(g), 0.05 * g_ss, g_ss)
     x_acc, x_dec = frozen(g_acc), frozen(g_dec)
     st_acc, st_dec = _stations(model, x_acc, g_acc), _stations(model, x_dec, g_dec)
+    accel_rate = float(_rates(model, x_acc, g_acc)[3])
     return SchedulePoint(
         n_pct=n_pct,
         steady_fuel_kg_s=g_ss,
@@ -217,12 +218,12 @@ def schedule_point(
         accel_limited_by=by,
         accel_egt_k=st_acc.t5,
         accel_surge_margin=surge_margin(model, x_acc),
-        accel_rate_pct_s=float(_rates(model, x_acc, g_acc)[3]),
+        accel_rate_pct_s=accel_rate,
         decel_fuel_kg_s=g_dec,
         decel_v=pump_voltage_for(model, x_dec, g_dec),
         decel_far=g_dec / st_dec.g3,
         decel_rate_pct_s=float(_rates(model, x_dec, g_dec)[3]),
-        ndot_pct_s=allowed_rate(float(_rates(model, x_acc, g_acc)[3])),
+        ndot_pct_s=allowed_rate(accel_rate),
     )
 
 
@@ -249,10 +250,12 @@ def allowed_rate(line_rate_pct_s: float) -> float:
     return max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * line_rate_pct_s)
 
 
-def rate_at_voltage(model: EngineModel, point: SchedulePoint, v: float) -> float:
-    """The shaft acceleration of the point's engine at frozen speed with the pump at v (V), at
-    most the acceleration line's fuel flow."""
-    _, steady = steady_at_speed(model, point.n_pct, running_line(model))
+def rate_at_voltage(
+    model: EngineModel, line: dict[str, np.ndarray], point: SchedulePoint, v: float
+) -> float:
+    """The shaft acceleration of the point's engine (line: its running line) at frozen speed with
+    the pump at v (V), at most the acceleration line's fuel flow."""
+    _, steady = steady_at_speed(model, point.n_pct, line)
 
     def under(g: float) -> bool:
         return pump_voltage_for(model, frozen_state(model, steady.x, g), g) < v
@@ -275,10 +278,12 @@ def health_corners(model: EngineModel, spread: float) -> list[EngineModel]:
     ]
 
 
-def kept_point(model: EngineModel, point: SchedulePoint) -> SchedulePoint:
+def kept_point(
+    model: EngineModel, line: dict[str, np.ndarray], point: SchedulePoint
+) -> SchedulePoint:
     """The point with its acceleration line lowered to KEEP_ACCEL of its fuel margin over the
-    steady line, with the frozen-speed figures there."""
-    g_ss, steady = steady_at_speed(model, point.n_pct, running_line(model))
+    steady line (line: the engine's running line), with the frozen-speed figures there."""
+    g_ss, steady = steady_at_speed(model, point.n_pct, line)
     g = g_ss + KEEP_ACCEL * (point.accel_fuel_kg_s - g_ss)
     x = frozen_state(model, steady.x, g)
     return replace(
@@ -293,7 +298,10 @@ def kept_point(model: EngineModel, point: SchedulePoint) -> SchedulePoint:
 
 
 def fleet_point(
-    model: EngineModel, nominal: SchedulePoint, corners: list[SchedulePoint]
+    model: EngineModel,
+    line: dict[str, np.ndarray],
+    nominal: SchedulePoint,
+    corners: list[SchedulePoint],
 ) -> SchedulePoint:
     """The nominal point with the lowest acceleration line and the highest deceleration floor of
     the nominal engine and its corners (with the EGT, surge margin, fuel-air ratio and floor rate
@@ -303,9 +311,9 @@ def fleet_point(
     dec = max([nominal, *corners], key=lambda p: p.decel_v)
     rate = nominal.accel_rate_pct_s
     if acc is not nominal:
-        kept = kept_point(model, nominal)
+        kept = kept_point(model, line, nominal)
         acc = kept if kept.accel_v > acc.accel_v else acc
-        rate = rate_at_voltage(model, nominal, acc.accel_v)
+        rate = rate_at_voltage(model, line, nominal, acc.accel_v)
     return replace(
         nominal,
         accel_fuel_kg_s=acc.accel_fuel_kg_s,
@@ -335,20 +343,21 @@ def fleet_schedule(
     (the nominal engine's alone with spread 0)."""
     limits = (egt_limit_k, surge_margin_min, lean_margin)
     engines = health_corners(model, spread) if spread > 0.0 else []
-    nominal = schedule(model, speeds_pct, *limits)
+    line = running_line(model)
+    nominal = [schedule_point(model, n, line, *limits) for n in sorted(speeds_pct)]
     at_speed: dict[float, list[SchedulePoint]] = {p.n_pct: [] for p in nominal}
     for k, corner in enumerate(engines):
-        line = running_line(corner)
+        own_line = running_line(corner)
         for n in at_speed:
-            if n < line["N_pct"][0]:
+            if n < own_line["N_pct"][0]:
                 continue  # slower than this engine runs
             try:
-                at_speed[n].append(schedule_point(corner, n, line, *limits))
+                at_speed[n].append(schedule_point(corner, n, own_line, *limits))
             except ScheduleError:
                 continue  # over a limit in steady state there: its EGT loop holds it lower
         if progress is not None:
             progress(k + 1, len(engines))
-    return [fleet_point(model, p, at_speed[p.n_pct]) for p in nominal]
+    return [fleet_point(model, line, p, at_speed[p.n_pct]) for p in nominal]
 
 
 def line_rise_s(

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ecu.limiters import OWNER_EGT, OWNER_SPEED
+
 ESTIMATES = {
     "Ap_row2": ("Est_Ap21", "Est_Ap22"),
     "Lambda": ("Est_Lambda",),
@@ -19,8 +21,6 @@ ESTIMATES = {
     "Kr": ("Gain_Kr",),
     "Kf": ("Gain_Kf1", "Gain_Kf2"),
 }
-LOOP_OWNER_SPEED = 0  # ecu.limiters.OWNER_SPEED: the control law owns the pump command
-LOOP_OWNER_EGT = 1
 STEP_MIN_PCT = 1.0  # a demand change at least this large is a step
 SETTLED_S = 1.0  # the final thrust of a step: its mean over this long before the next change
 THRUST_FRACTION = 0.95  # thrust_rise_s: from the step to this fraction of the thrust change
@@ -74,7 +74,7 @@ def speed_loop_rms_pct(trace: dict[str, np.ndarray]) -> float:
     """Tracking RMS over the ticks where the control law owned the pump command: the tracking
     itself, without the time a protection (EGT, acceleration, overspeed, floor) held the engine
     off its reference."""
-    free = trace["LoopOwner"] == LOOP_OWNER_SPEED
+    free = trace["LoopOwner"] == OWNER_SPEED
     return _rms(trace["speed_true"][free] - trace["ReferenceSpeed"][free])
 
 
@@ -104,7 +104,7 @@ def summarize(trace: dict[str, np.ndarray], period_s: float, bit_names: dict[int
         "tracking_rms_pct": tracking_rms_pct(trace),
         "tracking_speed_loop_rms_pct": speed_loop_rms_pct(trace),
         "max_egt_K": float(np.nanmax(egt)) if np.isfinite(egt).any() else math.nan,
-        "egt_limit_time_s": float(np.sum(owner == LOOP_OWNER_EGT) * period_s),
+        "egt_limit_time_s": float(np.sum(owner == OWNER_EGT) * period_s),
         "faults": fault_events(trace, bit_names),
         "estimates": final_estimates(trace),
     }

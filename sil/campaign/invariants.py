@@ -27,6 +27,7 @@ import numpy as np
 
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
+from ecu.limiters import OWNER_EGT, OWNER_SPEED
 from plant.flags import FLAMEOUT
 from sil import metrics
 from sil.busfault.spec import E2E_KINDS
@@ -34,7 +35,6 @@ from sil.campaign.case import CaseRun
 from sil.campaign.spec import Invariants
 
 BIT = {name: bit for bit, name in ecu_faults.NAMES.items()}
-OWNER_SPEED, OWNER_EGT = metrics.LOOP_OWNER_SPEED, metrics.LOOP_OWNER_EGT
 
 
 def _rms(x: np.ndarray) -> float:

@@ -155,7 +155,7 @@ def test_fleet_line_holds_for_every_corner_that_runs_and_keeps_the_nominal_accel
         assert pt.decel_v >= nom.decel_v
     # the acceleration schedule: 1.2 times the nominal engine's rate on the fleet line, >= 5 %N/s
     for pt, nom in zip(fleet, nominal, strict=True):
-        rate = rate_at_voltage(model, nom, pt.accel_v)
+        rate = rate_at_voltage(model, running_line(model), nom, pt.accel_v)
         assert 0.0 < rate < nom.accel_rate_pct_s  # a lower line: a slower nominal engine
         assert pt.accel_rate_pct_s == pytest.approx(rate)
         assert pt.ndot_pct_s == pytest.approx(max(NDOT_MIN_PCT_S, (1.0 + RATE_MARGIN) * rate))
