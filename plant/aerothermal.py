@@ -4,26 +4,35 @@ behind the one-ECU-period interface of plant/interface.py. One period is one com
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
+from plant import engine as eng
 from plant import flags as fl
+from plant import hot_section as hs
+from plant import ignition as ig
 from plant.compressor import CompressorMap
 from plant.engine import (
     EngineModel,
     EngineParams,
     Stations,
     advance_observed,
+    stations,
 )
 from plant.faults import FaultKind
+from plant.intake import intake
 from plant.interface import SUBSTEP_S, Ambient, PlantConfig, PlantOutputs, check_finite
 from plant.jit import EXACT
 from plant.maps import EngineMaps, load_maps
 from plant.periphery import (
+    BATTERY_R,
     BATTERY_V,
     ENGINE,
+    IGNITER,
+    STARTER_DUTY,
     PlantBase,
     delivering,
     mat,
@@ -36,9 +45,15 @@ from plant.periphery import (
     vec,
 )
 from plant.pump import pump_flow
+from plant.starter import motor_current
 from plant.trim import solve_steady, solve_steady_at_speed
 from plant.turbine import TurbineMap
 
+_PART_FAULT = {  # fault kind -> (engine parameter, its value while the fault lasts or None)
+    FaultKind.STARTER_FAILURE: ("starter_health", None),
+    FaultKind.IGNITER_FAILURE: ("igniter_health", 0.0),
+    FaultKind.FUEL_STARVATION: ("fuel_supply_kg_s", None),
+}
 _HEALTH_FIELD = {  # fault kind -> (engine parameter, as-built value in PlantConfig)
     FaultKind.COMPRESSOR_EFFICIENCY: ("comp_eff_scale", "compressor_efficiency"),
     FaultKind.COMPRESSOR_FLOW: ("comp_flow_scale", "compressor_flow"),
@@ -47,16 +62,21 @@ _HEALTH_FIELD = {  # fault kind -> (engine parameter, as-built value in PlantCon
 }
 
 
-# the engine's part of the state array: EngineParams, x, RK4 work, Stations, lit, substeps
+# the engine's part of the state array: EngineParams, x, RK4 work, Stations, the engine's own
+# states (plant.engine.advance_engine: ignition, metal, starter and igniter), substeps
 PARAMS = ENGINE
 X = PARAMS + len(EngineParams._fields)
 WORK = X + 4
 STATIONS = WORK + 20
-LIT = STATIONS + len(Stations._fields)
-N_SUB = LIT + 1
+Z = STATIONS + len(Stations._fields)
+LIT = Z + eng.IGNITION + ig.LIT
+METAL = Z + eng.METAL_K
+N_SUB = Z + eng.ENGINE_SLOTS
 _PARAM = {name: PARAMS + i for i, name in enumerate(EngineParams._fields)}
 _INJECTOR_DP, _P0 = _PARAM["injector_dp_pa"], _PARAM["p0_pa"]
 _PUMP_EFFECTIVENESS = _PARAM["pump_effectiveness"]
+_EMF, _R_STARTER = _PARAM["starter_emf_v_s"], _PARAM["starter_r_ohm"]
+_STARTER_HEALTH, _N_MAX = _PARAM["starter_health"], _PARAM["n_max_rpm"]
 
 
 def model_tables(model: EngineModel) -> np.ndarray:
@@ -70,11 +90,23 @@ def _model_at(s: np.ndarray, t: np.ndarray) -> EngineModel:
     params = EngineParams(
         s[p], s[p + 1], s[p + 2], s[p + 3], s[p + 4], s[p + 5], s[p + 6], s[p + 7], s[p + 8],
         s[p + 9], s[p + 10], s[p + 11], s[p + 12], s[p + 13], s[p + 14], s[p + 15], s[p + 16],
-        s[p + 17], s[p + 18], s[p + 19], s[p + 20], s[p + 21],
+        s[p + 17], s[p + 18], s[p + 19], s[p + 20], s[p + 21], s[p + 22], s[p + 23], s[p + 24],
+        s[p + 25], s[p + 26], s[p + 27], s[p + 28],
     )  # fmt: skip
     compressor = CompressorMap(vec(t, 0), vec(t, 1), mat(t, 2), vec(t, 3), mat(t, 4), vec(t, 5))
     turbine = TurbineMap(vec(t, 6), vec(t, 7), mat(t, 8), mat(t, 9))
     return EngineModel(params, compressor, turbine, pump_table_at(t, 10, s))
+
+
+@njit(**EXACT, inline="always")
+def _starter_load(s: np.ndarray, supply_v: float) -> float:
+    """Battery current of the starter at the supply voltage supply_v (duty x motor current)."""
+    duty = s[STARTER_DUTY]
+    if duty <= 0.0:
+        return 0.0
+    omega = s[X + 3] * 0.01 * s[_N_MAX] * math.pi / 30.0
+    i = motor_current(duty * supply_v, omega, s[_EMF], s[_R_STARTER])
+    return duty * s[_STARTER_HEALTH] * i
 
 
 @njit(**EXACT)
@@ -82,24 +114,33 @@ def aero_period(
     s: np.ndarray, t: np.ndarray, u: float, pump_enabled: bool, tick: int, pump_in_loop: bool
 ) -> int:
     """One ECU period of the aero-thermal plant on its state array s and tables t: pump wear,
-    driver and battery at duty u (or, without the pump in the loop, fuel flow u), the engine
-    (advance_observed), truth, limits and sensors into s. Returns the flags."""
+    driver, starter and battery at duty u (or, without the pump in the loop, fuel flow u), the
+    engine (advance_observed), truth, limits and sensors into s. Returns the flags."""
+    x = s[X : X + 4]
+    starter_a = 0.0
     if pump_in_loop:
         if pump_health(s):
             s[_PUMP_EFFECTIVENESS] = delivering(s)
-        x = s[X : X + 4]
-        supply, v_pump, current = pump_driver(s, u, x[0] + s[_INJECTOR_DP] - s[_P0])
+        p_out = x[0] + s[_INJECTOR_DP] - s[_P0]
+        supply, v_pump, current = pump_driver(s, u, p_out)
+        if s[STARTER_DUTY] > 0.0:  # the starter's current sags the supply too
+            starter_a = _starter_load(s, supply)
+            supply, v_pump, current = pump_driver(s, u, p_out, starter_a)
         u = v_pump
     else:
-        supply, v_pump, current = s[BATTERY_V], 0.0, 0.0
+        v_pump, current = 0.0, 0.0
+        supply = s[BATTERY_V]
+        if s[STARTER_DUTY] > 0.0:
+            starter_a = _starter_load(s, supply)
+            supply = s[BATTERY_V] - s[BATTERY_R] * starter_a
     model = _model_at(s, t)
-    x = s[X : X + 4]
-    out = s[STATIONS:LIT]
+    z = s[Z:N_SUB]
+    z[eng.STARTER_V] = s[STARTER_DUTY] * supply
+    z[eng.IGNITER_ON] = s[IGNITER]
+    out = s[STATIONS:Z]
     work = s[WORK : WORK + 20].reshape((5, 4))
-    flags, lit = advance_observed(
-        x, u, pump_in_loop, s[LIT], int(s[N_SUB]), SUBSTEP_S, model, work, out
-    )
-    s[LIT] = lit
+    flags = advance_observed(x, u, pump_in_loop, z, int(s[N_SUB]), SUBSTEP_S, model, work, out)
+    lit = z[eng.IGNITION + ig.LIT]
     if not pump_enabled:
         flags |= fl.PUMP_UNPOWERED
     flags |= int(out[10])
@@ -108,7 +149,8 @@ def aero_period(
     # truth: N %, P3, P5, T4 of the state; EGT (t5), fuel, air flow (g2), thrust of the stations
     return publish(
         s, tick, flags, supply, v_pump, current, x[3], x[0], x[1], x[2], out[6], out[4], out[0],
-        out[9],
+        out[9], starter_a, z[eng.METAL_K] if z[eng.METAL_K] >= 0.0 else out[6],
+        z[eng.IGNITION + ig.UNBURNT_KG], lit,
     )  # fmt: skip
 
 
@@ -134,7 +176,9 @@ class AeroThermalPlant(PlantBase):
     """Aero-thermal turbojet with gear pump, sensors and faults; ``step`` = one ECU period.
 
     Starts at the steady state of ``config.initial_fuel_kg_s`` (or of ``initial_speed_pct``
-    within ``initial_egt_max_k``); ``trim_pump_voltage`` and ``trim_duty`` hold it there.
+    within ``initial_egt_max_k``); ``trim_pump_voltage`` and ``trim_duty`` hold it there. With
+    ``config.standstill`` it starts at rest, cold and unlit (both trims 0): the starter
+    (``step(..., starter_duty=...)``) and the igniter start it.
     """
 
     ENGINE_SLOTS = N_SUB + 1 - ENGINE
@@ -153,20 +197,30 @@ class AeroThermalPlant(PlantBase):
         self._model = self._model._replace(params=params)  # as the trim below sees it
         s[PARAMS:X] = params
         self._refuse_unsupported(config.faults)
-        g_fuel = config.initial_fuel_kg_s
-        if config.initial_speed_pct is None:
-            steady = solve_steady(self._model, g_fuel)
-        else:
-            g_fuel, steady = solve_steady_at_speed(
-                self._model, config.initial_speed_pct, config.initial_egt_max_k
-            )
-        s[X : X + 4] = steady.x
-        s[LIT] = 1.0
         s[N_SUB] = config.substeps
-        s[STATIONS:LIT] = steady.stations  # stations of the present state
-        self.trim_pump_voltage = self._voltage_for(g_fuel)
-        self.trim_duty = self._duty_for(self.trim_pump_voltage)
-        self._start(steady.stations.t5, self.trim_duty)
+        if config.standstill:
+            p2, t2 = intake(params.p0_pa, params.t0_k, params.u0_m_s)
+            s[X : X + 4] = (p2, params.p0_pa, t2, 0.0)
+            st = Stations(*stations(s[X : X + 4], 0.0, self._model))
+            s[METAL] = t2 if config.hot_section_mass else hs.IN_EQUILIBRIUM
+            self.trim_pump_voltage = self.trim_duty = 0.0
+        else:
+            g_fuel = config.initial_fuel_kg_s
+            if config.initial_speed_pct is None:
+                steady = solve_steady(self._model, g_fuel)
+            else:
+                g_fuel, steady = solve_steady_at_speed(
+                    self._model, config.initial_speed_pct, config.initial_egt_max_k
+                )
+            s[X : X + 4] = steady.x
+            s[LIT] = 1.0
+            st = steady.stations
+            s[METAL] = st.t5 if config.hot_section_mass else hs.IN_EQUILIBRIUM
+            self.trim_pump_voltage = self._voltage_for(g_fuel)
+            self.trim_duty = self._duty_for(self.trim_pump_voltage)
+        s[STATIONS:Z] = st  # stations of the present state
+        s[Z + eng.G3_KG_S] = max(st.g3, 0.0)
+        self._start(st.t5, self.trim_duty)
 
     def step_fuel(self, fuel_kg_s: float) -> PlantOutputs:
         """Advance one ECU period with the fuel flow commanded directly (pump bypassed, no pump
@@ -180,17 +234,21 @@ class AeroThermalPlant(PlantBase):
         return self._s[X : X + 4].copy()
 
     @property
+    def stations(self) -> Stations:
+        """The station values at the present state (EGT in the t5 slot: the gas leaving the hot
+        section)."""
+        o = self._s[STATIONS:Z]
+        return Stations(*o[:-1].tolist(), int(o[-1]))
+
+    @property
     def model(self) -> EngineModel:
         """The compiled model's inputs as they are now (health and pump faults applied)."""
         return self._model._replace(params=EngineParams(*self._s[PARAMS:X].tolist()))
 
     # ---- engine side --------------------------------------------------------------------------
-    def _truth(
-        self, v_pump: float
-    ) -> tuple[float, float, float, float, float, float, float, float, int]:
+    def _truth(self, v_pump: float) -> tuple:
         s = self._s
-        o = s[STATIONS:LIT]
-        st = Stations(*o[:-1].tolist(), int(o[-1]))
+        st = self.stations
         flags = st.flags | (fl.FLAMEOUT if s[LIT] == 0.0 else 0)
         x = s[X : X + 4]
         return (
@@ -203,6 +261,9 @@ class AeroThermalPlant(PlantBase):
             st.g2,
             st.thrust,
             flags,
+            float(s[METAL]) if s[METAL] >= 0.0 else st.t5,
+            float(s[Z + eng.IGNITION + ig.UNBURNT_KG]),
+            float(s[LIT]),
         )
 
     def _pump_outlet_gauge(self) -> float:
@@ -215,11 +276,18 @@ class AeroThermalPlant(PlantBase):
     def _supports(self, kind: FaultKind) -> bool:
         return True
 
-    def _apply_engine(self, kind: FaultKind, value: float | None) -> None:
+    def _apply_engine(self, kind: FaultKind, value: float | None, starts: bool) -> None:
         if kind == FaultKind.AMBIENT_TEMPERATURE:
-            t0 = self.config.ambient.t0_k if value is None else value
+            t0 = value if starts else self.config.ambient.t0_k
             self._s[_PARAM["t0_k"]] = float(t0)
+        elif kind in _PART_FAULT:
+            param, during = _PART_FAULT[kind]
+            new = getattr(EngineParams(0.0), param)  # a new part
+            if starts:
+                new = value if during is None else during
+            self._s[_PARAM[param]] = float(new)
         else:
+            value = value if starts else None
             param, as_built = _HEALTH_FIELD[kind]
             v = getattr(self.config, as_built) if value is None else float(value)
             self._s[_PARAM[param]] = v

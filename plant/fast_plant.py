@@ -142,8 +142,9 @@ def fast_period(
     p_out = p3 + s[INJECTOR_DP] - s[P0]
     fuel, _ = _pump_flow(v_pump, p_out, pump_table_at(t, 7, s), delivering(s))
     return publish(
-        s, tick, flags, supply, v_pump, current, n_pct, p3, p5, t4, egt, fuel, air, thrust
-    )
+        s, tick, flags, supply, v_pump, current, n_pct, p3, p5, t4, egt, fuel, air, thrust,
+        0.0, egt, 0.0, 1.0,
+    )  # fmt: skip
 
 
 @lru_cache(maxsize=4)
@@ -168,6 +169,8 @@ class FastPlant(PlantBase):
         for name in HEALTH_FIELDS:
             if getattr(config, name) != 1.0:
                 raise ValueError(f"{name}: FastPlant has no compressor or turbine (aero only)")
+        if config.standstill:
+            raise ValueError("standstill: FastPlant models a running engine only (aero only)")
         self.theta = tuple(float(t) for t in theta)
         self.reference_voltage = maps.trim_pump_voltage  # dV = 0 (aero-thermal trim)
         self._table = _quasi_steady(config.ambient)
@@ -207,9 +210,7 @@ class FastPlant(PlantBase):
         n = TRIM_N_PCT + float(self._s[X])
         return float(np.interp(n, self._table["N_pct"], self._table[column]))
 
-    def _truth(
-        self, v_pump: float
-    ) -> tuple[float, float, float, float, float, float, float, float, int]:
+    def _truth(self, v_pump: float) -> tuple:
         fuel, _ = pump_flow(
             v_pump, self._pump_outlet_gauge(), self._pump, self.delivering_effectiveness
         )
@@ -223,6 +224,9 @@ class FastPlant(PlantBase):
             self._at("air_kg_s"),
             self._at("thrust_N"),
             0,
+            self._at("EGT_K"),
+            0.0,
+            1.0,
         )
 
     def _pump_outlet_gauge(self) -> float:

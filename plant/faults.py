@@ -29,6 +29,9 @@ class FaultKind(StrEnum):
     EGT_OPEN_CIRCUIT = "egt_open_circuit"  # thermocouple reads its upscale burnout value
     BATTERY_VOLTAGE = "battery_voltage"  # value: new open-circuit battery voltage, V
     AMBIENT_TEMPERATURE = "ambient_temperature"  # value: new ambient temperature T0, K
+    STARTER_FAILURE = "starter_failure"  # value: torque left / a new starter's (0: dead motor)
+    IGNITER_FAILURE = "igniter_failure"  # the glow plug is open: nothing lights
+    FUEL_STARVATION = "fuel_starvation"  # value: the most the tank and line supply, kg/s
 
 
 # kinds that need a value, with its allowed range
@@ -42,6 +45,8 @@ _VALUE_RANGE: dict[FaultKind, tuple[float, float]] = {
     FaultKind.SPEED_NOISE_BURST: (0.0, 1e5),
     FaultKind.BATTERY_VOLTAGE: (0.0, 100.0),
     FaultKind.AMBIENT_TEMPERATURE: (180.0, 340.0),
+    FaultKind.STARTER_FAILURE: (0.0, 1.0),
+    FaultKind.FUEL_STARVATION: (0.0, 1.0),
 }
 
 

@@ -73,6 +73,13 @@ class PlantConfig:
     # initial_egt_max_k if that speed is hotter: each varied engine where its governor holds it
     initial_speed_pct: float | None = None
     initial_egt_max_k: float = math.inf
+    # or, when set, at rest: 0 rpm, ambient pressures and temperatures, no flame, no fuel
+    # pooled (a start from standstill; aero-thermal plant only)
+    standstill: bool = False
+    # the hot section's thermal mass (plant/hot_section.py; aero-thermal plant): None = with a
+    # start from rest, without (the metal always at the gas temperature: the document's engine,
+    # whose figures are reproduced exactly) for a start in steady state
+    hot_section: bool | None = None
     faults: tuple[Fault, ...] = ()
     seed: int = 0
     speed_pickup: SpeedPickupConfig = field(default_factory=SpeedPickupConfig)
@@ -111,6 +118,12 @@ class PlantConfig:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
 
     @property
+    def hot_section_mass(self) -> bool:
+        """The hot section's thermal mass is simulated (``hot_section``, by default with a start
+        from rest)."""
+        return self.standstill if self.hot_section is None else self.hot_section
+
+    @property
     def substeps(self) -> int:
         return int(round(self.ecu_period_s / SUBSTEP_S))
 
@@ -132,12 +145,16 @@ class PlantOutputs:
     p3_pa: float = 0.0
     p5_pa: float = 0.0
     t4_k: float = 0.0
-    egt_true_k: float = 0.0  # T5 = T6 (eq. 2.24)
+    egt_true_k: float = 0.0  # gas leaving the hot section (T5 = T6 of eq. 2.24 when steady)
     fuel_kg_s: float = 0.0
     air_kg_s: float = 0.0
     thrust_n: float = 0.0
     pump_v: float = 0.0  # voltage at the pump terminals = duty x supply voltage
     pump_effectiveness: float = 1.0
+    starter_current_a: float = 0.0  # drawn from the battery by the starter
+    hot_section_k: float = 0.0  # the hot section's metal temperature
+    unburnt_fuel_kg: float = 0.0  # fuel the pump delivered while no flame burnt, since the start
+    burning: float = 1.0  # 1 while the flame burns
     flags: int = 0  # plant.flags bits (decode with plant.flags.PlantFlag)
 
 
@@ -154,8 +171,25 @@ class Plant(Protocol):
         """Simulated time: ECU periods stepped so far times the period."""
         ...
 
-    def step(self, pump_duty: float, pump_enabled: bool = True) -> PlantOutputs:
-        """Advance one ECU period with the pump at ``pump_duty`` (0..1) of the supply voltage."""
+    def step(
+        self,
+        pump_duty: float,
+        pump_enabled: bool = True,
+        starter_duty: float = 0.0,
+        igniter: bool = False,
+    ) -> PlantOutputs:
+        """Advance one ECU period with the pump at ``pump_duty`` (0..1) of the supply voltage,
+        the starter at ``starter_duty`` (0..1) and the igniter on or off."""
+        ...
+
+    @property
+    def starter_command(self) -> tuple[float, bool]:
+        """The starter's duty (0..1) and the igniter's power as the plant runs them now."""
+        ...
+
+    def set_starter(self, starter_duty: float, igniter: bool) -> None:
+        """The starter's duty (0..1) and the igniter's power from now on (a step() sets them
+        for its period)."""
         ...
 
     def inject(self, fault: Fault) -> None:

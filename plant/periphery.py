@@ -36,6 +36,9 @@ ENGINE_FAULTS = (  # handled by the engine side (_apply_engine)
     FaultKind.TURBINE_EFFICIENCY,
     FaultKind.TURBINE_FLOW,
     FaultKind.AMBIENT_TEMPERATURE,
+    FaultKind.STARTER_FAILURE,
+    FaultKind.IGNITER_FAILURE,
+    FaultKind.FUEL_STARVATION,
 )
 
 # ---- the state array --------------------------------------------------------------------------
@@ -53,7 +56,9 @@ ENGINE_FAULTS = (  # handled by the engine side (_apply_engine)
     OVERSPEED_PCT,
     OVERTEMPERATURE_K,
     NOISE_INDEX,  # next sample of the noise blocks
-) = range(13)
+    STARTER_DUTY,  # the starter's PWM duty, 0..1 (input)
+    IGNITER,  # 1 while the igniter is powered (input)
+) = range(15)
 SPEED = 16  # the speed pickup's slots (plant.sensors)
 THERMO = SPEED + SP_SLOTS  # the thermocouple's
 OUT = 32  # the outputs of the last period, in OUT_FIELDS order
@@ -74,6 +79,10 @@ OUT_FIELDS = (
     "thrust_n",
     "pump_v",
     "pump_effectiveness",
+    "starter_current_a",
+    "hot_section_k",
+    "unburnt_fuel_kg",
+    "burning",
 )
 NOISE = OUT + len(OUT_FIELDS)  # three blocks: speed normal, speed uniform, thermocouple normal
 ENGINE = NOISE + 3 * BLOCK  # the subclass's part
@@ -99,10 +108,14 @@ def delivering(s: np.ndarray) -> float:
 
 
 @njit(**EXACT, inline="always")
-def pump_driver(s: np.ndarray, duty: float, p_out_gauge_pa: float) -> tuple[float, float, float]:
+def pump_driver(
+    s: np.ndarray, duty: float, p_out_gauge_pa: float, other_load_a: float = 0.0
+) -> tuple[float, float, float]:
     """(supply voltage, pump voltage, pump current): plant.pump.supply_and_pump_voltage and
-    pump_current, compiled."""
-    battery_v, r = s[BATTERY_V], s[BATTERY_R]
+    pump_current, compiled; other_load_a, drawn from the battery beside the pump (the
+    starter), sags the supply too."""
+    r = s[BATTERY_R]
+    battery_v = s[BATTERY_V] - r * other_load_a
     state = s[PUMP_STATE]
     if state == _STALLED or duty <= 0.0:
         return battery_v, 0.0, 0.0
@@ -138,6 +151,10 @@ def publish(
     fuel: float,
     air: float,
     thrust: float,
+    starter_a: float,
+    metal_k: float,
+    unburnt_kg: float,
+    burning: float,
 ) -> int:
     """Limits, sensor readings (one sample of each noise block) and the outputs of the period
     into s[OUT:]; returns the flags."""
@@ -166,6 +183,10 @@ def publish(
     s[OUT + 13] = thrust
     s[OUT + 14] = v_pump
     s[OUT + 15] = s[EFFECTIVENESS]
+    s[OUT + 16] = starter_a
+    s[OUT + 17] = metal_k
+    s[OUT + 18] = unburnt_kg
+    s[OUT + 19] = burning
     return flags
 
 
@@ -213,7 +234,7 @@ class PlantBase:
     when pump_in_loop, else the fuel flow) and ``_tables``, and implement ``_truth()`` (the
     engine's present values, for the outputs of tick 0), ``_pump_outlet_gauge() -> Pa``,
     ``_pump_changed()``, and for ENGINE_FAULTS ``_supports(kind)`` and
-    ``_apply_engine(kind, value or None to end)``.
+    ``_apply_engine(kind, value, starts)`` (starts False: the fault ends).
     """
 
     ENGINE_SLOTS = 0
@@ -292,14 +313,16 @@ class PlantBase:
             self._pump_state,
         )
         c, o = self.config, self.outputs
-        n_pct, p3, p5, t4, egt, fuel, air, thrust, flags = self._truth(v_pump)
+        n_pct, p3, p5, t4, egt, fuel, air, thrust, flags, metal, unburnt, burning = self._truth(
+            v_pump
+        )
         if n_pct > c.overspeed_pct:
             flags |= fl.OVERSPEED
         if egt > c.overtemperature_egt_k:
             flags |= fl.OVERTEMPERATURE
         n_rpm = n_pct * 0.01 * self._n_max_rpm
         values = (0.0, n_rpm, egt, supply, current, n_rpm, n_pct, p3, p5, t4, egt, fuel, air)
-        values += (thrust, v_pump, self._effectiveness)
+        values += (thrust, v_pump, self._effectiveness, 0.0, metal, unburnt, burning)
         for name, value in zip(OUT_FIELDS, values, strict=True):
             setattr(o, name, value)
         self._s[OUT : OUT + len(OUT_FIELDS)] = values
@@ -307,9 +330,18 @@ class PlantBase:
         o.flags = int(flags)
 
     # ---- inputs -------------------------------------------------------------------------------
-    def step(self, pump_duty: float, pump_enabled: bool = True) -> PlantOutputs:
+    def step(
+        self,
+        pump_duty: float,
+        pump_enabled: bool = True,
+        starter_duty: float = 0.0,
+        igniter: bool = False,
+    ) -> PlantOutputs:
         """Advance one ECU period with the pump at ``pump_duty`` (0..1) of the supply voltage;
-        ``pump_enabled=False`` removes pump power (duty ignored)."""
+        ``pump_enabled=False`` removes pump power (duty ignored); the starter at
+        ``starter_duty`` (0..1) of the supply and the igniter powered or not over the period (a
+        plant without them ignores them)."""
+        self.set_starter(starter_duty, igniter)
         if not pump_enabled:
             duty = 0.0
         elif type(pump_duty) is float and 0.0 <= pump_duty <= 1.0:
@@ -317,6 +349,19 @@ class PlantBase:
         else:
             duty = check_finite("pump_duty", pump_duty, 0.0, 1.0)
         return self._period_with(duty, bool(pump_enabled))
+
+    @property
+    def starter_command(self) -> tuple[float, bool]:
+        """The starter's duty and the igniter's power as the plant runs them now."""
+        return float(self._s[STARTER_DUTY]), bool(self._s[IGNITER])
+
+    def set_starter(self, starter_duty: float, igniter: bool) -> None:
+        """The starter's duty (0..1 of the supply) and the igniter's power, from now on."""
+        s = self._s
+        if type(starter_duty) is not float or not 0.0 <= starter_duty <= 1.0:
+            starter_duty = check_finite("starter_duty", starter_duty, 0.0, 1.0)
+        s[STARTER_DUTY] = starter_duty
+        s[IGNITER] = 1.0 if igniter else 0.0
 
     def _period_with(self, u: float, pump_enabled: bool, pump_in_loop: bool = True) -> PlantOutputs:
         """One period: faults due, the kernel with input u, the outputs."""
@@ -355,6 +400,10 @@ class PlantBase:
             o.thrust_n,
             o.pump_v,
             o.pump_effectiveness,
+            o.starter_current_a,
+            o.hot_section_k,
+            o.unburnt_fuel_kg,
+            o.burning,
         ) = self._s[OUT:NOISE].tolist()
         o.tick = self._tick
         o.flags = flags
@@ -411,7 +460,7 @@ class PlantBase:
     def _apply(self, k: FaultKind, value: float | None, starts: bool) -> None:
         """Start (with its value) or end a fault of kind k."""
         if k in ENGINE_FAULTS:
-            self._apply_engine(k, value if starts else None)
+            self._apply_engine(k, value, starts)
         elif k == FaultKind.PUMP_EFFECTIVENESS:
             gain = self.config.pump_gain  # the fault's value is relative to the new pump
             self._effectiveness = value * gain if starts else gain
@@ -446,10 +495,9 @@ class PlantBase:
         return 0.5 * (lo + hi)
 
     # ---- engine side (subclasses) -------------------------------------------------------------
-    def _truth(
-        self, v_pump: float
-    ) -> tuple[float, float, float, float, float, float, float, float, int]:
-        """(N %, P3, P5, T4, EGT, fuel, air flow, thrust, flags) at the present state."""
+    def _truth(self, v_pump: float) -> tuple:
+        """(N %, P3, P5, T4, EGT, fuel, air flow, thrust, flags, hot-section metal K, unburnt
+        fuel kg, burning 0/1) at the present state."""
         raise NotImplementedError
 
     def _pump_outlet_gauge(self) -> float:
@@ -461,5 +509,5 @@ class PlantBase:
     def _supports(self, kind: FaultKind) -> bool:
         raise NotImplementedError
 
-    def _apply_engine(self, kind: FaultKind, value: float | None) -> None:
+    def _apply_engine(self, kind: FaultKind, value: float | None, starts: bool) -> None:
         raise NotImplementedError
