@@ -22,11 +22,12 @@ from __future__ import annotations
 
 from ecu import faults as F
 from ecu import modes as M
+from ecu import start_sequencer as Q
 from ecu.estimator import estimator_step
 from ecu.fast_model import observer_step
 from ecu.firmware_params import FirmwareParams, compile_params
 from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, sub_sat, take_sat_events
-from ecu.limiters import OWNER_SPEED, egt_lead_step, reset_loops, select_voltage
+from ecu.limiters import OWNER_SPEED, egt_lead_step, reset_loops, schedule_v, select_voltage
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, RATE_BUF_LEN, EcuParams
 from ecu.pi import pi_control, pi_track
@@ -92,6 +93,10 @@ class EcuOutputs:
         "nref_cpct",  # reference-model speed, 0.01 %N per count
         "n_cpct",  # speed used by the control (measured or substituted), 0.01 %N per count
         "owner",  # which loop owns the pump command (ecu.limiters.OWNER_*)
+        "starter_cpct",  # starter PWM duty, 0.01 % per count (0..10000)
+        "igniter",  # igniter power bit
+        "seq_state",  # start/stop sequencer state (ecu.start_sequencer)
+        "seq_reason",  # the last start's abort reason (ecu.start_sequencer, 0: none)
     )  # fmt: skip
 
     def __init__(self) -> None:
@@ -113,6 +118,7 @@ class Ecu:
         self.p = params if isinstance(params, FirmwareParams) else compile_params(params)
         self.s = EcuState()
         self.out = EcuOutputs()
+        self.seq = Q.SeqOut()
         self.reset()
 
     def reset(self) -> None:
@@ -242,8 +248,12 @@ class Ecu:
             faults |= F.OVERSPEED
         bad = mode == M.RUN and n_rpm < p.flameout_rpm
         s.flameout_cnt = F.persist(s.flameout_cnt, bad, p.flameout_ticks)
-        if s.flameout_cnt >= p.flameout_ticks:
+        bad = mode == M.RUN and egt_ok and s.egt_dk < p.flameout_egt_dk
+        s.flame_egt_cnt = F.persist(s.flame_egt_cnt, bad, p.flameout_egt_ticks)
+        flameout = 0
+        if s.flameout_cnt >= p.flameout_ticks or s.flame_egt_cnt >= p.flameout_egt_ticks:
             faults |= F.FLAMEOUT
+            flameout = 1
         bad = running and egt_ok and s.egt_dk > p.egt_max_dk
         s.egt_over_cnt = F.persist(s.egt_over_cnt, bad, p.egt_max_ticks)
         if s.egt_over_cnt >= p.egt_max_ticks:
@@ -253,23 +263,60 @@ class Ecu:
         trip_fault = 1 if (faults & TRIP_FAULT) else 0
         if running and s.sensor_age > p.sensor_loss_ticks:
             trip_fault = 1
-        trip_shutdown = 1 if (faults & F.FLAMEOUT) else 0
+        trip_shutdown = flameout
         if s.demand_age >= p.demand_shutdown_ticks:
             trip_shutdown = 1
+        relight = 1 if (flameout and p.start_on and s.relights < p.seq_relight_max) else 0
+
+        # 4b. the start sequencer (ARMED): this tick's starter, igniter and pump, or an abort
+        seq = self.seq
+        seq.v_q24 = 0
+        seq.starter_cpct = 0
+        seq.igniter = 0
+        start_abort = 0
+        running = 1 if n_rpm >= p.run_entry_rpm else 0
+        if mode == M.ARMED and p.start_on:
+            v_cap = p.v_max_q24
+            if p.fuel_schedules_on:  # the start's fuel stays under the acceleration line of
+                # the weakest pump the schedules accept (no pump estimate yet in a start)
+                v_cap = schedule_v(
+                    s, p, p.accel_line_q24, n_q24, p.sched_lam_lo_q24, p.sched_lam_lo_q24
+                )
+            start_abort = Q.start_step(s, p, n_rpm, s.egt_dk, ctrl_rate, v_cap, seq)
+            running = 1 if s.seq_state == Q.RUN else 0
+            if (s.stop or not s.arm or trip_shutdown) and not start_abort:
+                s.seq_reason = Q.STOPPED
         new_mode = M.next_mode(
             mode,
             s.arm,
             s.stop,
-            1 if n_rpm >= p.run_entry_rpm else 0,
+            running,
             1 if s.demand_age <= p.demand_hold_ticks else 0,
             trip_fault,
-            trip_shutdown,
+            1 if (trip_shutdown or start_abort) else 0,
             1 if n_rpm < p.shutdown_done_rpm else 0,
+            1 if (start_abort or s.seq_state >= Q.IGNITION) else 0,
+            relight,
+            1 if (Q.cooled(s, p) or not p.start_on) else 0,
         )
+        if new_mode == M.ARMED and mode != M.ARMED and p.start_on:  # a start or a relight
+            if mode == M.RUN:
+                s.relights += 1
+                s.flameout_cnt = 0
+                s.flame_egt_cnt = 0
+            else:
+                s.relights = 0
+            Q.start_begin(s, 1 if mode == M.RUN else 0)
+        if new_mode == M.OFF:
+            s.seq_state = Q.OFF
         if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless at the entry voltage
-            reset_loops(s, p.entry_v_q24)
+            v_entry = p.entry_v_q24
+            if mode == M.ARMED and p.start_on:
+                v_entry = s.seq_v_q24  # where the start left the pump
+            s.seq_state = Q.RUN
+            reset_loops(s, v_entry)
             s.hist_fill = 0
-            s.theta_q24[PID_I] = sub_sat(p.entry_v_q24, p.trim_v_q24)
+            s.theta_q24[PID_I] = sub_sat(v_entry, p.trim_v_q24)
             s.theta_ext[PID_I] = 0
             s.xm1_q24 = dn
             s.xm2_q24 = 0
@@ -327,14 +374,23 @@ class Ecu:
             if s.v_saturated:
                 faults |= F.PUMP_SATURATED
         else:
-            s.v_applied_q24 = 0
+            if new_mode == M.SHUTDOWN and p.start_on:
+                Q.stop_step(s, p, n_rpm, s.egt_dk, seq)
+            elif new_mode != M.ARMED:
+                seq.v_q24 = 0  # a start that just ended: no fuel
+            s.v_applied_q24 = seq.v_q24
             s.xm1_q24 = dn
             s.xm2_q24 = 0
             s.obs_n_q24 = dn
             s.obs_v_q24 = rate
-            pump_mv = 0
-            duty = 0
-            enable = 0
+            pump_mv = volts_q24_to_mv(seq.v_q24)
+            duty = pump_duty(s, p, pump_mv, s.supply_mv) if pump_mv > 0 else 0
+            enable = 1 if duty > 0 else 0
+        if new_mode != M.ARMED and new_mode != M.SHUTDOWN:
+            seq.starter_cpct = 0
+            seq.igniter = 0
+        s.starter_cpct = seq.starter_cpct
+        s.igniter = seq.igniter
 
         # 6. health, telemetry, fault word
         health = F.pump_health_pm(th[LAM], p.lambda_comm_q24)
@@ -363,4 +419,8 @@ class Ecu:
         o.nref_cpct = _q24_to_cpct(s.xm1_q24 + p.trim_n_q24)
         o.n_cpct = _q24_to_cpct(n_q24)
         o.owner = s.owner
+        o.starter_cpct = seq.starter_cpct
+        o.igniter = seq.igniter
+        o.seq_state = s.seq_state
+        o.seq_reason = s.seq_reason
         return o

@@ -3,8 +3,9 @@
 Frames are decoded with :mod:`protocol.codec` (raw integers, which are already the firmware's
 units: rpm, 0.1 K, mV, mA, 0.01 %) and checked with its E2E checkers; the per-frame-kind status
 of what arrived since the last tick goes to the firmware with the values (see
-:class:`ecu.firmware.EcuInputs`). Outputs go back as EcuStatus and EcuTelemetry when due, then
-EcuActuator last, following :mod:`protocol.lockstep`:
+:class:`ecu.firmware.EcuInputs`). Outputs go back as EcuStatus and EcuTelemetry when due,
+EcuStarter while the ECU is ARMED or in SHUTDOWN (the start/stop sequencer drives the starter
+and igniter), then EcuActuator last, following :mod:`protocol.lockstep`:
 
 - lockstep: one tick per PlantSensors frame, answered with ActuatorTick = SensorTick; when a
   Demand is due at that tick (and the command node sends ticked demands) the tick waits for it,
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from ecu import modes as M
 from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, Ecu, EcuInputs
 from ecu.firmware_params import FirmwareParams
 from ecu.params import EcuParams
@@ -71,6 +73,7 @@ class EcuNode:
         codec = codec or Codec()
         self.sensors, self.analog, self.demand = (codec[m] for m in RECEIVED)
         self.actuator = codec["EcuActuator"]
+        self.starter = codec["EcuStarter"]
         self.status = codec["EcuStatus"]
         self.telemetry = codec["EcuTelemetry"]
         self.frame_ids = tuple(m.frame_id for m in (self.sensors, self.analog, self.demand))
@@ -90,6 +93,7 @@ class EcuNode:
         self._demand_raw = [0] * len(self.demand.signal_names)
         self._demand_next = [0] * len(self.demand.signal_names)
         self._actuator_raw = [0] * len(self.actuator.signal_names)
+        self._starter_raw = [0] * len(self.starter.signal_names)
         self._status_raw = [0] * len(self.status.signal_names)
         self._telemetry_raw = [0, 0]
         self.ticks = 0  # ticks run
@@ -275,6 +279,15 @@ class EcuNode:
             self.telemetry.pack_raw(raw)
             send(self.telemetry.frame_id, self.telemetry.data)
             self.telemetry_index = j + 1 if j + 1 < TELEMETRY_COUNT else 0
+        if o.mode == M.ARMED or o.mode == M.SHUTDOWN:
+            raw = self._starter_raw
+            raw[0] = o.igniter
+            raw[1] = self.tick
+            raw[2] = _clamp(o.starter_cpct, 0, 10000)
+            raw[3] = o.seq_state
+            raw[4] = o.seq_reason
+            self.starter.pack_raw(raw)
+            send(self.starter.frame_id, self.starter.data)
         raw = self._actuator_raw
         raw[0] = o.pump_enable
         raw[1] = o.mode

@@ -154,6 +154,10 @@ class EcuParams:
     overspeed_time_s: float = 0.5
     flameout_margin: float = 0.10  # fraction under idle
     flameout_time_s: float = 3.0
+    # or, faster, the EGT under this (a lit engine runs 650 K at idle on a 253 K day and dips
+    # to about 520 K in a throttle chop; its flame out, the gas cools under 420 K within 1-2 s)
+    flameout_egt_k: float = 420.0
+    flameout_egt_time_s: float = 0.3
     v_min: float = 1.0
     v_max: float = 20.0  # within 95 % duty of a sagging 6S pack (22.2 V nominal)
     # the fastest the pump command may move: at 20 V/s the gas of a hot engine with a strong pump
@@ -226,6 +230,44 @@ class EcuParams:
     analog_loss_s: float = 0.15  # analog frames come every 50 ms: three missed ones
     run_entry_pct: float = 31.5  # ARMED -> RUN once the starter has the engine this fast
     shutdown_done_pct: float = 10.0  # SHUTDOWN -> OFF below this
+
+    # start and stop sequencer (ecu.start_sequencer); with start_on, ARMED starts the engine
+    # from rest (else it waits for an external starter to bring it to run_entry_pct). Defaults
+    # for our plant: ignition at 8 %N (9,000 rpm), where a few tenths of g/s of fuel burn
+    # under stoichiometric (at 4 %N a strong pump's light-off is rich and hot); starter cut-off
+    # at 51 %N, over the speed where the engine makes more power than it absorbs within the
+    # start's EGT target (about 30 %N corrected for the nominal engine, but about 50 %N for the
+    # weakest of a +-5 % health variation on a hot day: cut at 36 %N they hang); hand-over to
+    # the speed control at 52 %N, over the lowest speed every engine of that variation holds by
+    # itself at 288 K (46 %N; the nominal 38 %N)
+    start_on: bool = True
+    start_duty: float = 0.5  # starter duty while spinning up and igniting
+    start_purge_s: float = 2.5  # the least spin-up time: the air purges, the glow plug heats
+    start_ignition_pct: float = 8.0  # fuel on from this speed
+    start_spinup_timeout_s: float = 10.0  # STARTER_FAILURE if not at the ignition speed by then
+    start_ign_v0: float = 1.7  # pump voltage at fuel-on (just over the pump's dead band)
+    start_ign_v_rate: float = 0.1  # V/s, the ignition fuel ramp
+    start_ign_v_max: float = 2.5
+    start_light_rise_k: float = 30.0  # light-off: the EGT this much over a reference which ...
+    start_light_track_k_s: float = 20.0  # ... follows a slower rise (not a flame's)
+    start_ignition_timeout_s: float = 15.0  # IGNITION_TIMEOUT after this long with fuel on
+    start_igniter_hold_s: float = 1.0  # the igniter stays on this long after light-off
+    start_starter_ramp_s: float = 3.0  # starter from start_duty to full after light-off
+    start_ramp_v_rate: float = 0.2  # V/s, the fuel ramp of the lit engine, up while ...
+    start_accel_pct_s: float = 4.0  # ... it accelerates slower than this, down ...
+    start_egt_target_k: float = 1180.0  # ... over this EGT
+    start_egt_limit_k: float = 1250.0  # HOT_START over this during the start
+    start_cutoff_pct: float = 51.0  # starter off
+    start_ramp_timeout_s: float = 25.0  # SLOW_ACCEL: light-off to cut-off
+    start_idle_pct: float = 52.0  # the start hands over to the speed control (RUN) here
+    start_stabilise_timeout_s: float = 15.0  # SLOW_ACCEL: cut-off to idle
+    relight_max: int = 1  # relight attempts after a flameout in RUN (0: shut down at once)
+    cool_duty: float = 0.6  # starter duty while cooling after a shutdown
+    cool_egt_k: float = 363.0  # cooled below this EGT
+    cool_rearm_k: float = 10.0  # cool again if the EGT soaks back this far over cool_egt_k ...
+    cool_soak_s: float = 15.0  # ... within this long after the cooling stopped (then: cooled)
+    cool_speed_pct: float = 40.0  # the starter engages below this speed
+    cool_timeout_s: float = 120.0
 
 
 def _doc_common(**kw: object) -> EcuParams:
@@ -337,6 +379,64 @@ def _check(cond: bool, field: str, value: object, why: str) -> None:
         raise ParamError(f"{field}={value!r}: {why}")
 
 
+def _check_sequencer(p: EcuParams) -> None:
+    """The start and stop sequencer's parameters: duties in (0, 1], speeds and temperatures in
+    the order the sequence passes them, positive times."""
+    for name in ("start_duty", "cool_duty"):
+        _check(0.0 < getattr(p, name) <= 1.0, name, getattr(p, name), "must be in (0, 1]")
+    _check(
+        0.5 <= p.start_ignition_pct < p.start_cutoff_pct < p.start_idle_pct <= 60.0,
+        "start_cutoff_pct",
+        p.start_cutoff_pct,
+        "need 0.5 <= start_ignition_pct < start_cutoff_pct < start_idle_pct <= 60",
+    )
+    _check(
+        p.start_idle_pct >= p.idle_pct * (1.0 - p.flameout_margin),
+        "start_idle_pct",
+        p.start_idle_pct,
+        "must not be below the flameout threshold",
+    )
+    _check(
+        0.0 < p.start_ign_v0 < p.start_ign_v_max <= p.v_max,
+        "start_ign_v_max",
+        p.start_ign_v_max,
+        "need 0 < start_ign_v0 < start_ign_v_max <= v_max",
+    )
+    _check(
+        400.0 <= p.start_egt_target_k < p.start_egt_limit_k <= p.egt_max_k,
+        "start_egt_limit_k",
+        p.start_egt_limit_k,
+        "need 400 K <= start_egt_target_k < start_egt_limit_k <= egt_max_k",
+    )
+    _check(5.0 <= p.start_light_rise_k <= 300.0, "start_light_rise_k", p.start_light_rise_k,
+           "must be in 5-300 K")  # fmt: skip
+    _check(1.0 <= p.start_light_track_k_s <= 200.0, "start_light_track_k_s",
+           p.start_light_track_k_s, "must be in 1-200 K/s")  # fmt: skip
+    _check(300.0 <= p.cool_egt_k <= 500.0, "cool_egt_k", p.cool_egt_k, "must be in 300-500 K")
+    _check(1.0 <= p.cool_rearm_k <= 200.0, "cool_rearm_k", p.cool_rearm_k, "must be in 1-200 K")
+    _check(5.0 <= p.cool_speed_pct <= 60.0, "cool_speed_pct", p.cool_speed_pct, "must be in 5-60")
+    _check(isinstance(p.relight_max, int) and 0 <= p.relight_max <= 5, "relight_max",
+           p.relight_max, "must be an integer in 0..5")  # fmt: skip
+    _check(0.2 <= p.start_accel_pct_s <= 20.0, "start_accel_pct_s", p.start_accel_pct_s,
+           "must be in 0.2-20 %N/s")  # fmt: skip
+    for name in ("start_ign_v_rate", "start_ramp_v_rate"):
+        _check(0.0 < getattr(p, name) <= 5.0, name, getattr(p, name), "must be in (0, 5] V/s")
+    for name in (
+        "start_purge_s",
+        "start_spinup_timeout_s",
+        "start_ignition_timeout_s",
+        "start_igniter_hold_s",
+        "start_starter_ramp_s",
+        "start_ramp_timeout_s",
+        "start_stabilise_timeout_s",
+        "cool_timeout_s",
+        "cool_soak_s",
+    ):
+        _check(0.0 < getattr(p, name) <= 300.0, name, getattr(p, name), "must be in (0, 300] s")
+    _check(p.start_purge_s < p.start_spinup_timeout_s, "start_spinup_timeout_s",
+           p.start_spinup_timeout_s, "must exceed start_purge_s")  # fmt: skip
+
+
 def validate(p: EcuParams) -> None:
     """Refuse malformed or unsafe parameters, naming the field."""
     for f in fields(p):
@@ -439,10 +539,12 @@ def validate(p: EcuParams) -> None:
         "must not be below the flameout threshold",
     )
     _check(0.0 < p.demand_hold_s < p.demand_shutdown_s, "demand_hold_s", p.demand_hold_s, "< 2 s")
+    _check_sequencer(p)
     for name in (
         "egt_max_time_s",
         "overspeed_time_s",
         "flameout_time_s",
+        "flameout_egt_time_s",
         "pump_stall_time_s",
         "pump_dry_time_s",
         "speed_fault_time_s",

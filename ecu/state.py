@@ -53,10 +53,15 @@ class EcuState:
         # persistence counters (ticks)
         "sensor_age", "analog_age", "demand_age",
         "speed_range_cnt", "speed_rate_cnt", "speed_stuck_cnt", "speed_stuck_v_q24",
-        "egt_open_cnt", "egt_over_cnt", "overspeed_cnt", "flameout_cnt",
+        "egt_open_cnt", "egt_over_cnt", "overspeed_cnt", "flameout_cnt", "flame_egt_cnt",
         "pump_stall_cnt", "pump_dry_cnt",
         # speed sensor failed (latched) and how many speed samples the history holds
         "speed_failed", "speed_seen",
+        # start/stop sequencer (ecu.start_sequencer): state, abort reason, ticks in the state,
+        # pump voltage, the light-off detector's reference EGT (0.1 K in Q8), relights since the
+        # last start, commands of this tick
+        "seq_state", "seq_reason", "seq_timer", "seq_v_q24", "seq_egt_ref_q8", "relights",
+        "starter_cpct", "igniter",
         # modes, faults, counters
         "mode", "faults", "sat_events", "ticks",
     )  # fmt: skip

@@ -1,6 +1,6 @@
 """The plant's frames packed by one compiled call, from a plant's state array (plant/periphery.py).
 
-PlantTruthA/B, PlantAnalog and PlantSensors of a tick with the codec's layout, saturation,
+PlantTruthA/B/C, PlantAnalog and PlantSensors of a tick with the codec's layout, saturation,
 alive counters and E2E CRC: the bytes the codec's ``pack_raw`` gives (``pack_plant_frames``,
 the layout array from ``frame_layout``).
 """
@@ -17,7 +17,7 @@ from protocol.codec import MessageCodec
 from protocol.e2e import COUNTER_MODULO, crc8
 
 # messages in the order they go out at a tick; their payloads are 8 bytes each of one buffer
-FRAMES = ("PlantTruthA", "PlantTruthB", "PlantAnalog", "PlantSensors")
+FRAMES = ("PlantTruthA", "PlantTruthB", "PlantTruthC", "PlantAnalog", "PlantSensors")
 DUE_TRUTH, DUE_ANALOG = 1, 2
 MAX_FIELDS = 8
 # the int64 layout array: the CRC-8 table, then per message its alive counter, the CRC register
@@ -28,6 +28,7 @@ MESSAGE_SLOTS = 3 + 4 * MAX_FIELDS
 COUNTER, CRC_START, N_FIELDS, FIELDS = range(4)
 _O_TIME, _O_SPEED, _O_EGT, _O_SUPPLY, _O_CURRENT, _O_N_RPM = range(OUT, OUT + 6)
 _O_P3, _O_P5, _O_T4, _O_FUEL, _O_THRUST = OUT + 7, OUT + 8, OUT + 9, OUT + 11, OUT + 13
+_O_STARTER_A, _O_METAL, _O_UNBURNT, _O_BURNING = range(OUT + 16, OUT + 20)
 _CLAMPED = fl.COMPRESSOR_MAP_CLAMPED | fl.TURBINE_MAP_CLAMPED | fl.PUMP_MAP_CLAMPED
 
 
@@ -111,14 +112,20 @@ def pack_plant_frames(
         word |= _rounded(lay, b, 1, s[_O_THRUST] * 20.0)
         word |= _rounded(lay, b, 2, s[_O_N_RPM])
         _finish(lay, 1, word, buf)
-    if due & DUE_ANALOG:
         b = MESSAGE + 2 * MESSAGE_SLOTS
+        word = _field(lay, b, 0, 1 if s[_O_BURNING] != 0.0 else 0)
+        word |= _rounded(lay, b, 1, s[_O_METAL] * 10.0)
+        word |= _rounded(lay, b, 2, s[_O_STARTER_A] * 20.0)
+        word |= _rounded(lay, b, 3, s[_O_UNBURNT] * 1e6)
+        _finish(lay, 2, word, buf)
+    if due & DUE_ANALOG:
+        b = MESSAGE + 3 * MESSAGE_SLOTS
         word = _field(lay, b, 0, tick16)
         word |= _rounded(lay, b, 1, s[_O_SUPPLY] * 1000.0)
         word |= _rounded(lay, b, 2, s[_O_CURRENT] * 1000.0)
-        _finish(lay, 2, word, buf)
-    b = MESSAGE + 3 * MESSAGE_SLOTS
+        _finish(lay, 3, word, buf)
+    b = MESSAGE + 4 * MESSAGE_SLOTS
     word = _field(lay, b, 0, tick16)
     word |= _rounded(lay, b, 1, s[_O_SPEED])
     word |= _rounded(lay, b, 2, s[_O_EGT] * 10.0)
-    _finish(lay, 3, word, buf)
+    _finish(lay, 4, word, buf)

@@ -12,6 +12,9 @@ PlantAnalog), then PlantSensors with SensorTick = k, last. Then:
 
 Either way, after ``watchdog_ticks`` ticks in a row without a valid actuator frame the pump
 driver's watchdog removes pump power, as a real one would; a valid frame restores it.
+EcuStarter frames set the starter's duty and the igniter from the next period on; after
+``watchdog_ticks`` ticks without one the starter and igniter stop (the ECU sends them only while
+it starts or stops the engine).
 FaultInject frames schedule faults at their FaultTick (at once when that tick has passed);
 a fault the plant cannot represent, or a value out of range, is counted and ignored.
 The node reuses its buffers: nothing it keeps grows per frame or per tick. With a plant of
@@ -57,6 +60,7 @@ from plant.node_compiled import (
     NS_PLANT_TICK,
     NS_PUMP_ENABLED,
     NS_REJECTED,
+    NS_STARTER_MISSED,
     NS_TICK,
     NS_TRIPS,
     NS_WATCHDOG,
@@ -81,11 +85,15 @@ FAULT_TARGETS: dict[int, FaultKind] = {
     10: FaultKind.EGT_OPEN_CIRCUIT,
     11: FaultKind.BATTERY_VOLTAGE,
     12: FaultKind.AMBIENT_TEMPERATURE,
+    13: FaultKind.IGNITER_FAILURE,
+    14: FaultKind.STARTER_FAILURE,
+    15: FaultKind.FUEL_STARVATION,
 }
 SWITCHED = (
     FaultKind.SPEED_DROPOUT,
     FaultKind.SPEED_STUCK,
     FaultKind.EGT_OPEN_CIRCUIT,
+    FaultKind.IGNITER_FAILURE,
 )  # 1 on, 0 off
 ENDED_BY_ZERO = (FaultKind.SPEED_NOISE_BURST, FaultKind.PUMP_WEAR)
 CLEAR_ALL = 0
@@ -123,26 +131,36 @@ class PlantNode:
         self.analog = codec["PlantAnalog"]
         self.truth_a = codec["PlantTruthA"]
         self.truth_b = codec["PlantTruthB"]
+        self.truth_c = codec["PlantTruthC"]
         self.actuator = codec["EcuActuator"]
+        self.starter = codec["EcuStarter"]
         self.fault = codec["FaultInject"]
         self._actuator_id, self._fault_id = self.actuator.frame_id, self.fault.frame_id
-        self.frame_ids = (self._actuator_id, self._fault_id)  # all the node handles
+        self._starter_id = self.starter.frame_id
+        self.frame_ids = (self._actuator_id, self._starter_id, self._fault_id)  # all it handles
         self.actuator_check = self.actuator.checker(max_delta=2)
+        self.starter_check = self.starter.checker(max_delta=2)
         self.fault_check = self.fault.checker(max_delta=14)  # event frames: any step forward
         rate_hz = 1.0 / plant.config.ecu_period_s
         self.every_analog = every_ticks(self.analog.cycle_time_ms, rate_hz)
         self.every_truth = every_ticks(self.truth_a.cycle_time_ms, rate_hz)
         self._actuator_raw = [0] * len(self.actuator.signal_names)
         self._fault_raw = [0] * len(self.fault.signal_names)
+        self._starter_raw = [0] * len(self.starter.signal_names)
         self._sensors_raw = [0] * len(self.sensors.signal_names)
         self._analog_raw = [0] * len(self.analog.signal_names)
         self._truth_a_raw = [0] * len(self.truth_a.signal_names)
         self._truth_b_raw = [0] * len(self.truth_b.signal_names)
+        self._truth_c_raw = [0] * len(self.truth_c.signal_names)
         self.actuator_late = 0  # actuator frames for a past tick (repeated or late)
         self.actuator_ahead = 0  # actuator frames for a tick not yet sent
         self.tick = 0  # ECU periods stepped (the tick whose command is awaited)
         self.duty = plant.trim_duty  # held until the first actuator frame
         self.pump_enabled = True
+        self.starter_duty = 0.0  # the starter's duty (0..1) and the igniter, from EcuStarter
+        self.igniter = False
+        self.starter_missed = 0  # ticks since the last valid EcuStarter frame
+        self.starter_rejected = 0  # EcuStarter frames with an E2E status other than OK
         self.fresh = False  # a valid actuator frame for this tick arrived (real time)
         self.missed = 0  # ticks in a row without a valid actuator frame
         self.watchdog_trips = 0
@@ -171,6 +189,8 @@ class PlantNode:
     def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
         if frame_id == self._actuator_id:
             self._on_actuator(data, send)
+        elif frame_id == self._starter_id:
+            self._on_starter(data)
         elif frame_id == self._fault_id:
             if self.fault_check.check(data) == E2EStatus.OK:
                 raw = self._fault_raw
@@ -199,6 +219,17 @@ class PlantNode:
             return
         self._command(raw)
         self._advance(send)
+
+    def _on_starter(self, data: bytes | bytearray) -> None:
+        if self.starter_check.check(data) != E2EStatus.OK:
+            self.starter_rejected += 1
+            return
+        raw = self._starter_raw
+        self.starter.unpack_raw(data, raw)
+        self.igniter = bool(raw[0])
+        self.starter_duty = _clamp(raw[2], 0, 10000) * 1e-4  # StarterDuty, 0.01 %
+        self.starter_missed = 0
+        self.plant.set_starter(self.starter_duty, self.igniter)  # (the compiled twin reads it)
 
     def _command(self, raw: list) -> None:
         self.timeout_s = None
@@ -241,6 +272,7 @@ class PlantNode:
         ns[NS_WATCHDOG] = self.watchdog_ticks
         ns[NS_TRIPS] = self.watchdog_trips
         ns[NS_PUMP_ENABLED] = self.pump_enabled
+        ns[NS_STARTER_MISSED] = self.starter_missed
         ns[NS_REJECTED] = self.actuator_rejected
         ns[NS_LATE] = self.actuator_late
         ns[NS_AHEAD] = self.actuator_ahead
@@ -269,6 +301,8 @@ class PlantNode:
         self.missed = int(ns[NS_MISSED])
         self.watchdog_trips = int(ns[NS_TRIPS])
         self.pump_enabled = bool(ns[NS_PUMP_ENABLED])
+        self.starter_missed = int(ns[NS_STARTER_MISSED])
+        self.starter_duty, self.igniter = self.plant.starter_command
         self.actuator_rejected = int(ns[NS_REJECTED])
         self.actuator_late = int(ns[NS_LATE])
         self.actuator_ahead = int(ns[NS_AHEAD])
@@ -301,7 +335,10 @@ class PlantNode:
         if self._pending:
             self._apply_faults()
         powered = self.pump_enabled and self.missed <= self.watchdog_ticks
-        self.plant.step(self.duty if powered else 0.0, powered)
+        if self.starter_missed >= self.watchdog_ticks:  # no EcuStarter for the watchdog's time
+            self.starter_duty, self.igniter = 0.0, False
+        self.plant.step(self.duty if powered else 0.0, powered, self.starter_duty, self.igniter)
+        self.starter_missed += 1
         self.tick += 1
         if self.max_ticks is not None and self.tick >= self.max_ticks:
             self.finished = True
@@ -344,9 +381,10 @@ class PlantNode:
         if due & DUE_TRUTH:
             send(ids[0], payload[0])
             send(ids[1], payload[1])
-        if due & DUE_ANALOG:
             send(ids[2], payload[2])
-        send(ids[3], payload[3])
+        if due & DUE_ANALOG:
+            send(ids[3], payload[3])
+        send(ids[4], payload[4])
 
     def _send_tick_codec(self, send: SendFn) -> None:
         o = self.plant.outputs
@@ -370,6 +408,13 @@ class PlantNode:
             raw[2] = round(o.n_rpm)
             self.truth_b.pack_raw(raw)
             send(self.truth_b.frame_id, self.truth_b.data)
+            raw = self._truth_c_raw
+            raw[0] = 1 if o.burning else 0
+            raw[1] = round(o.hot_section_k * 10.0)
+            raw[2] = round(o.starter_current_a * 20.0)
+            raw[3] = round(o.unburnt_fuel_kg * 1e6)
+            self.truth_c.pack_raw(raw)
+            send(self.truth_c.frame_id, self.truth_c.data)
         if k % self.every_analog == 0:
             raw = self._analog_raw
             raw[0] = tick16

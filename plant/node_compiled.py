@@ -3,8 +3,8 @@
 PlantNode's lockstep handling of EcuActuator and its advance, operation for operation, on an
 int64 state array (the NS_ slots) and a float64 one (NF_): the Python parts of a period (faults
 falling due, noise blocks) stay in Python (PlantNode.python_part), which the caller runs when
-``python_due`` says so. PlantNode.to_compiled() and from_compiled() move the node's and its
-plant's state in and out.
+``python_due`` says so, as do the EcuStarter and FaultInject frames (PlantNode.on_frame).
+PlantNode.to_compiled() and from_compiled() move the node's and its plant's state in and out.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from plant.aerothermal import aero_period
 from plant.fast_plant import fast_period
 from plant.frames import CRC_TABLE, DUE_ANALOG, DUE_TRUTH, pack_plant_frames
 from plant.jit import EXACT
+from plant.periphery import IGNITER, STARTER_DUTY
 from protocol.e2e import COUNTER_MODULO, E2EStatus
 from protocol.lockstep import TICK_MODULO
 
@@ -41,8 +42,9 @@ from protocol.lockstep import TICK_MODULO
     NS_CHECK_LAST,  # the actuator checker's last accepted counter (-1: none)
     NS_CHECK_STATUS,  # its last status
     NS_CHECK_CRC,  # its CRC register after the data ID
-) = range(21)
-NS_CHECK_COUNTS = 21  # its counts per E2EStatus
+    NS_STARTER_MISSED,  # ticks since the last valid EcuStarter frame (PlantNode.starter_missed)
+) = range(22)
+NS_CHECK_COUNTS = 22  # its counts per E2EStatus
 NS_FIELDS = NS_CHECK_COUNTS + len(E2EStatus)  # (start, mask, sign bit) per EcuActuator field
 NS_SIZE = NS_FIELDS + 3 * 5
 NF_DUTY, NF_FAULT_NEXT_S, NF_PERIOD, NF_SIZE = 0, 1, 2, 3
@@ -140,11 +142,15 @@ def advance_compiled(
     tick's frames packed into buf (FRAMES order); returns which are due (DUE_ bits)."""
     powered = ns[NS_PUMP_ENABLED] != 0 and ns[NS_MISSED] <= ns[NS_WATCHDOG]
     u = nf[NF_DUTY] if powered else 0.0
+    if ns[NS_STARTER_MISSED] >= ns[NS_WATCHDOG]:  # no EcuStarter for the watchdog's time
+        s[STARTER_DUTY] = 0.0
+        s[IGNITER] = 0.0
     tick = ns[NS_PLANT_TICK] + 1
     if ns[NS_KERNEL] == 0:
         flags = aero_period(s, tables, u, powered, tick, True)
     else:
         flags = fast_period(s, tables, u, powered, tick, True)
+    ns[NS_STARTER_MISSED] += 1
     ns[NS_NOISE_LEFT] -= 1
     ns[NS_PLANT_TICK] = tick
     ns[NS_FLAGS] = flags

@@ -42,12 +42,14 @@ class CommandNode:
         progress=None,
         realtime: bool = False,
         run_id: int | None = None,
+        stop_tick: int | None = None,
     ) -> None:
         self.codec = codec
         self.recorder = recorder
         self.commands = commands  # the command at every tick 0..ticks
         self.last_tick = len(commands) - 1
         self.open_loop = open_loop
+        self.stop_tick = stop_tick  # from this tick: arm released, stop requested (None: never)
         self.demand = codec["Demand"]
         self.fault_msg = codec["FaultInject"]
         self.every = every_ticks(self.demand.cycle_time_ms, ecu_rate_hz)
@@ -87,7 +89,8 @@ class CommandNode:
             yield self.fault_msg.frame_id, self.fault_msg.data
         command = float(self.commands[tick])
         speed, volts = (0.0, command) if self.open_loop else (command, 0.0)
-        self.demand.pack([1, 0, speed, volts, tick % TICK_MODULO])
+        stop = self.stop_tick is not None and tick >= self.stop_tick
+        self.demand.pack([0 if stop else 1, 1 if stop else 0, speed, volts, tick % TICK_MODULO])
         yield self.demand.frame_id, self.demand.data
 
     def injections_at(self, tick: int) -> list[dict]:

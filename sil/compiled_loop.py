@@ -15,11 +15,12 @@ a time, with the same nodes and in the same order:
 - the plant: the compiled twin of the plant node (:func:`plant.node_compiled.actuator_compiled`,
   :func:`plant.node_compiled.advance_compiled`).
 
-It returns to Python for what stays there: a FaultInject frame for the plant, the Python part
-of a plant period (faults falling due, noise blocks: :meth:`PlantNode.python_part`), and a full
-chunk of recorded frames, which go to the recorder in whole ticks (``Recorder.record_ticks``;
-the first tick frame by frame, as the command node records). The files are the run's through
-InProcessBus with the C ECU, byte for byte (tests/sil/test_compiled_loop.py).
+It returns to Python for what stays there: a FaultInject or EcuStarter frame for the plant, the
+Python part of a plant period (faults falling due, noise blocks: :meth:`PlantNode.python_part`),
+and a full chunk of recorded frames, which go to the recorder in whole ticks
+(``Recorder.record_ticks``; the first tick frame by frame, as the command node records). The
+files are the run's through InProcessBus with the C ECU, byte for byte
+(tests/sil/test_compiled_loop.py).
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ CMD, ECU, PLANT = 0, 1, 2  # where a frame comes from: the nodes in InProcessBus
 QUEUE = 64  # frames in flight (a tick has at most a dozen)
 CHUNK_FRAMES = 8192  # frames recorded before the loop hands them to the recorder (~1800 ticks)
 FRAME_BYTES = 12  # ecu_can_frame_t: uint32 id, 8 data bytes
-NODE_OUT = 3  # ECU_NODE_MAX_OUT
+NODE_OUT = 4  # ECU_NODE_MAX_OUT
 # the loop's state (int64 slots)
 (
     L_HEAD,  # queue: next frame to deliver
@@ -81,13 +82,14 @@ NODE_OUT = 3  # ECU_NODE_MAX_OUT
     L_PLAYED,  # the last tick whose command frames were sent
     L_FINISHED,  # the command node is finished
     L_RESUME,  # the plant's advance waits for its Python part
-    L_FAULT_SLOT,  # queue place of the FaultInject frame handed to Python
+    L_FAULT_SLOT,  # queue place of the FaultInject or EcuStarter frame handed to Python
     L_SIZE,
 ) = range(16)
 # the frame IDs the loop tells apart
-I_SENSORS, I_ACTUATOR, I_FAULT, I_ECU, I_PLANT = 0, 1, 2, 3, 6  # I_ECU: 3, I_PLANT: 4 IDs
-# why the loop returned
-DONE, CHUNK, FAULT_FRAME, PLANT_PYTHON, IDLE = range(5)
+I_SENSORS, I_ACTUATOR, I_FAULT, I_ECU, I_PLANT = 0, 1, 2, 3, 6  # I_ECU: 3, I_PLANT: 5 IDs
+I_STARTER = 11  # EcuStarter
+# why the loop returned (PLANT_FRAME: a FaultInject or EcuStarter frame for the plant node)
+DONE, CHUNK, PLANT_FRAME, PLANT_PYTHON, IDLE = range(5)
 # the plant's truth kept per tick answered (CompiledLoop.truth): true speed %N, EGT K, P3 Pa and
 # thrust N from its outputs, then its flags (plant.flags)
 TRUTH_FIELDS = ("n_pct", "egt_true_k", "p3_pa", "thrust_n")
@@ -136,7 +138,7 @@ def run_frames(
     ecu_fn, ecu_node, ecu_out, s, tables, ns, nf, lay, buf, truth,
 ):  # fmt: skip  # noqa: ANN001, ANN201
     """Deliver frames (InProcessBus.run) until the run is done, the chunk is full or Python
-    has something to do; returns why (DONE, CHUNK, FAULT_FRAME, PLANT_PYTHON, IDLE)."""
+    has something to do; returns why (DONE, CHUNK, PLANT_FRAME, PLANT_PYTHON, IDLE)."""
     if ls[L_RESUME]:
         ls[L_RESUME] = 0
         _plant_advance(ls, q_id, q_origin, q_data, ids, s, tables, ns, nf, lay, buf)
@@ -177,9 +179,9 @@ def run_frames(
                     out_frame |= np.int64(ecu_out[f + b]) << (8 * b)
                 _push(ls, q_id, q_origin, q_data, ECU, out_frame, ecu_out[f + 4 : f + FRAME_BYTES])
         if origin != PLANT:
-            if frame_id == ids[I_FAULT]:
+            if frame_id == ids[I_FAULT] or frame_id == ids[I_STARTER]:
                 ls[L_FAULT_SLOT] = slot
-                return FAULT_FRAME
+                return PLANT_FRAME
             if frame_id == ids[I_ACTUATOR] and actuator_compiled(ns, nf, lay, data):
                 if python_due(ns, nf):
                     ls[L_RESUME] = 1
@@ -220,9 +222,10 @@ def _plant_advance(ls, q_id, q_origin, q_data, ids, s, tables, ns, nf, lay, buf)
     if due & DUE_TRUTH:
         _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT], buf[0:8])
         _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT + 1], buf[8:16])
-    if due & DUE_ANALOG:
         _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT + 2], buf[16:24])
-    _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT + 3], buf[24:32])
+    if due & DUE_ANALOG:
+        _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT + 3], buf[24:32])
+    _push(ls, q_id, q_origin, q_data, PLANT, ids[I_PLANT + 4], buf[32:40])
 
 
 class Recording(Protocol):
@@ -311,7 +314,15 @@ class CompiledLoop:
         ls[L_SENSOR_LAST] = ls[L_LATEST] = ls[L_PLAYED] = -1
         ls[L_LAST_TICK], ls[L_LEAD], ls[L_EVERY] = command.last_tick, command.lead, command.every
         ids = np.array(
-            [SENSORS, ACTUATOR, plant._fault_id, *self.ecu.frame_ids, *plant._ids], np.int64
+            [
+                SENSORS,
+                ACTUATOR,
+                plant._fault_id,
+                *self.ecu.frame_ids,
+                *plant._ids,
+                plant._starter_id,
+            ],
+            np.int64,
         )
         ecu_out = np.zeros(NODE_OUT * FRAME_BYTES, np.uint8)
         ns, nf = np.zeros(NS_SIZE, np.int64), np.zeros(NF_SIZE, np.float64)
@@ -348,7 +359,7 @@ class CompiledLoop:
                     progress(int(ls[L_ANSWERED]))
                 if why in (DONE, IDLE):
                     break
-                if why == FAULT_FRAME:  # the plant node takes it in Python, at its tick
+                if why == PLANT_FRAME:  # the plant node takes it in Python, at its tick
                     plant.from_compiled(ns, nf)
                     slot = int(ls[L_FAULT_SLOT])
                     plant.on_frame(int(q_id[slot]), q_data[slot].tobytes(), _no_send)
@@ -413,4 +424,4 @@ class CompiledLoop:
 
 
 def _no_send(frame_id: int, data: bytes | bytearray) -> None:
-    raise RuntimeError(f"the plant node sent frame 0x{frame_id:X} on a FaultInject frame")
+    raise RuntimeError(f"the plant node sent frame 0x{frame_id:X} on a frame it takes in Python")

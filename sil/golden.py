@@ -7,7 +7,9 @@ Sources:
   faults, limit loops on a hot day, the transients from idle and from maximum (an entry voltage
   other than the trim's);
 - a scripted sequence for what the SIL never does (it arms once and runs): OFF, ARMED, RUN,
-  SHUTDOWN and a latched FAULT, lost and corrupt frames, pump current faults.
+  SHUTDOWN and a latched FAULT, lost and corrupt frames, pump current faults;
+- a scripted start and stop through the start/stop sequencer (ecu.start_sequencer): starts
+  from rest, relights, stops with their cool-downs, every abort.
 
     python -m sil.golden OUT_DIR [NAME ...] [--ticks N]   write the vectors (all: no NAME)
 """
@@ -18,12 +20,13 @@ import argparse
 import dataclasses
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 from ecu import modes
-from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, EcuInputs
+from ecu import start_sequencer as seq
+from ecu.firmware import E2E_NONEWDATA, E2E_OK, E2E_WRONGCRC, EcuInputs, EcuOutputs
 from ecu.firmware_params import compile_params
 from ecu.golden import Golden, RecordingEcu, write
 from ecu.node import EcuNode
@@ -75,9 +78,11 @@ def record_modes(ticks: int) -> Golden:
     (hold, idle), corrupt and missing sensor frames; analog frames lost; stop (SHUTDOWN), spool
     down, disarm (OFF); arm again, supply sag, EGT thermocouple open; demand lost past the
     shutdown time; disarm, re-arm; a stalled pump (FAULT, latched). Speed follows the eq. 3.24
-    fast model while the ECU runs.
+    fast model while the ECU runs. Without the start sequencer (``start_on`` off: ARMED waits
+    for an external starter, SHUTDOWN has no cool-down); the sequencer's modes are
+    :func:`record_start_stop`'s.
     """
-    p = EcuParams()
+    p = EcuParams(start_on=False)
     ecu = RecordingEcu(p)
     engine = FastEngine()
     i = EcuInputs()
@@ -123,6 +128,228 @@ def record_modes(ticks: int) -> Golden:
             i.demand_status = E2E_NONEWDATA  # demand lost beyond the shutdown time
         ecu.tick(i)
     return Golden("modes", compile_params(p), ecu.rows)
+
+
+# the sequencer's timeouts cut from seconds to tenths (the sequence in a few thousand ticks);
+# its speeds and temperatures pinned for StartEngine (whatever the defaults' tuning)
+START_STOP_PARAMS = EcuParams(
+    start_duty=0.5,
+    start_purge_s=0.3,
+    start_ignition_pct=4.0,
+    start_spinup_timeout_s=0.8,
+    start_ign_v0=1.5,
+    start_ign_v_rate=2.0,
+    start_ign_v_max=3.0,
+    start_light_rise_k=30.0,
+    start_light_track_k_s=20.0,
+    start_ignition_timeout_s=0.6,
+    start_igniter_hold_s=0.2,
+    start_starter_ramp_s=0.3,
+    start_ramp_v_rate=5.0,
+    start_accel_pct_s=20.0,
+    start_egt_target_k=1100.0,
+    start_egt_limit_k=1200.0,
+    start_cutoff_pct=36.0,
+    start_ramp_timeout_s=1.5,
+    start_idle_pct=40.0,
+    start_stabilise_timeout_s=1.0,
+    relight_max=1,
+    cool_duty=0.6,
+    cool_egt_k=363.0,
+    cool_rearm_k=10.0,
+    cool_speed_pct=40.0,
+    cool_timeout_s=0.5,
+    cool_soak_s=0.5,
+    flameout_time_s=0.3,
+    flameout_egt_k=420.0,
+    flameout_egt_time_s=0.3,
+)
+AMBIENT_K = 290.0
+
+
+class StartEngine:
+    """A toy engine for the scripted start and stop (%N, K), driven by the ECU's outputs.
+
+    The starter drives the rotor towards 45 %N x duty; lit (the igniter on, with fuel and the
+    rotor turning, for 0.15 s), the fuel drives it towards 40 %N at 3 V plus 5.28 %N/V (a line
+    through the trim point, 89.68 %N at 12.41 V) and the gas towards 600 K + 36 K/V; unlit, the
+    gas goes to ambient plus ``soak_k`` (the hot section's heat soaking back, as the script sets
+    it), fast with airflow, slowly in still air. Failures: ``starter_ok`` (the starter turns
+    nothing), ``ignites`` (no light-off), ``hot_k`` (a hot start), ``weak_pct`` (a hung start).
+    """
+
+    def __init__(self) -> None:
+        self.n_pct = 0.0
+        self.egt_k = AMBIENT_K
+        self.lit = False
+        self.sparks = 0
+        self.starter_ok = True
+        self.ignites = True
+        self.hot_k = 0.0
+        self.weak_pct = 0.0
+        self.soak_k = 0.0
+
+    def flame_out(self) -> None:
+        self.lit = False
+        self.sparks = 0
+
+    def step(self, o: EcuOutputs, dt: float) -> None:
+        v = o.pump_mv / 1000.0 if o.pump_enable else 0.0
+        duty = o.starter_cpct / 10000.0 if self.starter_ok else 0.0
+        if v < 0.5:
+            self.flame_out()
+        elif not self.lit and self.ignites and o.igniter and self.n_pct > 3.0:
+            self.sparks += 1
+            self.lit = self.sparks >= 15
+        target = 45.0 * duty
+        if self.lit:
+            target = max(target, 40.0 + 5.28 * (v - 3.0) - self.weak_pct)
+        self.n_pct += (target - self.n_pct) * dt / (0.4 if target > self.n_pct else 0.8)
+        if self.lit:
+            gas, tau = 600.0 + 36.0 * v + self.hot_k, 0.25
+        else:
+            gas, tau = AMBIENT_K + self.soak_k, 1.0 - 0.75 * min(1.0, self.n_pct / 20.0)
+        self.egt_k += (gas - self.egt_k) * dt / tau
+
+
+def _start_stop_script(o: EcuOutputs, engine: StartEngine, cmd: dict[str, int]) -> Iterator[None]:
+    """One yield per tick: sets the arm and stop requests in ``cmd`` and the engine's failures,
+    waiting on the ECU's outputs ``o``; raises if the ECU does not get where the step expects."""
+
+    def hold(ticks: int, **request: int) -> Iterator[None]:
+        cmd.update(request)
+        for _ in range(ticks):
+            yield
+
+    def until(done: Callable[[], bool], limit: int = 400, **request: int) -> Iterator[None]:
+        cmd.update(request)
+        for _ in range(limit):
+            if done():
+                return
+            yield
+        raise RuntimeError(
+            f"scripted start/stop: mode {modes.NAMES[o.mode]}, sequencer "
+            f"{seq.NAMES[o.seq_state]} ({seq.REASONS[o.seq_reason]}) after {limit} ticks"
+        )
+
+    def is_mode(mode: int) -> Callable[[], bool]:
+        return lambda: o.mode == mode
+
+    def is_state(state: int) -> Callable[[], bool]:
+        return lambda: o.seq_state == state
+
+    def aborted(reason: int) -> Callable[[], bool]:
+        return lambda: o.seq_reason == reason
+
+    yield from hold(10, arm=0, stop=0)
+    # the starter turns nothing: STARTER_FAILURE, SHUTDOWN (DONE at once: cold), OFF
+    engine.starter_ok = False
+    yield from until(aborted(seq.STARTER_FAILURE), arm=1)
+    yield from until(is_mode(modes.OFF), arm=0)
+    engine.starter_ok = True
+    # from rest: SPIN_UP, IGNITION, RAMP, STABILISE, RUN at 45 %N
+    yield from until(is_mode(modes.RUN), arm=1)
+    yield from hold(40)
+    # a flameout in RUN: relight (ARMED, IGNITION with the rotor still turning), RUN again
+    engine.flame_out()
+    yield from until(is_mode(modes.ARMED))
+    yield from until(is_mode(modes.RUN))
+    yield from hold(40)
+    # stop: SHUTDOWN, SPOOL_DOWN, COOL_DOWN, DONE; the heat soaks back: COOL_DOWN, DONE; OFF
+    yield from until(is_state(seq.DONE), stop=1, arm=0)
+    engine.soak_k = 150.0
+    yield from until(is_state(seq.COOL_DOWN))
+    engine.soak_k = 0.0
+    yield from until(is_mode(modes.OFF))
+    yield from hold(5, stop=0)
+    # no light-off: IGNITION_TIMEOUT, SHUTDOWN, OFF
+    engine.ignites = False
+    yield from until(aborted(seq.IGNITION_TIMEOUT), arm=1)
+    yield from until(is_mode(modes.OFF), arm=0)
+    engine.ignites = True
+    # released in the spin-up (STOPPED, OFF at once), stopped in the ignition (SHUTDOWN)
+    yield from until(is_state(seq.SPIN_UP), arm=1)
+    yield from hold(10)
+    yield from until(is_mode(modes.OFF), arm=0)
+    yield from until(is_state(seq.IGNITION), arm=1)
+    yield from hold(5)
+    yield from until(is_mode(modes.SHUTDOWN), stop=1)
+    yield from until(is_mode(modes.OFF), stop=0, arm=0)
+    # a hot start: HOT_START; too hot to cool under cool_egt, the cool-down times out
+    engine.hot_k = 600.0
+    yield from until(aborted(seq.HOT_START), arm=1)
+    engine.hot_k = 0.0
+    engine.soak_k = 100.0
+    yield from until(is_state(seq.COOL_DOWN))
+    yield from until(is_state(seq.DONE))
+    engine.soak_k = 0.0
+    yield from until(is_mode(modes.OFF), arm=0)
+    # a hung start: SLOW_ACCEL
+    engine.weak_pct = 15.0
+    yield from until(aborted(seq.SLOW_ACCEL), arm=1)
+    yield from until(is_mode(modes.OFF), arm=0)
+    engine.weak_pct = 0.0
+    # the flame goes out just after light-off: FLAMEOUT
+    yield from until(is_state(seq.RAMP), arm=1)
+    yield from hold(2)
+    engine.flame_out()
+    engine.ignites = False
+    yield from until(aborted(seq.FLAMEOUT))
+    yield from until(is_mode(modes.OFF), arm=0)
+    engine.ignites = True
+    # a start, then two flameouts in RUN: one relight (relight_max), then SHUTDOWN
+    yield from until(is_mode(modes.RUN), arm=1)
+    yield from hold(20)
+    engine.flame_out()
+    yield from until(is_mode(modes.ARMED))
+    yield from until(is_mode(modes.RUN))
+    yield from hold(20)
+    engine.flame_out()  # the gas held warm: found by the speed (the first two, by the EGT)
+    engine.ignites = False
+    engine.soak_k = 200.0
+    yield from until(is_mode(modes.SHUTDOWN))
+    engine.soak_k = 0.0
+    yield from until(is_mode(modes.OFF), arm=0)
+    while True:  # OFF from here on
+        yield
+
+
+def record_start_stop(ticks: int) -> Golden:
+    """Scripted starts and stops through the start/stop sequencer, on :class:`StartEngine`
+    (the sequencer's timeouts cut short: START_STOP_PARAMS).
+
+    The starter fails (STARTER_FAILURE); a start from rest through SPIN_UP, IGNITION, RAMP,
+    STABILISE to RUN; a flameout in RUN and its relight; a stop through SPOOL_DOWN, COOL_DOWN,
+    DONE, a heat soak-back (COOL_DOWN again) and OFF; no light-off (IGNITION_TIMEOUT); released
+    in the spin-up and stopped in the ignition (STOPPED); a hot start (HOT_START) whose
+    cool-down times out; a hung start (SLOW_ACCEL); the flame lost after light-off (FLAMEOUT);
+    a second flameout in RUN with no relight left (SHUTDOWN). About 2,500 ticks, OFF after.
+    """
+    p = START_STOP_PARAMS
+    ecu = RecordingEcu(p)
+    o = ecu.out
+    engine = StartEngine()
+    cmd = {"arm": 0, "stop": 0}
+    script = _start_stop_script(o, engine, cmd)
+    i = EcuInputs()
+    dt = 1.0 / p.rate_hz
+    for k in range(ticks):
+        next(script)
+        i.tick = k % 65536
+        noise = (k * 7919) % 41 - 20 if engine.n_pct > 0.5 else 0  # a still rotor reads 0
+        i.speed_rpm = max(0, round(engine.n_pct * 1125.0) + noise)
+        i.egt_dk = round(engine.egt_k * 10.0)
+        i.supply_mv = 22200
+        i.pump_ma = (1050 + 60 * o.pump_mv // 1000) if o.pump_enable else 0
+        i.demand_cpct = 4500
+        i.open_loop_mv = 0
+        i.arm, i.stop = cmd["arm"], cmd["stop"]
+        i.sensor_status = E2E_OK
+        i.analog_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        i.demand_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        ecu.tick(i)
+        engine.step(o, dt)
+    return Golden("start-stop", compile_params(p), ecu.rows)
 
 
 _HOT_LIMITS = """
@@ -216,7 +443,12 @@ duration_s = 10
 model = "aero"
 [controller]
 kind = "pid"
-params = { limiters_on = 0, egt_limit_k = 1050, egt_max_k = 1100 }
+[controller.params]
+limiters_on = 0
+egt_limit_k = 1050
+egt_max_k = 1100
+start_egt_target_k = 1000  # the start's EGT limits under the lowered maximum (no start here)
+start_egt_limit_k = 1100
 [command]
 base = "trim"
 [[fault]]
@@ -279,6 +511,7 @@ SOURCES: dict[str, Source] = {
     "accel-idle": _scenario("accel-idle", "accel-idle-to-max", 1200),
     "chop-pi": _scenario("chop-pi", _CHOP_PI, 1200),
     "modes": Source(record_modes, 2400),
+    "start-stop": Source(record_start_stop, 2600),
 }
 
 

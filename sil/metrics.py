@@ -1,6 +1,7 @@
-"""Figures of a run, computed from its trace: tracking, EGT, limiter time, faults, estimates, and
-the transient figures of its largest demand step (thrust rise, EGT overshoot, surge margin,
-flameouts)."""
+"""Figures of a run, computed from its trace: tracking, EGT, limiter time, faults, estimates, the
+transient figures of its largest demand step (thrust rise, EGT overshoot, surge margin,
+flameouts) and, for a run from rest, the start and the stop (time to idle, EGT peak, abort reason,
+fuel delivered without a flame, cool-down)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ecu import modes
+from ecu import start_sequencer as seq
 from ecu.limiters import OWNER_EGT, OWNER_SPEED
 
 ESTIMATES = {
@@ -24,6 +27,8 @@ ESTIMATES = {
 STEP_MIN_PCT = 1.0  # a demand change at least this large is a step
 SETTLED_S = 1.0  # the final thrust of a step: its mean over this long before the next change
 THRUST_FRACTION = 0.95  # thrust_rise_s: from the step to this fraction of the thrust change
+COOL_K = 373.0  # cool_down_s: from the fuel cut to an EGT under this (100 degC)
+REST_PCT = 1.0  # a run from rest begins under this speed
 SurgeMargin = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (P3 Pa, N %) -> margin
 
 
@@ -141,12 +146,14 @@ def transient(
 ) -> dict[str, float | int | None]:
     """Transient figures of a run: its largest demand step (signed, %N) and the thrust's rise
     (or fall) after it, the EGT's overshoot over the limit (0 when under), the least surge margin
-    (%, from the true P3 and speed), the flameouts (rising edges of the plant's flag) and the
-    least true speed after the step (the whole run without one)."""
+    (%, from the true P3 and speed), the flameouts (rising edges of the plant's flag while the
+    ECU is in RUN) and the least true speed after the step (the whole run without one)."""
     egt = trace["EGT"]
     ok = np.isfinite(trace["P3"]) & np.isfinite(trace["speed_true"])
     margin = surge_margin(trace["P3"][ok], trace["speed_true"][ok])
     flame = np.nan_to_num(trace["Flameout"]).astype(np.int64)
+    if "ActuatorMode" in trace:  # a flame out while the ECU runs the engine (not starting it)
+        flame = flame * (trace["ActuatorMode"] == modes.RUN)
     step = largest_step(trace)
     after = trace["speed_true"][step[0] if step else 0 :]
     demand = trace["command"]
@@ -157,4 +164,48 @@ def transient(
         "min_surge_margin_pct": float(100.0 * margin.min()) if len(margin) else None,
         "flameouts": int(np.sum(np.diff(flame, prepend=0) > 0)),
         "min_speed_pct": float(np.nanmin(after)) if np.isfinite(after).any() else None,
+    }
+
+
+def cool_down_ticks(egt: np.ndarray, cut: int) -> float:
+    """Ticks from the fuel cut (index ``cut``) until the EGT is under COOL_K for good (it dips
+    as the gas cools at once and rises again as the slowing flow takes the metal's heat); NaN if
+    it ends over COOL_K."""
+    over = np.flatnonzero(~(egt[cut:] < COOL_K))
+    if not len(over):
+        return 0.0
+    last = int(over[-1])
+    return float(last + 1) if last + 1 < len(egt) - cut else math.nan
+
+
+def start_stop(trace: dict[str, np.ndarray]) -> dict[str, float | int | str | None]:
+    """The start and stop of a run from rest ({} for any other run): time from the arming to
+    RUN (None if it never got there), the EGT's peak before it, the abort reason (None without
+    an abort) and the time from the arming to it, relights (RUN -> ARMED), the fuel the pump
+    delivered while no flame burnt, the time from the fuel cut (the first SHUTDOWN) until the
+    EGT is under COOL_K for good (None without a cut, NaN if it never is), the final EGT."""
+    t, mode, egt = trace["time"], trace["ActuatorMode"], trace["EGT"]
+    if not len(t) or not trace["speed_true"][0] < REST_PCT:
+        return {}
+    armed = np.flatnonzero(mode == modes.ARMED)
+    if not len(armed):
+        return {}
+    i0 = int(armed[0])
+    run = np.flatnonzero(mode[i0:] == modes.RUN)
+    stop = np.flatnonzero(mode[i0:] == modes.SHUTDOWN)
+    end = i0 + int(run[0]) if len(run) else i0 + int(stop[0]) if len(stop) else len(t)
+    reason = int(np.nan_to_num(trace["AbortReason"])[-1])
+    cut = i0 + int(stop[0]) if len(stop) else None
+    was_run = (mode[:-1] == modes.RUN) & (mode[1:] == modes.ARMED)
+    aborted = reason != 0 and not len(run) and end < len(t)
+    unburnt = trace["UnburntFuel"]
+    return {
+        "start_time_s": float(t[i0 + run[0]] - t[i0]) if len(run) else None,
+        "start_egt_peak_K": float(np.nanmax(egt[i0:end])) if end > i0 else None,
+        "start_abort": seq.REASONS[reason] if reason else None,
+        "start_abort_s": float(t[end] - t[i0]) if aborted else None,
+        "relights": int(np.sum(was_run)),
+        "unburnt_fuel_kg": float(np.nanmax(unburnt)) if np.isfinite(unburnt).any() else None,
+        "cool_down_s": cool_down_ticks(egt, cut) * (t[1] - t[0]) if cut is not None else None,
+        "final_egt_K": float(egt[-1]),
     }

@@ -1,4 +1,5 @@
-"""Plots of a run laid out like the document's figures (speed, pump, EGT, estimates, gains)."""
+"""Plots of a run laid out like the document's figures (speed, pump, EGT, estimates, gains), and
+for a run from rest the start and stop (speed, EGT, pump, starter and igniter, sequencer)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from ecu import modes  # noqa: E402
+from ecu import start_sequencer as seq  # noqa: E402
+from sil.metrics import REST_PCT  # noqa: E402
 
 _PANELS = {
     "estimates": (
@@ -109,6 +114,51 @@ def panel_plot(trace: dict[str, np.ndarray], kind: str, title: str, path: Path) 
     return _save(fig, path)
 
 
+def sequencer_states(trace: dict[str, np.ndarray]) -> np.ndarray:
+    """The sequencer's state at every tick: EcuStarter's while the ECU sends it (ARMED,
+    SHUTDOWN), RUN in RUN and OFF in OFF (the frame is not sent there and the trace holds it)."""
+    mode = trace["ActuatorMode"]
+    state = np.nan_to_num(trace["SequencerState"]).copy()
+    state[mode == modes.RUN] = seq.RUN
+    state[mode == modes.OFF] = seq.OFF
+    return state
+
+
+def start_plot(trace: dict[str, np.ndarray], title: str, path: Path) -> Path:
+    """Speed, EGT, pump voltage, starter duty and igniter, and the sequencer's state."""
+    t = trace["time"]
+    fig, axes = plt.subplots(
+        4, 1, figsize=(10, 9), sharex=True, gridspec_kw={"height_ratios": [2, 2, 1.5, 1.3]}
+    )
+    ax = axes[0]
+    ax.plot(t, trace["command"], color="0.6", lw=1, label="speed demand")
+    ax.plot(t, trace["speed_true"], color="tab:blue", lw=1.2, label="engine (true)")
+    ax.set_ylabel("shaft speed [%N_max]")
+    ax.set_title(f"{title}: start and stop")
+    ax = axes[1]
+    ax.plot(t, trace["EGT"], color="tab:red", lw=1, label="EGT (thermocouple)")
+    ax.plot(t, trace["HotSectionTemp"], color="tab:brown", lw=1, label="hot section metal (truth)")
+    ax.plot(t, trace["T4"], color="tab:purple", lw=0.6, alpha=0.6, label="T4 (truth)")
+    ax.axhline(373.0, color="black", ls=":", lw=0.8, label="373 K")
+    ax.set_ylabel("temperature [K]")
+    ax = axes[2]
+    ax.plot(t, trace["PumpVoltageTarget"], color="tab:red", lw=1, label="pump voltage [V]")
+    ax.plot(t, 0.1 * trace["StarterDuty"], color="tab:green", lw=1, label="starter duty [10 %]")
+    ignited = np.nan_to_num(trace["IgniterOn"]) > 0
+    ax.fill_between(t, 0, 1, where=ignited, transform=ax.get_xaxis_transform(),
+                    color="tab:orange", alpha=0.2, label="igniter on")  # fmt: skip
+    ax.set_ylabel("pump, starter")
+    ax = axes[3]
+    ax.step(t, sequencer_states(trace), where="post", color="tab:blue", lw=1.2)
+    ax.set_yticks(range(len(seq.NAMES)), seq.NAMES, fontsize=7)
+    ax.set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    for ax in axes[:3]:
+        ax.legend(loc="best", fontsize=7)
+    return _save(fig, path)
+
+
 def plot_run(
     trace: dict[str, np.ndarray],
     out_dir: Path,
@@ -128,4 +178,6 @@ def plot_run(
         written.append(panel_plot(trace, "estimates", title, out_dir / "estimates.png"))
     if controller == "mrac":
         written.append(panel_plot(trace, "gains", title, out_dir / "gains.png"))
+    if trace["speed_true"][0] < REST_PCT and (trace["ActuatorMode"] == modes.ARMED).any():
+        written.append(start_plot(trace, title, out_dir / "start.png"))
     return written

@@ -209,7 +209,7 @@ def play(
 
 
 ECU_INPUTS = ("PlantSensors", "PlantAnalog", "Demand")
-ECU_OUTPUTS = ("EcuActuator", "EcuStatus", "EcuTelemetry")
+ECU_OUTPUTS = ("EcuActuator", "EcuStarter", "EcuStatus", "EcuTelemetry")
 
 
 @dataclass

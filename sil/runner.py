@@ -143,6 +143,8 @@ def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfi
     config = replace(
         config, initial_speed_pct=p.initial_speed_pct, initial_egt_max_k=p.initial_egt_max_K
     )
+    if p.standstill:
+        config = replace(config, standstill=True)
     if not p.varied:
         return config
     return replace(
@@ -163,7 +165,7 @@ def build_plant(s: Scenario, seed: int, *, nominal: bool = False) -> Plant:
 def ecu_trim_voltage(s: Scenario, plant: Plant) -> float:
     """The ECU's trim voltage: the nominal engine's at its trim (the ECU is not told how its
     engine varies, nor where the scenario starts it)."""
-    if not s.plant.varied and s.plant.initial_speed_pct is None:
+    if not s.plant.varied and s.plant.initial_speed_pct is None and not s.plant.standstill:
         return plant.trim_pump_voltage
     return build_plant(s, 0, nominal=True).trim_pump_voltage
 
@@ -345,6 +347,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
         progress=progress,
         realtime=opts.mode == "realtime",
         run_id=state.run_id,
+        stop_tick=s.stop_tick,
     )
     # What exists now (numba, the codec, the nodes...) lives through the run: frozen, it is
     # skipped by the collector's full passes, each of which would stall the run for 0.1 s.
@@ -467,6 +470,8 @@ def _plant_args(
         args += ["--initial-speed", repr(p.initial_speed_pct)]
         if math.isfinite(p.initial_egt_max_K):
             args += ["--initial-egt-max", repr(p.initial_egt_max_K)]
+    if p.standstill:
+        args.append("--standstill")
     if opts.mode == "realtime":
         args.append("--realtime")
     return args
@@ -749,6 +754,7 @@ def _finish(
         "missed_ticks": totals["missed_ticks"],
         **(metrics.summarize(trace, period, REPORTED_FAULTS) if trace is not None else {}),
         **(_transient(s, trace) if trace is not None and len(trace["time"]) > 1 else {}),
+        **(metrics.start_stop(trace) if trace is not None else {}),
         "faults_injected": [{"time_s": i["tick"] / s.ecu_rate_hz, **i} for i in command.injected],
         "bus_faults_injected": state.bus_fault_events,
         **({"bridge_errors": state.bridge_errors} if state.bridge_errors else {}),

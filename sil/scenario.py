@@ -62,6 +62,13 @@ Starting point (default: the steady state of eq. 2.32's 8 g/s, whatever speed th
     [plant]
     initial_speed_pct = 90     # the steady state holding this speed, each engine its own fuel
     initial_egt_max_K = 1280   # or the fastest steady state within this EGT, if that is hotter
+    standstill = true          # or at rest, cold and unlit: the ECU's sequencer starts it (aero)
+
+and the end of the run (default: armed throughout):
+
+    [command]
+    stop_s = 60                # the arm request released and a stop requested from this time:
+                               # the ECU shuts the engine down and cools it
 """
 
 from __future__ import annotations
@@ -107,6 +114,7 @@ class PlantSettings:
     egt_bias_K: float = 0.0
     initial_speed_pct: float | None = None
     initial_egt_max_K: float = math.inf
+    standstill: bool = False  # at rest, cold and unlit: the ECU starts the engine
 
     @property
     def varied(self) -> bool:
@@ -119,6 +127,7 @@ class PlantSettings:
             self.supply_voltage_V,
             initial_speed_pct=self.initial_speed_pct,
             initial_egt_max_K=self.initial_egt_max_K,
+            standstill=self.standstill,
         )
         return self != nominal
 
@@ -155,6 +164,12 @@ class Scenario:
     command_components: tuple[profiles.Component, ...]
     faults: tuple[Fault, ...]
     bus_faults: tuple[BusFault, ...] = ()
+    stop_s: float | None = None  # from then on the arm request is released and a stop requested
+
+    @property
+    def stop_tick(self) -> int | None:
+        """The first tick of the stop request (None: armed throughout)."""
+        return None if self.stop_s is None else round(self.stop_s * self.ecu_rate_hz)
 
     def profile(self, trim_value: float) -> profiles.Profile:
         """The command profile, with ``trim_value`` standing for a base of "trim"."""
@@ -309,6 +324,13 @@ def _component(r: _Reader, base_dir: Path) -> profiles.Component:
     return c
 
 
+def _flag(r: _Reader, key: str) -> bool:
+    value = r.get(key, False)
+    if not isinstance(value, bool):
+        raise r.fail(key, "true or false", value)
+    return value
+
+
 def _ecu_rate(r: _Reader) -> float:
     value = r.number("ecu_rate_hz", 100.0, lo=50, hi=1000)
     try:
@@ -429,7 +451,12 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
             if "initial_egt_max_K" in p.table
             else math.inf
         ),
+        standstill=_flag(p, "standstill"),
     )
+    if plant.standstill and plant.model != "aero":
+        raise p.fail("standstill", "false: only the aero plant starts from rest", True)
+    if plant.standstill and plant.initial_speed_pct is not None:
+        raise p.fail("initial_speed_pct", "no value: the engine starts from rest", "a speed")
     if plant.model == "fast":
         for k in HEALTH:
             if getattr(plant, k) != 1.0:
@@ -462,6 +489,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
     ):
         raise cmd.fail("base", 'a finite number or "trim"', base)
     components = tuple(_component(r, base_dir) for r in cmd.tables("component"))
+    stop_s = cmd.number("stop_s", lo=0, hi=duration) if "stop_s" in cmd.table else None
     cmd.done()
 
     targets = fault_targets()
@@ -487,6 +515,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
         components,
         tuple(sorted(faults, key=lambda f: f.time_s)),
         bus_faults,
+        stop_s,
     )
 
 

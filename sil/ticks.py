@@ -13,8 +13,8 @@ import numpy as np
 from protocol.lockstep import TICK_MODULO
 
 SENSORS, ACTUATOR = 0x100, 0x110
-PLANT_IDS = frozenset((0x100, 0x101, 0x300, 0x301))
-ECU_IDS = frozenset((0x110, 0x200, 0x210))
+PLANT_IDS = frozenset((0x100, 0x101, 0x300, 0x301, 0x302))
+ECU_IDS = frozenset((0x110, 0x111, 0x200, 0x210))
 
 # the frame classes in a tick, in their canonical order (tick_block)
 _PLANT, _SENSORS, _OTHER, _ECU, _ACTUATOR = range(5)

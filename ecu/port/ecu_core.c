@@ -8,6 +8,16 @@
 #error "ecu_core needs arithmetic right shift of negative values"
 #endif
 
+/* Helpers called from several places that are worth no call frame of their own: forced inline
+ * (C99's inline is only a hint, which gcc -Os does not take for these). The tick's stack bound
+ * is the sum of the frames of every function here (sil/port_bench.py), within the 2 KiB of RAM
+ * the core, its parameters and its stack are given. */
+#if defined(__GNUC__)
+#define ECU_INLINE static inline __attribute__((always_inline))
+#else
+#define ECU_INLINE static inline
+#endif
+
 /* ---- ecu/fixedpoint.py --------------------------------------------------------------------- */
 
 #define ACC_EXT_BITS 16 /* Q7.40 split accumulator: 16 bits below the Q7.24 word */
@@ -33,7 +43,7 @@ static int64_t clamp(int64_t x, int64_t lo, int64_t hi)
 }
 
 /* a / b truncated toward zero, saturated; b == 0 saturates with the dividend's sign */
-static int32_t div_trunc(ecu_t *e, int64_t a, int64_t b)
+ECU_INLINE int32_t div_trunc(ecu_t *e, int64_t a, int64_t b)
 {
     if (b == 0) {
         e->sat_pending++;
@@ -194,7 +204,7 @@ static int64_t increment_q40(int32_t phi_e_q16, int32_t gain_q28)
     return (-(int64_t)phi_e_q16 * gain_q28 + 8) >> 4;
 }
 
-static int32_t pump_bias_q16(ecu_t *e)
+ECU_INLINE int32_t pump_bias_q16(ecu_t *e)
 {
     const ecu_params_t *p = e->p;
     if (!p->pump_scaling_on) {
@@ -359,22 +369,24 @@ static int32_t interp_uniform(ecu_t *e, const int32_t *table, int32_t n, int32_t
                               int32_t step_q24, int32_t x_q24)
 {
     int64_t x = (int64_t)x_q24 - x0_q24;
-    int64_t k, f;
+    uint32_t k, f;
     if (x <= 0) {
         return table[0];
     }
-    k = x / step_q24;
-    if (k >= n - 1) {
+    /* 0 < x < 2^32 and step >= 1 (ecu_params_load): Python's x // step, exactly, in one
+     * unsigned 32-bit division (UDIV on a Cortex-M4) */
+    k = (uint32_t)x / (uint32_t)step_q24;
+    if (k >= (uint32_t)(n - 1)) {
         return table[n - 1];
     }
-    f = x - k * step_q24;
+    f = (uint32_t)x - k * (uint32_t)step_q24;
     return sat32(e, (int64_t)table[k] +
                         div_trunc(e, ((int64_t)table[k + 1] - table[k]) * f, step_q24));
 }
 
 /* ---- ecu/pi.py ----------------------------------------------------------------------------- */
 
-static int32_t scheduled(ecu_t *e, const int32_t *table, int32_t n_q24)
+ECU_INLINE int32_t scheduled(ecu_t *e, const int32_t *table, int32_t n_q24)
 {
     return interp_uniform(e, table, ECU_PI_POINTS, e->p->pi_n0_q24, e->p->pi_step_q24, n_q24);
 }
@@ -426,7 +438,7 @@ static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_pre
 }
 
 /* a schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24) */
-static int32_t schedule_at(ecu_t *e, const int32_t *table, int32_t n_q24)
+ECU_INLINE int32_t schedule_at(ecu_t *e, const int32_t *table, int32_t n_q24)
 {
     const ecu_params_t *p = e->p;
     int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
@@ -545,7 +557,7 @@ static void reset_loops(ecu_state_t *s, int32_t v_q24)
 /* ---- ecu/fast_model.py (eq. 3.5 as an observer) ------------------------------------------- */
 
 /* the input's acceleration (Lambda + Th1 dN + Th2 dN^2) dV, %N/s^2 in Q15.16, not saturated */
-static int64_t input_accel_q16(const int32_t *th, int32_t n, int32_t u)
+ECU_INLINE int64_t input_accel_q16(const int32_t *th, int32_t n, int32_t u)
 {
     int64_t th2_n = ((int64_t)th[ECU_TH2] * n) >> 24;
     return (((int64_t)th[ECU_LAM] * u) >> 32) +
@@ -599,7 +611,8 @@ static void rate_filter_step(ecu_t *e, int32_t dn, int32_t u, int valid)
 /* ---- ecu/modes.py -------------------------------------------------------------------------- */
 
 static int32_t next_mode(int32_t mode, int arm, int stop, int running, int demand_fresh,
-                         int trip_fault, int trip_shutdown, int spooled_down)
+                         int trip_fault, int trip_shutdown, int spooled_down, int fuelled,
+                         int relight, int cooled)
 {
     if (mode == ECU_FAULT) {
         return ECU_FAULT;
@@ -607,16 +620,189 @@ static int32_t next_mode(int32_t mode, int arm, int stop, int running, int deman
     if (trip_fault && (mode == ECU_ARMED || mode == ECU_RUN)) {
         return ECU_FAULT;
     }
-    if (mode == ECU_OFF || mode == ECU_ARMED) {
-        if (stop || !arm) {
+    if (mode == ECU_OFF) {
+        if (!arm || stop) {
             return ECU_OFF;
         }
         return running && demand_fresh ? ECU_RUN : ECU_ARMED;
     }
+    if (mode == ECU_ARMED) {
+        if (stop || !arm || trip_shutdown) {
+            return fuelled ? ECU_SHUTDOWN : ECU_OFF;
+        }
+        return running && demand_fresh ? ECU_RUN : ECU_ARMED;
+    }
     if (mode == ECU_RUN) {
+        if (relight && arm && !stop) {
+            return ECU_ARMED;
+        }
         return trip_shutdown || stop || !arm ? ECU_SHUTDOWN : ECU_RUN;
     }
-    return spooled_down && !arm ? ECU_OFF : ECU_SHUTDOWN;
+    return spooled_down && cooled && !arm ? ECU_OFF : ECU_SHUTDOWN;
+}
+
+/* ---- ecu/start_sequencer.py ---------------------------------------------------------------- */
+
+/* The sequencer's commands of the tick (Python: the SeqOut record) are the state's
+ * starter_cpct and igniter words, which the tick clears before the sequencer runs; its pump
+ * voltage is s->seq_v_q24. */
+
+#define DUTY_FULL_CPCT 10000
+
+static int32_t seq_timer_step(int32_t t)
+{
+    return t < INT32_MAX ? t + 1 : INT32_MAX;
+}
+
+static void seq_enter(ecu_state_t *s, int32_t state)
+{
+    s->seq_state = state;
+    s->seq_timer = 0;
+}
+
+/* start_begin: a start (SPIN_UP) or, for a relight, the ignition with the engine still turning */
+static void start_begin(ecu_state_t *s, int relight)
+{
+    s->seq_reason = ECU_ABORT_NONE;
+    s->seq_v_q24 = 0;
+    if (relight) {
+        s->seq_egt_ref_q8 = (int32_t)((int64_t)s->egt_dk * 256);
+        seq_enter(s, ECU_SEQ_IGNITION);
+    } else {
+        seq_enter(s, ECU_SEQ_SPIN_UP);
+    }
+}
+
+/* _fuel_ramp: down by ramp_v_step over the start's EGT target, else up by it while the shaft
+ * accelerates slower than accel_q24 (held while faster), within [ign_v0, min(v_cap, v_max)] */
+static void fuel_ramp(ecu_t *e, int32_t egt_dk, int32_t rate_q24, int32_t v_cap_q24)
+{
+    const ecu_params_t *p = e->p;
+    int64_t step = 0;
+    if (egt_dk >= p->seq_egt_target_dk) {
+        step = -(int64_t)p->seq_ramp_v_step_q24;
+    } else if (rate_q24 < p->seq_accel_q24) {
+        step = p->seq_ramp_v_step_q24;
+    }
+    e->s.seq_v_q24 = (int32_t)clamp(e->s.seq_v_q24 + step, p->seq_ign_v0_q24,
+                                    v_cap_q24 < p->v_max_q24 ? v_cap_q24 : p->v_max_q24);
+}
+
+/* start_step: one tick of the start in ARMED at speed n_rpm, EGT egt_dk and speed rate rate_q24
+ * (%N/s, Q7.24); returns an abort reason (ECU_ABORT_NONE while starting); s->seq_state is
+ * ECU_SEQ_RUN once the engine is at idle */
+static int32_t start_step(ecu_t *e, int32_t n_rpm, int32_t egt_dk, int32_t rate_q24,
+                          int32_t v_cap_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t state = s->seq_state;
+    int32_t t = seq_timer_step(s->seq_timer);
+    int32_t abort = ECU_ABORT_NONE;
+    s->seq_timer = t;
+    if (state == ECU_SEQ_SPIN_UP) {
+        s->starter_cpct = p->seq_start_cpct;
+        s->igniter = 1;
+        if (t >= p->seq_purge_ticks && n_rpm >= p->seq_ign_rpm) {
+            s->seq_egt_ref_q8 = (int32_t)((int64_t)egt_dk * 256);
+            s->seq_v_q24 = p->seq_ign_v0_q24;
+            seq_enter(s, ECU_SEQ_IGNITION);
+        } else if (t >= p->seq_spinup_ticks) {
+            abort = ECU_ABORT_STARTER_FAILURE;
+        }
+    } else if (state == ECU_SEQ_IGNITION) {
+        s->starter_cpct = p->seq_start_cpct;
+        s->igniter = 1;
+        if (s->seq_v_q24 < p->seq_ign_v0_q24) {
+            s->seq_v_q24 = p->seq_ign_v0_q24;
+        } else {
+            int64_t v = (int64_t)s->seq_v_q24 + p->seq_ign_v_step_q24;
+            s->seq_v_q24 = v < p->seq_ign_v_max_q24 ? (int32_t)v : p->seq_ign_v_max_q24;
+        }
+        { /* the light-off reference: follows the EGT down at once, up at most light_track */
+            int64_t x_q8 = (int64_t)egt_dk * 256;
+            int64_t ref = (int64_t)s->seq_egt_ref_q8 + p->seq_light_track_q8;
+            s->seq_egt_ref_q8 = (int32_t)(x_q8 < ref ? x_q8 : ref);
+        }
+        if (egt_dk >= (int64_t)(s->seq_egt_ref_q8 >> 8) + p->seq_light_rise_dk) {
+            seq_enter(s, ECU_SEQ_RAMP);
+        } else if (t >= p->seq_ign_ticks) {
+            abort = ECU_ABORT_IGNITION_TIMEOUT;
+        }
+    } else if (state == ECU_SEQ_RAMP || state == ECU_SEQ_STABILISE) {
+        fuel_ramp(e, egt_dk, rate_q24, v_cap_q24); /* (Python: in each of the two branches) */
+        if (state == ECU_SEQ_RAMP) {
+            int64_t duty = p->seq_start_cpct + (int64_t)t * p->seq_starter_step_cpct;
+            s->starter_cpct = duty < DUTY_FULL_CPCT ? (int32_t)duty : DUTY_FULL_CPCT;
+            s->igniter = t < p->seq_igniter_hold_ticks;
+            if (n_rpm >= p->seq_cutoff_rpm) {
+                seq_enter(s, ECU_SEQ_STABILISE);
+            } else if (t >= p->seq_ramp_ticks) {
+                abort = ECU_ABORT_SLOW_ACCEL;
+            } else if (t >= p->seq_igniter_hold_ticks &&
+                       egt_dk < (int64_t)(s->seq_egt_ref_q8 >> 8) + (p->seq_light_rise_dk >> 1)) {
+                abort = ECU_ABORT_FLAMEOUT;
+            }
+        } else if (n_rpm >= p->seq_idle_rpm) {
+            seq_enter(s, ECU_SEQ_RUN);
+        } else if (t >= p->seq_stabilise_ticks || n_rpm < p->seq_ign_rpm) {
+            abort = ECU_ABORT_SLOW_ACCEL;
+        }
+    }
+    if (abort == ECU_ABORT_NONE && egt_dk > p->seq_hot_dk) {
+        abort = ECU_ABORT_HOT_START;
+    }
+    if (abort != ECU_ABORT_NONE) {
+        s->seq_reason = abort;
+        s->starter_cpct = 0;
+        s->igniter = 0;
+        s->seq_v_q24 = 0;
+    }
+    return abort;
+}
+
+/* cooled: the stop is over, DONE and held for soak_ticks without the EGT soaking back */
+static int cooled(const ecu_t *e)
+{
+    return e->s.seq_state == ECU_SEQ_DONE && e->s.seq_timer >= e->p->seq_soak_ticks;
+}
+
+/* stop_step: one tick of the stop in SHUTDOWN (fuel cut): spool down, cool down with the
+ * starter once the rotor is slow enough for its clutch, DONE when cool (back to COOL_DOWN if the
+ * heat soaks back by more than cool_rearm_dk) */
+static void stop_step(ecu_t *e, int32_t n_rpm, int32_t egt_dk)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t state = s->seq_state;
+    int hot = egt_dk > p->seq_cool_egt_dk;
+    s->seq_timer = seq_timer_step(s->seq_timer);
+    s->starter_cpct = 0;
+    s->igniter = 0;
+    s->seq_v_q24 = 0;
+    if (state != ECU_SEQ_SPOOL_DOWN && state != ECU_SEQ_COOL_DOWN && state != ECU_SEQ_DONE) {
+        seq_enter(s, ECU_SEQ_SPOOL_DOWN);
+        state = ECU_SEQ_SPOOL_DOWN;
+    }
+    if (state == ECU_SEQ_SPOOL_DOWN) {
+        if (n_rpm <= p->seq_cool_rpm) {
+            seq_enter(s, hot ? ECU_SEQ_COOL_DOWN : ECU_SEQ_DONE);
+        }
+    } else if (state == ECU_SEQ_COOL_DOWN) {
+        if (!hot) {
+            seq_enter(s, ECU_SEQ_DONE);
+        } else if (s->seq_timer >= p->seq_cool_ticks) { /* given up: no re-arm */
+            seq_enter(s, ECU_SEQ_DONE);
+            s->seq_timer = p->seq_soak_ticks;
+        }
+    } else if (s->seq_timer < p->seq_soak_ticks &&
+               egt_dk > (int64_t)p->seq_cool_egt_dk + p->seq_cool_rearm_dk &&
+               n_rpm <= p->seq_cool_rpm) {
+        seq_enter(s, ECU_SEQ_COOL_DOWN); /* the metal's heat soaked back: cool again */
+    }
+    if (s->seq_state == ECU_SEQ_COOL_DOWN) {
+        s->starter_cpct = p->seq_cool_cpct;
+    }
 }
 
 /* ---- ecu/firmware.py ----------------------------------------------------------------------- */
@@ -640,7 +826,7 @@ static int32_t rate_q24(ecu_t *e, int32_t age)
     return div_trunc(e, mul_wide_shr(d_rpm * p->rpm_to_q24_k, p->rate_hz, 16), 2 * (int64_t)m);
 }
 
-static int32_t dn_q24(ecu_t *e, int32_t age)
+ECU_INLINE int32_t dn_q24(ecu_t *e, int32_t age)
 {
     const ecu_state_t *s = &e->s;
     int64_t rpm = s->n_hist_rpm[ring(s->hist_idx - age)];
@@ -688,7 +874,8 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     int32_t mode = s->mode;
     int32_t m = p->rate_half_window;
     int32_t n_rpm, n_q24, dn, rate, ctrl_rate, demand, new_mode, pump_mv, duty, enable, health;
-    int speed_ok, egt_ok, analog_fresh, running, trip_fault, trip_shutdown;
+    int32_t seq_v, start_abort;
+    int speed_ok, egt_ok, analog_fresh, running, trip_fault, trip_shutdown, flameout, relight;
     int64_t pending;
 
     s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
@@ -788,8 +975,13 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     }
     s->flameout_cnt = persist(s->flameout_cnt, mode == ECU_RUN && n_rpm < p->flameout_rpm,
                               p->flameout_ticks);
-    if (s->flameout_cnt >= p->flameout_ticks) {
+    s->flame_egt_cnt = persist(s->flame_egt_cnt,
+                               mode == ECU_RUN && egt_ok && s->egt_dk < p->flameout_egt_dk,
+                               p->flameout_egt_ticks);
+    flameout = 0;
+    if (s->flameout_cnt >= p->flameout_ticks || s->flame_egt_cnt >= p->flameout_egt_ticks) {
         faults |= F_FLAMEOUT;
+        flameout = 1;
     }
     s->egt_over_cnt = persist(s->egt_over_cnt, running && egt_ok && s->egt_dk > p->egt_max_dk,
                               p->egt_max_ticks);
@@ -800,14 +992,55 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         faults |= pump_current_checks(e, s->pump_ma, s->v_applied_q24);
     }
     trip_fault = (faults & F_TRIP) != 0 || (running && s->sensor_age > p->sensor_loss_ticks);
-    trip_shutdown = (faults & F_FLAMEOUT) != 0 || s->demand_age >= p->demand_shutdown_ticks;
-    new_mode = next_mode(mode, s->arm, s->stop, n_rpm >= p->run_entry_rpm,
-                         s->demand_age <= p->demand_hold_ticks, trip_fault, trip_shutdown,
-                         n_rpm < p->shutdown_done_rpm);
-    if (new_mode == ECU_RUN && mode != ECU_RUN) { /* bumpless start at the entry voltage */
-        reset_loops(s, p->entry_v_q24);
+    trip_shutdown = flameout || s->demand_age >= p->demand_shutdown_ticks;
+    relight = flameout && p->start_on && s->relights < p->seq_relight_max;
+
+    /* 4b. the start sequencer (ARMED): this tick's starter, igniter and pump, or an abort */
+    s->starter_cpct = 0;
+    s->igniter = 0;
+    seq_v = 0;
+    start_abort = ECU_ABORT_NONE;
+    running = n_rpm >= p->run_entry_rpm;
+    if (mode == ECU_ARMED && p->start_on) {
+        int32_t v_cap = p->v_max_q24;
+        if (p->fuel_schedules_on) { /* under the acceleration line of the weakest pump the
+                                       schedules accept (no pump estimate yet in a start) */
+            v_cap = schedule_v(e, p->accel_line_q24, n_q24, p->sched_lam_lo_q24,
+                               p->sched_lam_lo_q24);
+        }
+        start_abort = start_step(e, n_rpm, s->egt_dk, ctrl_rate, v_cap);
+        seq_v = s->seq_v_q24;
+        running = s->seq_state == ECU_SEQ_RUN;
+        if ((s->stop || !s->arm || trip_shutdown) && !start_abort) {
+            s->seq_reason = ECU_ABORT_STOPPED;
+        }
+    }
+    new_mode = next_mode(mode, s->arm, s->stop, running, s->demand_age <= p->demand_hold_ticks,
+                         trip_fault, trip_shutdown || start_abort, n_rpm < p->shutdown_done_rpm,
+                         start_abort || s->seq_state >= ECU_SEQ_IGNITION, relight,
+                         cooled(e) || !p->start_on);
+    if (new_mode == ECU_ARMED && mode != ECU_ARMED && p->start_on) { /* a start or a relight */
+        if (mode == ECU_RUN) {
+            s->relights++;
+            s->flameout_cnt = 0;
+            s->flame_egt_cnt = 0;
+        } else {
+            s->relights = 0;
+        }
+        start_begin(s, mode == ECU_RUN);
+    }
+    if (new_mode == ECU_OFF) {
+        s->seq_state = ECU_SEQ_OFF;
+    }
+    if (new_mode == ECU_RUN && mode != ECU_RUN) { /* bumpless at the entry voltage */
+        int32_t v_entry = p->entry_v_q24;
+        if (mode == ECU_ARMED && p->start_on) {
+            v_entry = s->seq_v_q24; /* where the start left the pump */
+        }
+        s->seq_state = ECU_SEQ_RUN;
+        reset_loops(s, v_entry);
         s->hist_fill = 0;
-        th[ECU_PID_I] = sat32(e, (int64_t)p->entry_v_q24 - p->trim_v_q24);
+        th[ECU_PID_I] = sat32(e, (int64_t)v_entry - p->trim_v_q24);
         s->theta_ext[ECU_PID_I] = 0;
         s->xm1_q24 = dn;
         s->xm2_q24 = 0;
@@ -857,23 +1090,33 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         observer_step(e, u_applied, dn, speed_ok);
         s->u_hist_q24[s->hist_idx] = u_applied;
         pump_mv = volts_q24_to_mv(v);
-        duty = pump_duty(e, pump_mv, s->supply_mv);
-        enable = 1;
         if (s->owner != OWNER_SPEED) {
             faults |= F_LIMITER_ACTIVE;
         }
-        if (s->v_saturated) {
-            faults |= F_PUMP_SATURATED;
-        }
     } else {
-        s->v_applied_q24 = 0;
+        if (new_mode == ECU_SHUTDOWN && p->start_on) {
+            stop_step(e, n_rpm, s->egt_dk);
+            seq_v = 0;
+        } else if (new_mode != ECU_ARMED) {
+            seq_v = 0; /* a start that just ended: no fuel */
+        }
+        s->v_applied_q24 = seq_v;
         s->xm1_q24 = dn;
         s->xm2_q24 = 0;
         s->obs_n_q24 = dn;
         s->obs_v_q24 = rate;
-        pump_mv = 0;
-        duty = 0;
-        enable = 0;
+        pump_mv = volts_q24_to_mv(seq_v);
+    }
+    /* the pump driver, in one place for both branches above: in RUN always (enabled, its
+     * clipping reported), outside RUN for the start's fuel only */
+    duty = new_mode == ECU_RUN || pump_mv > 0 ? pump_duty(e, pump_mv, s->supply_mv) : 0;
+    enable = new_mode == ECU_RUN || duty > 0;
+    if (new_mode == ECU_RUN && s->v_saturated) {
+        faults |= F_PUMP_SATURATED;
+    }
+    if (new_mode != ECU_ARMED && new_mode != ECU_SHUTDOWN) {
+        s->starter_cpct = 0;
+        s->igniter = 0;
     }
 
     /* 6. health, telemetry, fault word */
@@ -906,6 +1149,10 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     o->nref_cpct = q24_to_cpct((int64_t)s->xm1_q24 + p->trim_n_q24);
     o->n_cpct = q24_to_cpct(n_q24);
     o->owner = s->owner;
+    o->starter_cpct = s->starter_cpct;
+    o->igniter = s->igniter;
+    o->seq_state = s->seq_state;
+    o->seq_reason = s->seq_reason;
     return o;
 }
 

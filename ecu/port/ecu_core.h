@@ -17,8 +17,10 @@
  *         fill an ecu_inputs_t from the frames received since the last tick (raw integers in
  *         the CAN contract's units; one E2E status per frame kind, see ECU_E2E_*),
  *         const ecu_outputs_t *o = ecu_tick(&ecu, &in);
- *         send o->duty_cpct / o->pump_enable to the pump driver and the ECU frames
- *         (ecu_frames.h packs them from the outputs, with E2E CRC and alive counter).
+ *         send o->duty_cpct / o->pump_enable to the pump driver, o->starter_cpct and
+ *         o->igniter to the starter and the igniter (the start/stop sequencer drives them in
+ *         ECU_ARMED and ECU_SHUTDOWN), and the ECU frames (ecu_frames.h packs them from the
+ *         outputs, with E2E CRC and alive counter).
  *
  * ecu_tick is reentrant per instance, has no loops, uses no floating point and calls nothing but
  * the compiler's 64-bit division helper (__aeabi_ldivmod on Arm). Inputs are expected in their
@@ -55,6 +57,18 @@ enum {
 
 /* modes (ecu/modes.py) */
 enum { ECU_OFF, ECU_ARMED, ECU_RUN, ECU_SHUTDOWN, ECU_FAULT };
+
+/* start/stop sequencer states (ecu/start_sequencer.py) */
+enum {
+    ECU_SEQ_OFF, ECU_SEQ_SPIN_UP, ECU_SEQ_IGNITION, ECU_SEQ_RAMP, ECU_SEQ_STABILISE, ECU_SEQ_RUN,
+    ECU_SEQ_SPOOL_DOWN, ECU_SEQ_COOL_DOWN, ECU_SEQ_DONE
+};
+
+/* start abort reasons (ecu/start_sequencer.py) */
+enum {
+    ECU_ABORT_NONE, ECU_ABORT_IGNITION_TIMEOUT, ECU_ABORT_SLOW_ACCEL, ECU_ABORT_STARTER_FAILURE,
+    ECU_ABORT_HOT_START, ECU_ABORT_FLAMEOUT, ECU_ABORT_STOPPED
+};
 
 /* controllers (ecu/params.py) */
 enum { ECU_CTRL_MRAC, ECU_CTRL_PID, ECU_CTRL_OPEN_LOOP, ECU_CTRL_PI };
@@ -97,7 +111,8 @@ enum {
     X(egt_max_dk) X(egt_max_ticks) \
     X(accel_max_q24) X(decel_max_q24) X(rate_kp_q24) X(rate_ki_dt_q24) X(n_limit_q24) \
     X(n_limit_kp_q24) X(n_limit_ki_dt_q24) X(overspeed_rpm) X(overspeed_ticks) \
-    X(flameout_rpm) X(flameout_ticks) X(v_min_q24) X(v_max_q24) X(v_slew_q24) \
+    X(flameout_rpm) X(flameout_ticks) X(flameout_egt_dk) X(flameout_egt_ticks) X(v_min_q24) \
+    X(v_max_q24) X(v_slew_q24) \
     X(duty_min_cpct) X(duty_max_cpct) X(supply_nominal_mv) X(pump_stall_ma) X(pump_trip_ma) \
     X(pump_stall_ticks) X(pump_dry_base_ma) X(pump_dry_ma_per_v) X(pump_dry_min_q24) \
     X(pump_dry_ticks) X(speed_valid_max_rpm) X(speed_step_max_rpm) X(speed_fault_ticks) \
@@ -105,7 +120,14 @@ enum {
     X(egt_fault_ticks) X(egt_fail_demand_q24) X(obs_l1_dt_q24) X(obs_l2_dt_q24) \
     X(rate_filter_on) X(rf_k1_q24) X(rf_k2_q24) X(rf_k3_q24) \
     X(demand_hold_ticks) X(demand_shutdown_ticks) X(sensor_loss_ticks) X(analog_loss_ticks) \
-    X(run_entry_rpm) X(shutdown_done_rpm)
+    X(run_entry_rpm) X(shutdown_done_rpm) \
+    X(start_on) X(seq_start_cpct) X(seq_purge_ticks) X(seq_ign_rpm) X(seq_spinup_ticks) \
+    X(seq_ign_v0_q24) X(seq_ign_v_step_q24) X(seq_ign_v_max_q24) X(seq_light_rise_dk) \
+    X(seq_light_track_q8) X(seq_ign_ticks) X(seq_igniter_hold_ticks) X(seq_starter_step_cpct) \
+    X(seq_ramp_v_step_q24) X(seq_accel_q24) X(seq_egt_target_dk) X(seq_hot_dk) \
+    X(seq_cutoff_rpm) X(seq_ramp_ticks) X(seq_idle_rpm) X(seq_stabilise_ticks) \
+    X(seq_relight_max) X(seq_cool_cpct) X(seq_cool_egt_dk) X(seq_cool_rearm_dk) \
+    X(seq_cool_rpm) X(seq_cool_ticks) X(seq_soak_ticks)
 
 /* ecu.state.EcuState, in its order (the state digest runs over these words in this order) */
 #define ECU_STATE_FIELDS(X, A) \
@@ -118,8 +140,10 @@ enum {
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \
     X(speed_range_cnt) X(speed_rate_cnt) X(speed_stuck_cnt) X(speed_stuck_v_q24) \
-    X(egt_open_cnt) X(egt_over_cnt) X(overspeed_cnt) X(flameout_cnt) \
+    X(egt_open_cnt) X(egt_over_cnt) X(overspeed_cnt) X(flameout_cnt) X(flame_egt_cnt) \
     X(pump_stall_cnt) X(pump_dry_cnt) X(speed_failed) X(speed_seen) \
+    X(seq_state) X(seq_reason) X(seq_timer) X(seq_v_q24) X(seq_egt_ref_q8) X(relights) \
+    X(starter_cpct) X(igniter) \
     X(mode) X(faults) X(sat_events) X(ticks)
 
 /* ecu.firmware.EcuInputs: raw integers in the CAN contract's units */
@@ -151,7 +175,11 @@ enum {
     X(pump_health_pm) /* Lambda-hat / commissioning Lambda, 0.1 % */ \
     X(nref_cpct)      /* reference-model speed, 0.01 %N */ \
     X(n_cpct)         /* speed used by the control, 0.01 %N */ \
-    X(owner)          /* loop owning the pump command (0 speed, 1 EGT, 2 accel, 3 N, 4 decel) */
+    X(owner)          /* loop owning the pump command (0 speed, 1 EGT, 2 accel, 3 N, 4 decel) */ \
+    X(starter_cpct)   /* starter PWM duty, 0.01 % (0..10000) */ \
+    X(igniter)        /* igniter power bit */ \
+    X(seq_state)      /* start/stop sequencer state (ECU_SEQ_*) */ \
+    X(seq_reason)     /* the last start's abort reason (ECU_ABORT_*, 0: none) */
 
 #define ECU_X_FIELD(name) int32_t name;
 #define ECU_A_FIELD(name, n) int32_t name[n];

@@ -10,16 +10,18 @@
 #define MAX_DELTA 2       /* counter step still OK (ecu/node.py: max_delta=2) */
 
 enum { RX_SENSORS, RX_ANALOG, RX_DEMAND };
-enum { TX_ACTUATOR, TX_STATUS, TX_TELEMETRY };
+enum { TX_ACTUATOR, TX_STATUS, TX_TELEMETRY, TX_STARTER };
 
 static const uint16_t rx_data_id[3] = {4098u, 4099u, 4097u};
-static const uint16_t tx_data_id[3] = {4100u, 4101u, 4102u};
+static const uint16_t tx_data_id[4] = {4100u, 4101u, 4102u, 4106u};
 
 void ecu_frames_init(ecu_frames_t *f)
 {
     int k;
     for (k = 0; k < 3; k++) {
         f->rx_last[k] = -1;
+    }
+    for (k = 0; k < 4; k++) {
         f->tx_counter[k] = 0;
     }
     f->telemetry_index = 0;
@@ -143,6 +145,19 @@ void ecu_frames_actuator(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8
     m.pump_voltage_target = (uint16_t)sat_raw(o->pump_mv, 0, 30000);
     (void)turbojet_ecu_actuator_pack(data, &m, 8u);
     protect(f, TX_ACTUATOR, data);
+}
+
+void ecu_frames_starter(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8])
+{
+    struct turbojet_ecu_starter_t m;
+    (void)turbojet_ecu_starter_init(&m);
+    m.igniter_on = (uint8_t)sat_raw(o->igniter, 0, 1);
+    m.starter_tick = (uint16_t)sat_raw(o->tick, 0, 65535);
+    m.starter_duty = (uint16_t)sat_raw(o->starter_cpct, 0, 10000);
+    m.sequencer_state = (uint8_t)sat_raw(o->seq_state, 0, 8);
+    m.abort_reason = (uint8_t)sat_raw(o->seq_reason, 0, 6);
+    (void)turbojet_ecu_starter_pack(data, &m, 8u);
+    protect(f, TX_STARTER, data);
 }
 
 void ecu_frames_status(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8])

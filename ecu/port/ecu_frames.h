@@ -9,9 +9,10 @@
  * step of 1 or 2 is OK: one lost frame before a good one is tolerated) and, when it is OK,
  * writes its values into the tick's inputs. Keep the "best" status per frame kind between ticks
  * (an OK since the last tick wins) and pass ECU_E2E_NONEWDATA for kinds that did not arrive.
- * Send: after ecu_tick, pack EcuActuator every tick, EcuStatus every 50 ms and EcuTelemetry
- * every tick (one of its 13 multiplexed values per frame, round robin), each with the next
- * alive counter and its CRC. Scheduling and the CAN driver are the integrator's; ecu_node.h does
+ * Send: after ecu_tick, pack EcuActuator every tick, EcuStatus every 50 ms, EcuTelemetry
+ * every tick (one of its 13 multiplexed values per frame, round robin) and EcuStarter every
+ * tick in ARMED and SHUTDOWN (the start/stop sequencer's starter and igniter), each with the
+ * next alive counter and its CRC. Scheduling and the CAN driver are the integrator's; ecu_node.h does
  * all of this as the ECU's CAN node (the twin of ecu/node.py).
  */
 #ifndef ECU_FRAMES_H
@@ -29,13 +30,14 @@ extern "C" {
 #define ECU_FRAME_SENSORS 0x100u
 #define ECU_FRAME_ANALOG 0x101u
 #define ECU_FRAME_ACTUATOR 0x110u
+#define ECU_FRAME_STARTER 0x111u
 #define ECU_FRAME_STATUS 0x200u
 #define ECU_FRAME_TELEMETRY 0x210u
 #define ECU_TELEMETRY_COUNT 13
 
 typedef struct {
     int8_t rx_last[3];       /* last accepted alive counter: sensors, analog, demand (-1: none) */
-    uint8_t tx_counter[3];   /* next alive counter: actuator, status, telemetry */
+    uint8_t tx_counter[4];   /* next alive counter: actuator, status, telemetry, starter */
     uint8_t telemetry_index; /* next EcuTelemetry multiplexer index */
 } ecu_frames_t;
 
@@ -63,6 +65,7 @@ int ecu_frames_receive(ecu_frames_t *f, uint32_t frame_id, const uint8_t data[8]
 void ecu_frames_actuator(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8]);
 void ecu_frames_status(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8]);
 void ecu_frames_telemetry(ecu_frames_t *f, const ecu_t *e, uint8_t data[8]);
+void ecu_frames_starter(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8]);
 
 #ifdef __cplusplus
 }

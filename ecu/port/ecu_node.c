@@ -131,7 +131,8 @@ static void apply_demand(ecu_node_t *n)
     n->demand_pending--;
 }
 
-/* _run_tick: one firmware tick, then EcuStatus and EcuTelemetry when due, EcuActuator last */
+/* _run_tick: one firmware tick, then EcuStatus and EcuTelemetry when due, EcuStarter in ARMED
+ * and SHUTDOWN, EcuActuator last */
 static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
 {
     const ecu_outputs_t *o;
@@ -157,6 +158,11 @@ static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
     if (n->telemetry_phase == 0u) { /* ticks % every_telemetry == 0 */
         out[count].id = ECU_FRAME_TELEMETRY;
         ecu_frames_telemetry(&n->frames, n->ecu, out[count].data);
+        count++;
+    }
+    if (o->mode == ECU_ARMED || o->mode == ECU_SHUTDOWN) {
+        out[count].id = ECU_FRAME_STARTER;
+        ecu_frames_starter(&n->frames, o, out[count].data);
         count++;
     }
     out[count].id = ECU_FRAME_ACTUATOR; /* ActuatorTick: o->tick, the echo of in.tick */

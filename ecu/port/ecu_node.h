@@ -64,7 +64,8 @@
 extern "C" {
 #endif
 
-#define ECU_NODE_MAX_OUT 3 /* frames one call can send: EcuStatus, EcuTelemetry, EcuActuator */
+#define ECU_NODE_MAX_OUT 4 /* frames one call can send: EcuStatus, EcuTelemetry, EcuStarter,
+                              EcuActuator */
 
 /*
  * The two public records, as X-macro lists (the struct below and, in host builds, the field

@@ -1,7 +1,10 @@
 """The fault log: a ring of the latest events, each with its time, code and a snapshot.
 
 Codes 0-15 are the bit numbers of the firmware's fault word (:mod:`ecu.faults`), logged when
-the bit rises; codes from 64 are the service port's own events (parameter storage). The two
+the bit rises; codes from 64 are the service port's own events (parameter storage); code
+START_ABORT + r is a start aborted with reason r (:mod:`ecu.start_sequencer`: 1
+IGNITION_TIMEOUT ... 6 STOPPED), logged when the abort happens, with the sequencer's state in
+the snapshot. The two
 information bits (a limiter owns the command, the pump voltage is at a limit) are not logged.
 The log lives in RAM and is cleared by the service or a power cycle.
 """
@@ -12,17 +15,23 @@ from collections import deque
 from dataclasses import dataclass
 
 from ecu import faults as F
+from ecu import start_sequencer as Q
 
 CAPACITY = 32
 PARAMS_DEFAULTS = 64  # no valid parameter slot in flash at start: defaults in use
 PARAMS_REJECTED = 65  # a stored set (or some of its entries) was refused at start
+START_ABORT = 80  # + the abort reason
 LOGGED_BITS = 0xFFFF & ~(F.LIMITER_ACTIVE | F.PUMP_SATURATED)
-SNAPSHOT_FIELDS = ("mode", "fault_word", "speed_cpct", "egt_dk", "pump_mv", "supply_mv", "pump_ma")
+SNAPSHOT_FIELDS = (
+    "mode", "fault_word", "speed_cpct", "egt_dk", "pump_mv", "supply_mv", "pump_ma", "seq_state",
+)  # fmt: skip
 
 
 def code_name(code: int) -> str:
     if 0 <= code < 16:
         return F.NAMES[1 << code]
+    if START_ABORT < code < START_ABORT + len(Q.REASONS):
+        return f"START_ABORT_{Q.REASONS[code - START_ABORT]}"
     return {PARAMS_DEFAULTS: "PARAMS_DEFAULTS", PARAMS_REJECTED: "PARAMS_REJECTED"}.get(
         code, f"CODE_{code}"
     )
@@ -43,13 +52,19 @@ class FaultLog:
         self.entries: deque[FaultEntry] = deque(maxlen=capacity)
         self.total = 0  # events logged since power-up (older ones roll off the ring)
         self._last_word = 0
+        self._last_reason = 0
 
     def record(self, tick: int, code: int, snapshot: tuple[int, ...]) -> None:
         self.entries.append(FaultEntry(tick, code, snapshot))
         self.total += 1
 
-    def update(self, tick: int, fault_word: int, snapshot: tuple[int, ...]) -> None:
-        """Log the fault bits that rose since the last call."""
+    def update(
+        self, tick: int, fault_word: int, snapshot: tuple[int, ...], abort_reason: int = 0
+    ) -> None:
+        """Log the fault bits that rose since the last call, and a start abort (a new reason)."""
+        if abort_reason and abort_reason != self._last_reason:
+            self.record(tick, START_ABORT + abort_reason, snapshot)
+        self._last_reason = abort_reason
         rising = fault_word & ~self._last_word & LOGGED_BITS
         self._last_word = fault_word
         bit = 0

@@ -216,7 +216,7 @@ class ServicePort:
             inputs.stop = 1
             self.ecu.s.stop = 1
         ecu = self.ecu
-        self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot())
+        self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot(), ecu.out.seq_reason)
         if ticking and self._stream_every and c.polls % self._stream_every == 0:
             self._send_stream()
         if self._writer is not None:
@@ -240,7 +240,10 @@ class ServicePort:
     def _snapshot(self) -> tuple[int, ...]:
         o = self.ecu.out
         s = self.ecu.s
-        return (o.mode, o.fault_word, o.n_cpct, s.egt_dk, o.pump_mv, s.supply_mv, s.pump_ma)
+        return (
+            o.mode, o.fault_word, o.n_cpct, s.egt_dk, o.pump_mv, s.supply_mv, s.pump_ma,
+            o.seq_state,
+        )  # fmt: skip
 
     # -- frames out --------------------------------------------------------------------------
     def _queue(self, frame: bytes, limit: int = TX_BUFFER) -> None:

@@ -63,7 +63,13 @@ def run_case(
     out = plant.outputs
     probe = Probe(codec, lambda: (out.n_pct, out.egt_true_k, out.p3_pa, out.thrust_n, out.flags))
     command = CommandNode(
-        codec, probe, commands, ecu_rate_hz=s.ecu_rate_hz, open_loop=open_loop, faults=s.faults
+        codec,
+        probe,
+        commands,
+        ecu_rate_hz=s.ecu_rate_hz,
+        open_loop=open_loop,
+        faults=s.faults,
+        stop_tick=s.stop_tick,
     )
     # one codec for all three (18 ms each to build): each node packs only its own messages
     core = make_ecu(ecu_impl, compile_params(params))

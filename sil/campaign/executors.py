@@ -32,6 +32,7 @@ FIGURES = (
     "pump_v_min", "pump_v_max", "final_mode", "fault_bits",
     "stalls", "step_pct", "thrust_rise_s", "egt_overshoot_K", "min_surge_margin_pct",
     "flameouts", "min_speed_pct",
+    "start_time_s", "start_egt_peak_K", "start_abort", "unburnt_fuel_kg", "cool_down_s",
 )  # fmt: skip
 
 

@@ -12,6 +12,10 @@ Invariants (thresholds in the campaign's ``[invariants]``):
   of its change within ``max_thrust_rise_s``;
 - ``pump_command``: the pump voltage the ECU commands within [0, v_max], and within
   [v_min, v_max] while it runs;
+- for a start from rest (``check_start``): ``idle`` (the start reaches RUN), ``hot_start`` (the
+  true EGT during the start never above the ECU's start limit plus ``egt_margin_K``),
+  ``hung_start`` (no SLOW_ACCEL abort), ``abort_reason`` (a start that ends without RUN says
+  why); ``cool_down`` (the true EGT under 373 K within ``max_cool_down_s`` of the fuel cut);
 - per ``[[bus_fault]]`` with expectations: ``detect`` (every corrupted frame rejected by its
   receiver for "E2E", else the fault bit seen in EcuStatus within ``within_ticks`` of the
   window's start), ``fallback`` (the ECU mode reached from the window's start on) and
@@ -27,6 +31,7 @@ import numpy as np
 
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
+from ecu import start_sequencer as seq
 from ecu.limiters import OWNER_EGT, OWNER_SPEED
 from plant.flags import FLAMEOUT
 from sil import metrics
@@ -66,6 +71,32 @@ def transient(r: CaseRun) -> dict:
     return {k: (math.nan if v is None else v) for k, v in out.items()}
 
 
+def start(r: CaseRun) -> dict:
+    """The start and stop figures of a run from rest ({} for any other run): time from the
+    arming to RUN, the true EGT's peak before RUN (or over the whole start if it never got
+    there), the abort reason, the fuel delivered without a flame, and the time from the fuel
+    cut (the first SHUTDOWN) to a true EGT under metrics.COOL_K for good."""
+    if not r.scenario.plant.standstill:
+        return {}
+    rate = r.scenario.ecu_rate_hz
+    mode, egt = r.column("mode"), r.column("egt_k")
+    armed = np.flatnonzero(mode == ecu_modes.ARMED)
+    run = np.flatnonzero(mode == ecu_modes.RUN)
+    stop = np.flatnonzero(mode == ecu_modes.SHUTDOWN)
+    i0 = int(armed[0]) if armed.size else 0
+    end = int(run[0]) if run.size else int(stop[0]) if stop.size else len(mode)
+    reasons = r.column("abort_reason")
+    reason = int(reasons[-1]) if reasons.size else 0
+    unburnt = r.column("unburnt_kg")
+    return {
+        "start_time_s": (int(run[0]) - i0) / rate if run.size else math.nan,
+        "start_egt_peak_K": float(np.nanmax(egt[i0 : max(end, i0 + 1)])),
+        "start_abort": seq.REASONS[reason] if reason else "",
+        "unburnt_fuel_kg": float(np.nanmax(unburnt)) if unburnt.size else math.nan,
+        "cool_down_s": metrics.cool_down_ticks(egt, int(stop[0])) / rate if stop.size else math.nan,
+    }
+
+
 def figures(r: CaseRun) -> dict:
     p = r.probe
     n, egt, mode = r.column("n_pct"), r.column("egt_k"), r.column("mode")
@@ -94,6 +125,7 @@ def figures(r: CaseRun) -> dict:
         ),
         "stalls": sum(r.stalls.values()),
         **transient(r),
+        **start(r),
     }
 
 
@@ -170,6 +202,12 @@ def check(r: CaseRun, inv: Invariants) -> tuple[dict, list[dict], list[str]]:
             f"pump_command: {fig['pump_v_min']:.3f}..{fig['pump_v_max']:.3f} V outside "
             f"[{params.v_min:g}, {params.v_max:g}] V"
         )
+    if inv.check_start and r.scenario.plant.standstill:
+        violations += _start_violations(fig, params.start_egt_limit_k + inv.egt_margin_K)
+    if math.isfinite(inv.max_cool_down_s) and "cool_down_s" in fig:
+        cool = fig["cool_down_s"]
+        if not cool <= inv.max_cool_down_s:
+            violations.append(f"cool_down: {cool:.1f} s > {inv.max_cool_down_s:g} s")
     detections = _detections(r)
     if inv.check_faults:
         for d in detections:
@@ -181,3 +219,17 @@ def check(r: CaseRun, inv: Invariants) -> tuple[dict, list[dict], list[str]]:
             if d.get("recovered") is False:
                 violations.append(f"{name}: did not recover in time")
     return fig, detections, violations
+
+
+def _start_violations(fig: dict, hot_k: float) -> list[str]:
+    out = []
+    abort = fig["start_abort"]
+    if math.isnan(fig["start_time_s"]):
+        out.append(f"idle: the start never reached RUN ({abort or 'no abort reason'})")
+    if fig["start_egt_peak_K"] > hot_k:
+        out.append(f"hot_start: EGT {fig['start_egt_peak_K']:.1f} K > {hot_k:g} K in the start")
+    if abort == "SLOW_ACCEL":
+        out.append("hung_start: aborted SLOW_ACCEL")
+    if math.isnan(fig["start_time_s"]) and not abort:
+        out.append("abort_reason: the start ended without RUN and without a reason")
+    return out

@@ -2,10 +2,11 @@
 
 It stands in for :class:`sil.recorder.Recorder` towards the command node (``record``,
 ``commands_sent``, ``tick``, ``latest_sensor_tick``) and keeps, sample-and-hold as the trace
-does, the true speed of PlantTruthB, the ECU's reference speed, fault word and loop owner of
-EcuStatus and the pump voltage and mode of EcuActuator; the plant's true speed, EGT, P3, thrust
-and flags are read from the plant in process (``truth``), so invariants hold on the engine, not on
-what its sensors claim.
+does, the true speed of PlantTruthB, the fuel delivered without a flame of PlantTruthC, the ECU's
+reference speed, fault word and loop owner of EcuStatus, the sequencer's state and abort reason
+of EcuStarter and the pump voltage and mode of EcuActuator; the plant's true speed, EGT, P3,
+thrust and flags are read from the plant in process (``truth``), so invariants hold on the
+engine, not on what its sensors claim.
 
 A run in the compiled loop (sil/compiled_loop.py, the C ECU) hands the frames over in blocks
 (:meth:`Probe.record_ticks`, decoded vectorised to the same rows) and the plant's truth per tick
@@ -30,11 +31,15 @@ class Probe(InOrderTicks):
     def __init__(self, codec: Codec, truth: Truth) -> None:
         self.truth = truth
         self._truth_b = codec["PlantTruthB"]
+        self._truth_c = codec["PlantTruthC"]
         self._status = codec["EcuStatus"]
+        self._starter = codec["EcuStarter"]
         self._actuator = codec["EcuActuator"]
         self._ids = {
             self._truth_b.frame_id: self._on_truth_b,
+            self._truth_c.frame_id: self._on_truth_c,
             self._status.frame_id: self._on_status,
+            self._starter.frame_id: self._on_starter,
             ACTUATOR: self._on_actuator,
         }
         self._raw = [0] * 8
@@ -42,6 +47,8 @@ class Probe(InOrderTicks):
         # sample-and-hold values
         self._speed = self._ref = math.nan
         self._fault_word = self._owner = 0
+        self._unburnt = 0.0
+        self._seq_state = self._reason = 0
         # one entry per tick
         self.speed_pct: list[float] = []  # PlantTruthB true speed (as the trace's speed_true)
         self.ref_pct: list[float] = []
@@ -54,6 +61,9 @@ class Probe(InOrderTicks):
         self.owner: list[int] = []
         self.mode: list[int] = []
         self.pump_v: list[float] = []
+        self.unburnt_kg: list[float] = []  # PlantTruthC: fuel delivered without a flame
+        self.seq_state: list[int] = []  # EcuStarter (held while the ECU does not send it)
+        self.abort_reason: list[int] = []
 
     def record(self, frame_id: int, data: bytes | bytearray, wall_s: float | None = None) -> None:
         self.track(frame_id, data)
@@ -77,6 +87,14 @@ class Probe(InOrderTicks):
         fault_word, held_word = _held(ids, words, rows, status, 1, self._fault_word, _same)
         owner, held_owner = _held(ids, words, rows, status, 3, self._owner, _same)
         self._fault_word, self._owner = int(held_word), int(held_owner)
+        unburnt, self._unburnt = _held(ids, words, rows, self._truth_c, 3, self._unburnt, _micro)
+        starter = self._starter
+        seq_state, held_state = _held(ids, words, rows, starter, 3, self._seq_state, _same)
+        reason, held_reason = _held(ids, words, rows, starter, 4, self._reason, _same)
+        self._seq_state, self._reason = int(held_state), int(held_reason)
+        self.unburnt_kg += unburnt.tolist()
+        self.seq_state += seq_state.astype(np.int64).tolist()
+        self.abort_reason += reason.astype(np.int64).tolist()
         self.speed_pct += speed.tolist()
         self.ref_pct += ref.tolist()
         self.fault_word += fault_word.astype(np.int64).tolist()
@@ -100,6 +118,15 @@ class Probe(InOrderTicks):
         self._truth_b.unpack_raw(data, self._raw)
         self._speed = 100.0 * self._raw[2] / N_MAX_RPM
 
+    def _on_truth_c(self, data: bytes | bytearray) -> None:
+        self._truth_c.unpack_raw(data, self._raw)
+        self._unburnt = self._raw[3] * 1e-6
+
+    def _on_starter(self, data: bytes | bytearray) -> None:
+        self._starter.unpack_raw(data, self._raw)
+        self._seq_state = self._raw[3]
+        self._reason = self._raw[4]
+
     def _on_status(self, data: bytes | bytearray) -> None:
         raw = self._raw
         self._status.unpack_raw(data, raw)
@@ -122,10 +149,17 @@ class Probe(InOrderTicks):
         self.owner.append(self._owner)
         self.mode.append(raw[1])
         self.pump_v.append(raw[4] * 0.001)
+        self.unburnt_kg.append(self._unburnt)
+        self.seq_state.append(self._seq_state)
+        self.abort_reason.append(self._reason)
 
 
 def _percent_n(raw: np.ndarray) -> np.ndarray:
     return 100.0 * raw / N_MAX_RPM  # (as _on_truth_b)
+
+
+def _micro(raw: np.ndarray) -> np.ndarray:
+    return raw * 1e-6  # (as _on_truth_c)
 
 
 def _centi(raw: np.ndarray) -> np.ndarray:

@@ -3,6 +3,8 @@
 - tracking RMS per controller across the engine variation (percentiles, the nominal engine's,
   and the targets: MRAC 95th percentile within 2x its nominal, MRAC median below the PID's);
 - per bus fault class: detection rate, time to detect, fallback and recovery;
+- for starts from rest: how many reached idle, the start times (median, p95, max), the EGT's
+  peak in the start, the aborts by reason, the fuel delivered without a flame, the cool-down;
 - invariant violations and failures, each with the ``sil run`` line that reproduces the run.
 """
 
@@ -183,6 +185,47 @@ def _plots(rows: list[dict], track: dict, classes: dict, out: Path) -> list[str]
     return names
 
 
+def starts(rows: list[dict]) -> dict | None:
+    """Over the runs that started from rest: runs, how many reached RUN, the start times and
+    EGT peaks (median, p95, max), the aborts by reason, the unburnt fuel's max and the cool-down
+    times (median, max); None without such runs."""
+    rs = [r for r in rows if r["status"] == "completed" and r.get("start_egt_peak_K", "") != ""]
+    if not rs:
+        return None
+
+    def col(key: str) -> np.ndarray:
+        return np.array([_float(r[key]) for r in rs])
+
+    t, egt, cool = col("start_time_s"), col("start_egt_peak_K"), col("cool_down_s")
+    reached = t[np.isfinite(t)]
+    aborts: dict[str, int] = defaultdict(int)
+    for r in rs:
+        if r["start_abort"]:
+            aborts[r["start_abort"]] += 1
+    nominal = [_float(r["start_time_s"]) for r in rs if r["sample"] == "-1"]
+    return {
+        "runs": len(rs),
+        "reached": int(reached.size),
+        "time_nominal": nominal[0] if nominal else math.nan,
+        "time": (_median(reached), _pct(reached, 95), _max(reached)),
+        "egt": (_median(egt), _pct(egt[np.isfinite(egt)], 95), _max(egt)),
+        "aborts": dict(sorted(aborts.items())),
+        "unburnt_max_g": 1000.0 * _max(col("unburnt_fuel_kg")),
+        "cool": (_median(cool), _max(cool)),
+        "cooled": int(np.sum(np.isfinite(cool))),
+    }
+
+
+def _median(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) if x.size else math.nan
+
+
+def _max(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(x.max()) if x.size else math.nan
+
+
 def _fmt(x: float, spec: str = ".3f") -> str:
     return format(x, spec) if math.isfinite(x) else "-"
 
@@ -240,6 +283,22 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
             )
         lines += ["", "Thrust rise: from the step to 95 % of the thrust change (a fall after a "
                   "step down); EGT overshoot over the ECU's limit, true EGT.", ""]  # fmt: skip
+    start = starts(rows)
+    if start is not None:
+        s = start
+        lines += ["## Starts", "",
+                  f"- reached idle (RUN): {s['reached']} of {s['runs']}",
+                  "- start time, arming to RUN [s]: nominal "
+                  f"{_fmt(s['time_nominal'], '.2f')}, median {_fmt(s['time'][0], '.2f')}, "
+                  f"p95 {_fmt(s['time'][1], '.2f')}, max {_fmt(s['time'][2], '.2f')}",
+                  f"- EGT peak in the start [K]: median {_fmt(s['egt'][0], '.0f')}, p95 "
+                  f"{_fmt(s['egt'][1], '.0f')}, max {_fmt(s['egt'][2], '.0f')}",
+                  "- aborts: " + (", ".join(f"{k} {n}" for k, n in s["aborts"].items())
+                                  or "none"),
+                  f"- fuel delivered without a flame, max: {_fmt(s['unburnt_max_g'], '.2f')} g",
+                  f"- cool-down, fuel cut to EGT under 373 K [s]: median "
+                  f"{_fmt(s['cool'][0], '.1f')}, max {_fmt(s['cool'][1], '.1f')} "
+                  f"({s['cooled']} of {s['runs']} runs)", ""]  # fmt: skip
     if classes:
         lines += [
             "## Bus faults",

@@ -68,6 +68,10 @@ class Invariants:
     check_undershoot: bool = False  # in RUN, true speed never under the ECU's flameout threshold
     max_thrust_rise_s: float = math.inf  # the largest demand step: 95 % of its thrust within this
     check_faults: bool = True  # each [[bus_fault]] expectation (detect, fallback, recovery)
+    # a start from rest: RUN reached, no hot start (true EGT over the ECU's start limit plus
+    # egt_margin_K), no hung start, every abort with its reason
+    check_start: bool = False
+    max_cool_down_s: float = math.inf  # the true EGT under 373 K within this of the fuel cut
 
 
 @dataclass(frozen=True)

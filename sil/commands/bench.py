@@ -23,6 +23,7 @@ TARGETS = {
     "port": "sil.port_bench",
     "realtime": "sil.realtime_bench",
     "pil": "sil.pil_bench",
+    "starts": "sil.start_bench",
 }
 
 

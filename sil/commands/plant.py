@@ -93,6 +93,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="K",
         help="with --initial-speed: the fastest steady state within this EGT if that is hotter",
     )
+    parser.add_argument(
+        "--standstill",
+        action="store_true",
+        help="start at rest, cold and unlit (aero plant): the ECU's sequencer starts it",
+    )
     parser.add_argument("--t0", type=float, default=288.15, help="ambient temperature, K")
     parser.add_argument("--p0", type=float, default=101325.0, help="ambient pressure, Pa")
     parser.add_argument("--flight-speed", type=float, default=0.0, help="flight speed, m/s")
@@ -158,6 +163,7 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
         initial_fuel_kg_s=args.fuel,
         initial_speed_pct=args.initial_speed,
         initial_egt_max_k=args.initial_egt_max,
+        standstill=args.standstill,
         faults=tuple(args.fault),
         seed=args.seed,
     )

@@ -93,9 +93,16 @@ def print_summary(summary: dict, out: Path) -> None:
         "missed_ticks",
         "tracking_rms_pct",
         "tracking_speed_loop_rms_pct",
-        "tracking_speed_loop_rms_pct",
         "max_egt_K",
         "egt_limit_time_s",
+        "start_time_s",
+        "start_egt_peak_K",
+        "start_abort",
+        "start_abort_s",
+        "relights",
+        "unburnt_fuel_kg",
+        "cool_down_s",
+        "final_egt_K",
     )
     for key in keys:
         value = summary.get(key)

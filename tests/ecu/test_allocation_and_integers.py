@@ -20,7 +20,7 @@ ECU_DIR = Path(ecu.__file__).resolve().parent
 # twins in ecu/reference are not part of the firmware path
 FIRMWARE_MODULES = (
     "fixedpoint", "state", "estimator", "mrac", "pid", "fast_model", "limiters", "pump_driver",
-    "faults", "modes", "firmware",
+    "faults", "modes", "firmware", "start_sequencer",
 )  # fmt: skip
 
 

@@ -23,7 +23,9 @@ def ramp(rig: Any, start: int, stop: int, per_tick: int, **kw: int) -> None:
 
 
 def test_mode_sequence_off_armed_run_shutdown_off(make_rig: Any) -> None:
-    r = make_rig()
+    """Without the start sequencer: ARMED waits for an external starter (tests/ecu/
+    test_start_sequencer.py has the sequencer's own start and stop)."""
+    r = make_rig(replace(EcuParams(), start_on=False))
     r.step(3, arm=0, speed_rpm=0)
     assert r.out.mode == M.OFF and r.out.pump_enable == 0
     r.step(1, speed_rpm=0)
@@ -73,14 +75,19 @@ def test_overspeed_for_half_a_second_faults(rig: Any) -> None:
     assert 40 <= taken <= 50  # 0.5 s above 105 %, counted from the first tick above 118,125
 
 
-def test_flameout_after_three_seconds_under_idle(rig: Any) -> None:
+@pytest.mark.parametrize("relight_max", [0, 1])
+def test_flameout_after_three_seconds_under_idle(make_rig: Any, relight_max: int) -> None:
+    """Shut down, or with a relight left go back to ARMED, where the sequencer relights."""
+    rig = make_rig(replace(EcuParams(), relight_max=relight_max))
+    rig.step(2)
     ramp(rig, 100_890, 35_500, 2_000)
     rpm = 34_000  # under 35 %N less 10 % (35,438 rpm) from the next tick on
     for k in range(299):
         rig.step(1, speed_rpm=rpm - k % 2)  # a live (not frozen) reading
         assert rig.out.mode == M.RUN, k
     rig.step(1, speed_rpm=rpm)  # the 300th tick under the threshold: 3 s
-    assert rig.out.mode == M.SHUTDOWN and rig.out.fault_word & F.FLAMEOUT
+    assert rig.out.mode == (M.ARMED if relight_max else M.SHUTDOWN)
+    assert rig.out.fault_word & F.FLAMEOUT
 
 
 def test_stuck_speed_sensor_is_replaced_by_the_fast_model(rig: Any) -> None:

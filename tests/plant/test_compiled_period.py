@@ -192,6 +192,12 @@ def test_compiled_frames_are_the_codec_frames_also_when_saturated():
                 round(o["t4_k"] * 10.0),
             ],
             [round(o["fuel_kg_s"] * 1e6), round(o["thrust_n"] * 20.0), round(o["n_rpm"])],
+            [
+                1 if o["burning"] != 0.0 else 0,
+                round(o["hot_section_k"] * 10.0),
+                round(o["starter_current_a"] * 20.0),
+                round(o["unburnt_fuel_kg"] * 1e6),
+            ],
             [tick16, round(o["supply_v"] * 1000.0), round(o["pump_current_a"] * 1000.0)],
             [tick16, round(o["speed_rpm"]), round(o["egt_k"] * 10.0)],
         )

@@ -132,8 +132,8 @@ def test_fault_injection_frame_applies_at_its_tick():
     effectiveness = []
     node_step = node.plant.step
 
-    def spy(duty, enabled=True):
-        out = node_step(duty, enabled)
+    def spy(duty, enabled=True, starter_duty=0.0, igniter=False):
+        out = node_step(duty, enabled, starter_duty, igniter)
         effectiveness.append(out.pump_effectiveness)
         return out
 
@@ -226,4 +226,4 @@ def test_compiled_frames_are_the_frames_the_codec_packs():
         return sent
 
     compiled = frames(False)
-    assert len(compiled) == 301 + 2 * 151 + 61 and compiled == frames(True)
+    assert len(compiled) == 301 + 3 * 151 + 61 and compiled == frames(True)

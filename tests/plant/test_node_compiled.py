@@ -1,7 +1,8 @@
 """The plant node's compiled lockstep twin (plant.node_compiled.actuator_compiled, python_due,
 advance_compiled) against PlantNode itself: the same frames out, byte for byte, and the same
 state, on streams of actuator frames that answer, repeat, skip, run ahead, carry a bad CRC or an
-old alive counter, switch the pump off, and inject faults (FaultInject stays in Python)."""
+old alive counter, switch the pump off, inject faults and drive the starter and igniter
+(FaultInject and EcuStarter stay in Python; the starter's watchdog runs in both)."""
 
 from __future__ import annotations
 
@@ -43,13 +44,13 @@ class Twin:
         plant = node.plant
         due = advance_compiled(plant._s, plant._tables, ns, nf, node._layout, node._buf)
         for k, frame_id in enumerate(node._ids):
-            if k < 2 and not due & DUE_TRUTH or k == 2 and not due & DUE_ANALOG:
+            if k < 3 and not due & DUE_TRUTH or k == 3 and not due & DUE_ANALOG:
                 continue
             send(frame_id, node._payload[k])
 
-    def on_fault(self, data: bytes, send) -> None:
+    def on_python(self, frame_id: int, data: bytes, send) -> None:
         self.node.from_compiled(self.ns, self.nf)
-        self.node.on_frame(self.node._fault_id, data, send)
+        self.node.on_frame(frame_id, data, send)
         self.node.to_compiled(self.ns, self.nf)
 
 
@@ -58,7 +59,7 @@ def _python_run(seed: int, ticks: int, node: PlantNode):
     waits for, sometimes something else); returns the frames it sent and the events."""
     rng = random.Random(seed)
     codec = Codec()
-    actuator, fault = codec["EcuActuator"], codec["FaultInject"]
+    actuator, fault, starter = codec["EcuActuator"], codec["FaultInject"], codec["EcuStarter"]
     events: list[tuple[str, bytes]] = []
     sent: list[tuple[int, bytes]] = []
 
@@ -82,7 +83,13 @@ def _python_run(seed: int, ticks: int, node: PlantNode):
             event = ("act", bytes(bad))
         elif r < 0.07:  # the previous frame again (REPEATED)
             event = ("act", bytes(actuator.data))
-        elif r < 0.08:  # a fault for now or a few ticks ahead
+        elif r < 0.10:  # the starter and igniter (in bursts: the watchdog stops them between)
+            starter.pack_raw([rng.randint(0, 1), tick % TICK_MODULO, rng.randint(-5, 10050), 2, 0])
+            data = bytearray(starter.data)
+            if rng.random() < 0.2:
+                data[rng.randint(0, 7)] ^= 1 << rng.randint(0, 7)
+            event = ("starter", bytes(data))
+        elif r < 0.11:  # a fault for now or a few ticks ahead
             target = rng.choice(FAULT_TARGETS)
             value = rng.choice((0.0, 1.0, 0.5, 0.8, 200.0, 18.0))
             at = (tick + rng.randint(0, 6)) % TICK_MODULO
@@ -95,8 +102,15 @@ def _python_run(seed: int, ticks: int, node: PlantNode):
             actuator.counter = (actuator.counter + 5) % 15
         events.append(event)
         kind, data = event
-        node.on_frame(node._actuator_id if kind == "act" else node._fault_id, data, send)
+        node.on_frame(_ID[kind](node), data, send)
     return sent, events
+
+
+_ID = {
+    "act": lambda node: node._actuator_id,
+    "fault": lambda node: node._fault_id,
+    "starter": lambda node: node._starter_id,
+}
 
 
 def _twin_run(events, twin: Twin) -> list[tuple[int, bytes]]:
@@ -108,7 +122,10 @@ def _twin_run(events, twin: Twin) -> list[tuple[int, bytes]]:
     twin.node.start(send)
     twin.node.to_compiled(twin.ns, twin.nf)
     for kind, data in events:
-        (twin.on_actuator if kind == "act" else twin.on_fault)(data, send)
+        if kind == "act":
+            twin.on_actuator(data, send)
+        else:
+            twin.on_python(_ID[kind](twin.node), data, send)
     twin.node.from_compiled(twin.ns, twin.nf)
     return sent
 
@@ -126,6 +143,7 @@ def _state(node: PlantNode) -> dict:
         "late": node.actuator_late,
         "ahead": node.actuator_ahead,
         "faults": (node.faults_applied, node.faults_rejected, node._pending),
+        "starter": (node.starter_duty, node.igniter, node.starter_missed, node.starter_rejected),
         "checker": (c._last_counter, c.status, c.counts),
         "plant_tick": node.plant._tick,
         "outputs": (o.tick, o.flags, o.speed_rpm, o.egt_k, o.n_pct, o.pump_effectiveness),
@@ -150,6 +168,7 @@ def test_compiled_twin_sends_and_keeps_what_the_node_does(make, seed, ticks):
     # the stream reached every branch (noise blocks run out every 4096 periods; faults applied)
     assert twin.python_parts > ticks // 4096 and python.faults_applied > 10
     assert python.actuator_rejected and python.actuator_late and python.actuator_ahead
+    assert python.starter_rejected
 
 
 def test_no_compiled_twin_in_real_time():
@@ -157,4 +176,4 @@ def test_no_compiled_twin_in_real_time():
     assert not node.compiled()
     with pytest.raises(ValueError, match="no compiled twin"):
         node.to_compiled(np.zeros(NS_SIZE, np.int64), np.zeros(NF_SIZE))
-    assert len(FRAMES) == 4
+    assert len(FRAMES) == 5

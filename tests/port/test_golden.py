@@ -67,6 +67,25 @@ def test_vectors_cover_controllers_modes_limiters_and_faults(vectors):
     assert max(_column(vectors["mrac-reproducing"][1], OUT["sat_events"])) > 0  # saturation counted
 
 
+def test_start_stop_vector_covers_the_sequencer(vectors):
+    """The scripted start and stop passes every sequencer state and abort reason, relights
+    after flameouts in RUN and drives the starter and the igniter; `modes` runs without it."""
+    from ecu import modes as M
+    from ecu import start_sequencer as Q
+
+    g = vectors["start-stop"][1]
+    assert g.params.start_on == 1 and vectors["modes"][1].params.start_on == 0
+    assert set(_column(g, OUT["seq_state"])) == set(range(len(Q.NAMES)))
+    assert set(_column(g, OUT["seq_reason"])) == set(range(len(Q.REASONS)))
+    mode = _column(g, OUT["mode"])
+    relights = sum(1 for a, b in zip(mode, mode[1:], strict=False) if (a, b) == (M.RUN, M.ARMED))
+    assert relights >= 2
+    starter = set(_column(g, OUT["starter_cpct"]))
+    assert {0, g.params.seq_start_cpct, g.params.seq_cool_cpct, 10000} <= starter
+    assert set(_column(g, OUT["igniter"])) == {0, 1}
+    assert g.ticks >= 1000 and mode[-1] == M.OFF
+
+
 def test_replayer_reports_the_first_differing_integer(vectors, tmp_path):
     path, g = vectors["modes"]
     params, rows = golden.read_rows(path)

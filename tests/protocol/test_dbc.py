@@ -32,6 +32,8 @@ REQUIRED = {
     "PlantTruthA": ("Plant", {"P3", "P5", "T4"}),
     "PlantTruthB": ("Plant", {"FuelFlow", "Thrust"}),
     "FaultInject": ("Command", {"FaultTarget", "FaultTick", "FaultValue"}),
+    "EcuStarter": ("ECU", {"StarterDuty", "IgniterOn", "SequencerState", "AbortReason"}),
+    "PlantTruthC": ("Plant", {"Burning", "HotSectionTemp", "StarterCurrent", "UnburntFuel"}),
 }
 
 
@@ -70,13 +72,30 @@ def test_simulation_only_and_e2e_marks():
     assert {m.name for m in codec.messages if m.sim_only} == {
         "PlantTruthA",
         "PlantTruthB",
+        "PlantTruthC",
         "FaultInject",
         "SimRun",
     }
     protected = [m for m in codec.messages if m.protected]
     # every frame with a command or a sensor value is protected, each with its own data ID
-    assert {"Demand", "PlantSensors", "PlantAnalog", "EcuActuator"} <= {m.name for m in protected}
+    commands = {"Demand", "PlantSensors", "PlantAnalog", "EcuActuator", "EcuStarter"}
+    assert commands <= {m.name for m in protected}
     assert len({m.data_id for m in protected}) == len(protected)
+
+
+def test_sequencer_names_are_the_firmwares():
+    """The DBC's value tables for the sequencer's state and abort reason name the firmware's."""
+    from ecu import start_sequencer as seq
+
+    db = load_database()
+    m = db.get_message_by_name("EcuStarter")
+    state, reason = m.get_signal_by_name("SequencerState"), m.get_signal_by_name("AbortReason")
+    assert [str(state.choices[i]) for i in range(len(seq.NAMES))] == list(seq.NAMES)
+    assert [str(reason.choices[i]) for i in range(len(seq.REASONS))] == list(seq.REASONS)
+    fault = db.get_message_by_name("FaultInject").get_signal_by_name("FaultTarget")
+    assert {str(fault.choices[k]) for k in (13, 14, 15)} == {
+        "IGNITER_FAILURE", "STARTER_FAILURE", "FUEL_STARVATION",
+    }  # fmt: skip
 
 
 def test_broken_dbc_is_one_clear_error(tmp_path):

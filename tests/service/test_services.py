@@ -162,8 +162,10 @@ def test_stop_holds_until_arm(rig):
     rig.ticks(300)  # the demand frames keep asking for arm and no stop
     assert rig.ecu.out.mode == M.SHUTDOWN
     rig.i.speed_rpm = 5_000  # spooled down
+    rig.i.egt_dk = 3_000  # and cool: the sequencer's soak time passes without a cool-down
     rig.i.arm = 0  # the arm switch released: SHUTDOWN -> OFF
-    rig.ticks(5)
+    rig.ticks(round(rig.ecu.p.seq_soak_ticks) + 5)
+    assert rig.ecu.out.mode == M.OFF
     rig.i.arm = 1  # armed again by the demand frames: the held stop keeps the ECU in OFF
     rig.ticks(50)
     assert rig.ecu.out.mode == M.OFF
@@ -347,3 +349,16 @@ def test_line_noise_never_raises_out_of_a_tick(noise):
     rig.ticks(8)  # up to 512 bytes a tick
     rig.transport.read(1 << 16)  # whatever the port answered to frames the noise held
     assert rig.client.identify()["protocol"] == 1
+
+
+def test_a_start_abort_is_logged_once_with_its_reason_and_state():
+    log = fault_log.FaultLog()
+    snap = tuple(range(len(fault_log.SNAPSHOT_FIELDS)))
+    log.update(10, 0, snap, abort_reason=0)
+    log.update(11, 0, snap, abort_reason=1)  # IGNITION_TIMEOUT
+    log.update(12, 0, snap, abort_reason=1)  # the same abort, still reported: not again
+    log.update(13, 0, snap, abort_reason=0)  # a new start
+    log.update(14, 0, snap, abort_reason=4)  # HOT_START
+    codes = [(e.tick, fault_log.code_name(e.code)) for e in log.entries]
+    assert codes == [(11, "START_ABORT_IGNITION_TIMEOUT"), (14, "START_ABORT_HOT_START")]
+    assert log.entries[0].snapshot[fault_log.SNAPSHOT_FIELDS.index("seq_state")] == 7

@@ -52,6 +52,7 @@ def same_run(tmp_path, first_difference):
         ("thesis-6.2-staircase-pid", 25.0),  # PID
         ("thesis-3.3-staircase", 20.0),  # open loop on the pump voltage
         ("thesis-5.2-mrac-fast", 30.0),  # the fast plant
+        ("start-flameout-relight", 130.0),  # from rest: EcuStarter to the plant, relight, stop
     ],
 )
 def test_the_compiled_loop_writes_what_the_python_loop_writes(same_run, name, duration_s):

@@ -500,6 +500,113 @@ bool turbojet_ecu_actuator_pump_voltage_target_is_in_phys_range(double value)
     return ((value >= 0.0) && (value <= 30.0));
 }
 
+int turbojet_ecu_starter_pack(
+    uint8_t *dst_p,
+    const struct turbojet_ecu_starter_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u8(src_p->starter_crc, 0u, 0xffu);
+    dst_p[1] |= pack_left_shift_u8(src_p->starter_counter, 0u, 0x0fu);
+    dst_p[1] |= pack_left_shift_u8(src_p->igniter_on, 4u, 0x10u);
+    dst_p[2] |= pack_left_shift_u16(src_p->starter_tick, 0u, 0xffu);
+    dst_p[3] |= pack_right_shift_u16(src_p->starter_tick, 8u, 0xffu);
+    dst_p[4] |= pack_left_shift_u16(src_p->starter_duty, 0u, 0xffu);
+    dst_p[5] |= pack_right_shift_u16(src_p->starter_duty, 8u, 0x3fu);
+    dst_p[6] |= pack_left_shift_u8(src_p->sequencer_state, 0u, 0x0fu);
+    dst_p[6] |= pack_left_shift_u8(src_p->abort_reason, 4u, 0xf0u);
+
+    return (8);
+}
+
+int turbojet_ecu_starter_init(struct turbojet_ecu_starter_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct turbojet_ecu_starter_t));
+
+    return 0;
+}
+
+bool turbojet_ecu_starter_starter_crc_is_in_range(uint8_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool turbojet_ecu_starter_starter_crc_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 255.0));
+}
+
+bool turbojet_ecu_starter_starter_counter_is_in_range(uint8_t value)
+{
+    return (value <= 14u);
+}
+
+bool turbojet_ecu_starter_starter_counter_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 14.0));
+}
+
+bool turbojet_ecu_starter_igniter_on_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool turbojet_ecu_starter_igniter_on_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 1.0));
+}
+
+bool turbojet_ecu_starter_starter_tick_is_in_range(uint16_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool turbojet_ecu_starter_starter_tick_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 65535.0));
+}
+
+bool turbojet_ecu_starter_starter_duty_is_in_range(uint16_t value)
+{
+    return (value <= 10000u);
+}
+
+bool turbojet_ecu_starter_starter_duty_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 100.0));
+}
+
+bool turbojet_ecu_starter_sequencer_state_is_in_range(uint8_t value)
+{
+    return (value <= 8u);
+}
+
+bool turbojet_ecu_starter_sequencer_state_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 8.0));
+}
+
+bool turbojet_ecu_starter_abort_reason_is_in_range(uint8_t value)
+{
+    return (value <= 6u);
+}
+
+bool turbojet_ecu_starter_abort_reason_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 6.0));
+}
+
 int turbojet_ecu_status_pack(
     uint8_t *dst_p,
     const struct turbojet_ecu_status_t *src_p,

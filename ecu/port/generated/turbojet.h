@@ -49,6 +49,7 @@ extern "C" {
 #define TURBOJET_PLANT_SENSORS_FRAME_ID (0x100u)
 #define TURBOJET_PLANT_ANALOG_FRAME_ID (0x101u)
 #define TURBOJET_ECU_ACTUATOR_FRAME_ID (0x110u)
+#define TURBOJET_ECU_STARTER_FRAME_ID (0x111u)
 #define TURBOJET_ECU_STATUS_FRAME_ID (0x200u)
 #define TURBOJET_ECU_TELEMETRY_FRAME_ID (0x210u)
 #define TURBOJET_SIM_RUN_FRAME_ID (0x7f0u)
@@ -58,6 +59,7 @@ extern "C" {
 #define TURBOJET_PLANT_SENSORS_LENGTH (8u)
 #define TURBOJET_PLANT_ANALOG_LENGTH (8u)
 #define TURBOJET_ECU_ACTUATOR_LENGTH (8u)
+#define TURBOJET_ECU_STARTER_LENGTH (8u)
 #define TURBOJET_ECU_STATUS_LENGTH (8u)
 #define TURBOJET_ECU_TELEMETRY_LENGTH (8u)
 #define TURBOJET_SIM_RUN_LENGTH (8u)
@@ -67,6 +69,7 @@ extern "C" {
 #define TURBOJET_PLANT_SENSORS_IS_EXTENDED (0)
 #define TURBOJET_PLANT_ANALOG_IS_EXTENDED (0)
 #define TURBOJET_ECU_ACTUATOR_IS_EXTENDED (0)
+#define TURBOJET_ECU_STARTER_IS_EXTENDED (0)
 #define TURBOJET_ECU_STATUS_IS_EXTENDED (0)
 #define TURBOJET_ECU_TELEMETRY_IS_EXTENDED (0)
 #define TURBOJET_SIM_RUN_IS_EXTENDED (0)
@@ -76,6 +79,7 @@ extern "C" {
 #define TURBOJET_PLANT_SENSORS_CYCLE_TIME_MS (10u)
 #define TURBOJET_PLANT_ANALOG_CYCLE_TIME_MS (50u)
 #define TURBOJET_ECU_ACTUATOR_CYCLE_TIME_MS (10u)
+#define TURBOJET_ECU_STARTER_CYCLE_TIME_MS (10u)
 #define TURBOJET_ECU_STATUS_CYCLE_TIME_MS (50u)
 #define TURBOJET_ECU_TELEMETRY_CYCLE_TIME_MS (10u)
 #define TURBOJET_SIM_RUN_CYCLE_TIME_MS (1000u)
@@ -86,6 +90,24 @@ extern "C" {
 #define TURBOJET_ECU_ACTUATOR_ACTUATOR_MODE_RUN_CHOICE (2u)
 #define TURBOJET_ECU_ACTUATOR_ACTUATOR_MODE_SHUTDOWN_CHOICE (3u)
 #define TURBOJET_ECU_ACTUATOR_ACTUATOR_MODE_FAULT_CHOICE (4u)
+
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_OFF_CHOICE (0u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_SPIN_UP_CHOICE (1u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_IGNITION_CHOICE (2u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_RAMP_CHOICE (3u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_STABILISE_CHOICE (4u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_RUN_CHOICE (5u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_SPOOL_DOWN_CHOICE (6u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_COOL_DOWN_CHOICE (7u)
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_DONE_CHOICE (8u)
+
+#define TURBOJET_ECU_STARTER_ABORT_REASON_NONE_CHOICE (0u)
+#define TURBOJET_ECU_STARTER_ABORT_REASON_IGNITION_TIMEOUT_CHOICE (1u)
+#define TURBOJET_ECU_STARTER_ABORT_REASON_SLOW_ACCEL_CHOICE (2u)
+#define TURBOJET_ECU_STARTER_ABORT_REASON_STARTER_FAILURE_CHOICE (3u)
+#define TURBOJET_ECU_STARTER_ABORT_REASON_HOT_START_CHOICE (4u)
+#define TURBOJET_ECU_STARTER_ABORT_REASON_FLAMEOUT_CHOICE (5u)
+#define TURBOJET_ECU_STARTER_ABORT_REASON_STOPPED_CHOICE (6u)
 
 #define TURBOJET_ECU_STATUS_ECU_MODE_OFF_CHOICE (0u)
 #define TURBOJET_ECU_STATUS_ECU_MODE_ARMED_CHOICE (1u)
@@ -104,6 +126,7 @@ extern "C" {
 #define TURBOJET_PLANT_SENSORS_NAME "PlantSensors"
 #define TURBOJET_PLANT_ANALOG_NAME "PlantAnalog"
 #define TURBOJET_ECU_ACTUATOR_NAME "EcuActuator"
+#define TURBOJET_ECU_STARTER_NAME "EcuStarter"
 #define TURBOJET_ECU_STATUS_NAME "EcuStatus"
 #define TURBOJET_ECU_TELEMETRY_NAME "EcuTelemetry"
 #define TURBOJET_SIM_RUN_NAME "SimRun"
@@ -133,6 +156,13 @@ extern "C" {
 #define TURBOJET_ECU_ACTUATOR_ACTUATOR_TICK_NAME "ActuatorTick"
 #define TURBOJET_ECU_ACTUATOR_PUMP_DUTY_NAME "PumpDuty"
 #define TURBOJET_ECU_ACTUATOR_PUMP_VOLTAGE_TARGET_NAME "PumpVoltageTarget"
+#define TURBOJET_ECU_STARTER_STARTER_CRC_NAME "Starter_CRC"
+#define TURBOJET_ECU_STARTER_STARTER_COUNTER_NAME "Starter_Counter"
+#define TURBOJET_ECU_STARTER_IGNITER_ON_NAME "IgniterOn"
+#define TURBOJET_ECU_STARTER_STARTER_TICK_NAME "StarterTick"
+#define TURBOJET_ECU_STARTER_STARTER_DUTY_NAME "StarterDuty"
+#define TURBOJET_ECU_STARTER_SEQUENCER_STATE_NAME "SequencerState"
+#define TURBOJET_ECU_STARTER_ABORT_REASON_NAME "AbortReason"
 #define TURBOJET_ECU_STATUS_STATUS_CRC_NAME "Status_CRC"
 #define TURBOJET_ECU_STATUS_STATUS_COUNTER_NAME "Status_Counter"
 #define TURBOJET_ECU_STATUS_ECU_MODE_NAME "EcuMode"
@@ -361,6 +391,64 @@ struct turbojet_ecu_actuator_t {
      * Offset: 0
      */
     uint16_t pump_voltage_target;
+};
+
+/**
+ * Signals in message EcuStarter.
+ *
+ * Starter and igniter drive from the ECU, with the start/stop sequencer's state and the last start's abort reason; every tick while the ECU is ARMED or in SHUTDOWN (starting, stopping, cooling), before EcuActuator. The plant stops the starter and the igniter after its watchdog ticks without one.
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct turbojet_ecu_starter_t {
+    /**
+     * Range: 0..255 (0..255 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t starter_crc;
+
+    /**
+     * Range: 0..14 (0..14 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t starter_counter;
+
+    /**
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t igniter_on;
+
+    /**
+     * Range: 0..65535 (0..65535 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint16_t starter_tick;
+
+    /**
+     * Range: 0..10000 (0..100 %)
+     * Scale: 0.01
+     * Offset: 0
+     */
+    uint16_t starter_duty;
+
+    /**
+     * Range: 0..8 (0..8 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t sequencer_state;
+
+    /**
+     * Range: 0..6 (0..6 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t abort_reason;
 };
 
 /**
@@ -1184,6 +1272,183 @@ bool turbojet_ecu_actuator_pump_voltage_target_is_in_range(uint16_t value);
  * @return true if in range, false otherwise.
  */
 bool turbojet_ecu_actuator_pump_voltage_target_is_in_phys_range(double value);
+
+/**
+ * Pack message EcuStarter.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int turbojet_ecu_starter_pack(
+    uint8_t *dst_p,
+    const struct turbojet_ecu_starter_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from EcuStarter.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int turbojet_ecu_starter_init(struct turbojet_ecu_starter_t *msg_p);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_crc_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_crc_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_counter_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_counter_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_igniter_on_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_igniter_on_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_tick_is_in_range(uint16_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_tick_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_duty_is_in_range(uint16_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_starter_duty_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_sequencer_state_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_sequencer_state_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_abort_reason_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_starter_abort_reason_is_in_phys_range(double value);
 
 /**
  * Pack message EcuStatus.
