@@ -30,7 +30,7 @@ from ecu.service.crc import crc16
 
 MAGIC = b"TJP1"
 HEADER = struct.Struct(">4sIHH4x")
-SLOT_SIZE = 2048
+SLOT_SIZE = 4096  # a 4 KiB erase sector; the whole table packs to about 2.2 KiB
 SLOTS = 2
 IMAGE_SIZE = SLOT_SIZE * SLOTS
 PAGE_SIZE = 256  # bytes programmed per operation

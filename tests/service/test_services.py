@@ -362,3 +362,17 @@ def test_a_start_abort_is_logged_once_with_its_reason_and_state():
     codes = [(e.tick, fault_log.code_name(e.code)) for e in log.entries]
     assert codes == [(11, "START_ABORT_IGNITION_TIMEOUT"), (14, "START_ABORT_HOT_START")]
     assert log.entries[0].snapshot[fault_log.SNAPSHOT_FIELDS.index("seq_state")] == 7
+
+
+def test_the_sequencer_thresholds_are_written_and_checked_as_a_set(rig):
+    c = rig.client
+    c.unlock()
+    with pytest.raises(ServiceRequestError, match=r"INVALID: start_cutoff_pct: .*start_idle_pct"):
+        c.set("start_cutoff_pct", 55.0)  # over the hand-over speed
+    with pytest.raises(ServiceRequestError, match=r"INVALID: start_egt_target_k: .*limit"):
+        c.set("start_egt_target_k", 1300.0)  # over the hot-start limit
+    c.set("start_accel_pct_s", 3.0)
+    c.set("relight_max", 0)
+    expected = compile_params(EcuParams(start_accel_pct_s=3.0, relight_max=0))
+    assert rig.ecu.p.seq_accel_q24 == expected.seq_accel_q24
+    assert rig.ecu.p.seq_relight_max == 0
