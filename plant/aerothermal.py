@@ -28,8 +28,6 @@ from plant.interface import SUBSTEP_S, Ambient, PlantConfig, PlantOutputs, check
 from plant.jit import EXACT
 from plant.maps import EngineMaps, load_maps
 from plant.periphery import (
-    BATTERY_R,
-    BATTERY_V,
     ENGINE,
     IGNITER,
     STARTER_DUTY,
@@ -117,22 +115,17 @@ def aero_period(
     driver, starter and battery at duty u (or, without the pump in the loop, fuel flow u), the
     engine (advance_observed), truth, limits and sensors into s. Returns the flags."""
     x = s[X : X + 4]
+    if pump_in_loop and pump_health(s):
+        s[_PUMP_EFFECTIVENESS] = delivering(s)
+    duty = u if pump_in_loop else 0.0  # (without the pump in the loop: the battery alone)
+    p_out = x[0] + s[_INJECTOR_DP] - s[_P0]
+    supply, v_pump, current = pump_driver(s, duty, p_out)
     starter_a = 0.0
+    if s[STARTER_DUTY] > 0.0:  # the starter's current sags the supply too
+        starter_a = _starter_load(s, supply)
+        supply, v_pump, current = pump_driver(s, duty, p_out, starter_a)
     if pump_in_loop:
-        if pump_health(s):
-            s[_PUMP_EFFECTIVENESS] = delivering(s)
-        p_out = x[0] + s[_INJECTOR_DP] - s[_P0]
-        supply, v_pump, current = pump_driver(s, u, p_out)
-        if s[STARTER_DUTY] > 0.0:  # the starter's current sags the supply too
-            starter_a = _starter_load(s, supply)
-            supply, v_pump, current = pump_driver(s, u, p_out, starter_a)
         u = v_pump
-    else:
-        v_pump, current = 0.0, 0.0
-        supply = s[BATTERY_V]
-        if s[STARTER_DUTY] > 0.0:
-            starter_a = _starter_load(s, supply)
-            supply = s[BATTERY_V] - s[BATTERY_R] * starter_a
     model = _model_at(s, t)
     z = s[Z:N_SUB]
     z[eng.STARTER_V] = s[STARTER_DUTY] * supply

@@ -364,10 +364,12 @@ def advance_engine(
         h = dt / k
         for _ in range(k):
             lit = ign[ig.LIT]
-            g_pump_now = u
-            if pump_in_loop:
-                g_pump_now, _ = pump_fuel_flow(x, u, model)
-            g_pool = ig.pool_to_gas(ign[ig.POOL_KG], z[G3_KG_S], g_pump_now, lit)
+            g_pool = 0.0
+            if ign[ig.POOL_KG] > 0.0:  # (the pump's flow matters only to a pool)
+                g_pump_now = u
+                if pump_in_loop:
+                    g_pump_now, _ = pump_fuel_flow(x, u, model)
+                g_pool = ig.pool_to_gas(ign[ig.POOL_KG], z[G3_KG_S], g_pump_now, lit)
             f, g3, g_pump, dtm = _rk4_step(
                 x, h, u, pump_in_loop, lit, True, g_pool, z[METAL_K], z[STARTER_V], p2, t2,
                 model, work,
