@@ -198,6 +198,7 @@ def start_stop(trace: dict[str, np.ndarray]) -> dict[str, float | int | str | No
     cut = i0 + int(stop[0]) if len(stop) else None
     was_run = (mode[:-1] == modes.RUN) & (mode[1:] == modes.ARMED)
     aborted = reason != 0 and not len(run) and end < len(t)
+    period = float(t[1] - t[0]) if len(t) > 1 else 0.0
     unburnt = trace["UnburntFuel"]
     return {
         "start_time_s": float(t[i0 + run[0]] - t[i0]) if len(run) else None,
@@ -206,6 +207,6 @@ def start_stop(trace: dict[str, np.ndarray]) -> dict[str, float | int | str | No
         "start_abort_s": float(t[end] - t[i0]) if aborted else None,
         "relights": int(np.sum(was_run)),
         "unburnt_fuel_kg": float(np.nanmax(unburnt)) if np.isfinite(unburnt).any() else None,
-        "cool_down_s": cool_down_ticks(egt, cut) * (t[1] - t[0]) if cut is not None else None,
+        "cool_down_s": cool_down_ticks(egt, cut) * period if cut is not None else None,
         "final_egt_K": float(egt[-1]),
     }

@@ -31,7 +31,6 @@ import numpy as np
 
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
-from ecu import start_sequencer as seq
 from ecu.limiters import OWNER_EGT, OWNER_SPEED
 from plant.flags import FLAMEOUT
 from sil import metrics
@@ -40,6 +39,13 @@ from sil.campaign.case import CaseRun
 from sil.campaign.spec import Invariants
 
 BIT = {name: bit for bit, name in ecu_faults.NAMES.items()}
+START_FIGURES = (
+    "start_time_s",
+    "start_egt_peak_K",
+    "start_abort",
+    "unburnt_fuel_kg",
+    "cool_down_s",
+)
 
 
 def _rms(x: np.ndarray) -> float:
@@ -72,28 +78,22 @@ def transient(r: CaseRun) -> dict:
 
 
 def start(r: CaseRun) -> dict:
-    """The start and stop figures of a run from rest ({} for any other run): time from the
-    arming to RUN, the true EGT's peak before RUN (or over the whole start if it never got
-    there), the abort reason, the fuel delivered without a flame, and the time from the fuel
-    cut (the first SHUTDOWN) to a true EGT under metrics.COOL_K for good."""
+    """sil.metrics.start_stop of a run from rest ({} for any other run) on the plant's truth (the
+    true EGT and speed), with NaN (and "" for no abort) where a figure does not apply."""
     if not r.scenario.plant.standstill:
         return {}
-    rate = r.scenario.ecu_rate_hz
-    mode, egt = r.column("mode"), r.column("egt_k")
-    armed = np.flatnonzero(mode == ecu_modes.ARMED)
-    run = np.flatnonzero(mode == ecu_modes.RUN)
-    stop = np.flatnonzero(mode == ecu_modes.SHUTDOWN)
-    i0 = int(armed[0]) if armed.size else 0
-    end = int(run[0]) if run.size else int(stop[0]) if stop.size else len(mode)
-    reasons = r.column("abort_reason")
-    reason = int(reasons[-1]) if reasons.size else 0
-    unburnt = r.column("unburnt_kg")
+    trace = {
+        "time": np.arange(len(r.probe.n_pct)) / r.scenario.ecu_rate_hz,
+        "ActuatorMode": r.column("mode"),
+        "EGT": r.column("egt_k"),
+        "speed_true": r.column("n_pct"),
+        "AbortReason": r.column("abort_reason"),
+        "UnburntFuel": r.column("unburnt_kg"),
+    }
+    out = metrics.start_stop(trace)
     return {
-        "start_time_s": (int(run[0]) - i0) / rate if run.size else math.nan,
-        "start_egt_peak_K": float(np.nanmax(egt[i0 : max(end, i0 + 1)])),
-        "start_abort": seq.REASONS[reason] if reason else "",
-        "unburnt_fuel_kg": float(np.nanmax(unburnt)) if unburnt.size else math.nan,
-        "cool_down_s": metrics.cool_down_ticks(egt, int(stop[0])) / rate if stop.size else math.nan,
+        key: out.get(key) if out.get(key) is not None else "" if key == "start_abort" else math.nan
+        for key in START_FIGURES
     }
 
 
