@@ -10,7 +10,6 @@ fuel cut; every engine of the campaign at idle, with no hot start, hung start or
 
 from __future__ import annotations
 
-import csv
 import math
 import re
 import subprocess
@@ -18,10 +17,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from ecu.params import EcuParams
 from sil.bench import BenchError, completed_run
+from sil.campaign import report
 from sil.scenario import load
 
 SCENARIOS = ("start-nominal", "start-cold-day", "start-hot-day", "start-no-light",
@@ -46,25 +44,22 @@ def _campaign(folder: Path, quick: bool) -> dict:
            "--out", str(out), "--no-progress", "--no-report"]  # fmt: skip
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     try:
-        with (out / "results.csv").open(newline="") as f:
-            rows = list(csv.DictReader(f))
+        rows = report.load(out / "results.csv")
     except OSError:
         tail = proc.stderr.strip()[-300:]
         raise BenchError(f"sil campaign starts: no results ({tail})") from None
-    times = np.array([float(r["start_time_s"] or "nan") for r in rows])
-    egt = np.array([float(r["start_egt_peak_K"] or "nan") for r in rows])
-    cool = np.array([float(r["cool_down_s"] or "nan") for r in rows])
-    done = times[np.isfinite(times)]
+    spread = report.starts(rows) or {"reached": 0, "time": (math.nan,) * 3,
+                                     "egt": (math.nan,) * 3, "cool": (math.nan,) * 2}  # fmt: skip
     violations = [r["violations"] for r in rows if r["violations"]]
     kinds = [v.split(":")[0] for vs in violations for v in vs.split("; ")]
     return {
         "campaign_engines": len(rows),
-        "campaign_reached_idle": int(done.size),
-        "campaign_start_time_median_s": float(np.median(done)) if done.size else math.nan,
-        "campaign_start_time_p95_s": float(np.percentile(done, 95)) if done.size else math.nan,
-        "campaign_start_time_max_s": float(done.max()) if done.size else math.nan,
-        "campaign_start_egt_peak_max_K": float(np.nanmax(egt)),
-        "campaign_cool_down_max_s": float(np.nanmax(cool)),
+        "campaign_reached_idle": spread["reached"],
+        "campaign_start_time_median_s": spread["time"][0],
+        "campaign_start_time_p95_s": spread["time"][1],
+        "campaign_start_time_max_s": spread["time"][2],
+        "campaign_start_egt_peak_max_K": spread["egt"][2],
+        "campaign_cool_down_max_s": spread["cool"][1],
         "campaign_hot_starts": kinds.count("hot_start"),
         "campaign_hung_starts": kinds.count("hung_start"),
         "campaign_overspeeds": kinds.count("overspeed"),
