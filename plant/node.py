@@ -157,8 +157,6 @@ class PlantNode:
         self.tick = 0  # ECU periods stepped (the tick whose command is awaited)
         self.duty = plant.trim_duty  # held until the first actuator frame
         self.pump_enabled = True
-        self.starter_duty = 0.0  # the starter's duty (0..1) and the igniter, from EcuStarter
-        self.igniter = False
         self.starter_missed = 0  # ticks since the last valid EcuStarter frame
         self.starter_rejected = 0  # EcuStarter frames with an E2E status other than OK
         self.fresh = False  # a valid actuator frame for this tick arrived (real time)
@@ -226,10 +224,18 @@ class PlantNode:
             return
         raw = self._starter_raw
         self.starter.unpack_raw(data, raw)
-        self.igniter = bool(raw[0])
-        self.starter_duty = _clamp(raw[2], 0, 10000) * 1e-4  # StarterDuty, 0.01 %
         self.starter_missed = 0
-        self.plant.set_starter(self.starter_duty, self.igniter)  # (the compiled twin reads it)
+        self.plant.set_starter(_clamp(raw[2], 0, 10000) * 1e-4, bool(raw[0]))  # StarterDuty 0.01 %
+
+    @property
+    def starter_duty(self) -> float:
+        """The starter's duty (0..1) as the plant runs it (0 after the watchdog)."""
+        return self.plant.starter_command[0]
+
+    @property
+    def igniter(self) -> bool:
+        """The igniter's power as the plant runs it."""
+        return self.plant.starter_command[1]
 
     def _command(self, raw: list) -> None:
         self.timeout_s = None
@@ -302,7 +308,6 @@ class PlantNode:
         self.watchdog_trips = int(ns[NS_TRIPS])
         self.pump_enabled = bool(ns[NS_PUMP_ENABLED])
         self.starter_missed = int(ns[NS_STARTER_MISSED])
-        self.starter_duty, self.igniter = self.plant.starter_command
         self.actuator_rejected = int(ns[NS_REJECTED])
         self.actuator_late = int(ns[NS_LATE])
         self.actuator_ahead = int(ns[NS_AHEAD])
@@ -336,8 +341,9 @@ class PlantNode:
             self._apply_faults()
         powered = self.pump_enabled and self.missed <= self.watchdog_ticks
         if self.starter_missed >= self.watchdog_ticks:  # no EcuStarter for the watchdog's time
-            self.starter_duty, self.igniter = 0.0, False
-        self.plant.step(self.duty if powered else 0.0, powered, self.starter_duty, self.igniter)
+            self.plant.set_starter(0.0, False)
+        starter_duty, igniter = self.plant.starter_command
+        self.plant.step(self.duty if powered else 0.0, powered, starter_duty, igniter)
         self.starter_missed += 1
         self.tick += 1
         if self.max_ticks is not None and self.tick >= self.max_ticks:
