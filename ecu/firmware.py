@@ -27,7 +27,15 @@ from ecu.estimator import estimator_step
 from ecu.fast_model import observer_step
 from ecu.firmware_params import FirmwareParams, compile_params
 from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, sub_sat, take_sat_events
-from ecu.limiters import OWNER_SPEED, egt_lead_step, reset_loops, schedule_v, select_voltage
+from ecu.inlet import take_egt_at_rest
+from ecu.limiters import (
+    OWNER_SPEED,
+    egt_lead_step,
+    pump_from_start,
+    reset_loops,
+    schedule_v,
+    select_voltage,
+)
 from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, RATE_BUF_LEN, EcuParams
 from ecu.pi import pi_control, pi_track
@@ -138,6 +146,9 @@ class Ecu:
         s.supply_mv = p.supply_nominal_mv
         s.demand_q24 = p.idle_q24
         s.mode = M.OFF
+        s.ncor_k_q24 = p.ncor_k_q24  # the operator's day (ecu.inlet)
+        s.seq_target_dk = p.seq_day_target_dk
+        s.line_lam_min_q24 = p.lambda_comm_q24
         take_sat_events()
 
     def _rate_q24(self, age: int) -> int:
@@ -307,12 +318,16 @@ class Ecu:
             else:
                 s.relights = 0
             Q.start_begin(s, 1 if mode == M.RUN else 0)
+            if mode != M.RUN:
+                take_egt_at_rest(s, p)
         if new_mode == M.OFF:
             s.seq_state = Q.OFF
         if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless at the entry voltage
             v_entry = p.entry_v_q24
             if mode == M.ARMED and p.start_on:
                 v_entry = s.seq_v_q24  # where the start left the pump
+                if p.fuel_schedules_on and p.pump_scaling_on:
+                    pump_from_start(s, p, n_q24, v_entry)
             s.seq_state = Q.RUN
             reset_loops(s, v_entry)
             s.hist_fill = 0

@@ -18,13 +18,13 @@ from __future__ import annotations
 import math
 
 from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q16, Q24, Q28
+from ecu.inlet import day_target_dk, ncor_k_q24
 from ecu.params import (
     CONTROLLERS,
     N_MAX_RPM,
     RATE_BUF_LEN,
     SCHED_N0_PCT,
     SCHED_STEP_PCT,
-    T_STD_K,
     EcuParams,
     ParamError,
     firmware_convention,
@@ -81,7 +81,7 @@ class FirmwareParams:
         "g_x1_q28", "g_x2_q28", "g_r_q28", "g_f1_q28", "g_f2_q28", "u_den_min_q24",
         "pid_kp_q24", "pid_ki_dt_q28", "pid_kd_q24",
         "pi_n0_q24", "pi_step_q24", "pi_kp_q24", "pi_ki_dt_q28",
-        "fuel_schedules_on", "sched_n0_q24", "sched_step_q24", "ncor_k_q24",
+        "fuel_schedules_on", "sched_n0_q24", "sched_step_q24", "ncor_k_q24", "inlet_from_egt",
         "accel_line_q24", "decel_floor_q24", "accel_rate_q24", "pump_dead_q24", "sched_lam_lo_q24",
         "sched_lam_hi_q24",
         "idle_q24", "demand_max_q24",
@@ -105,7 +105,8 @@ class FirmwareParams:
         "seq_light_track_q8",
         "seq_ign_ticks", "seq_igniter_hold_ticks", "seq_starter_step_cpct", "seq_ramp_v_step_q24",
         "seq_accel_q24",
-        "seq_egt_target_dk", "seq_hot_dk", "seq_cutoff_rpm", "seq_ramp_ticks", "seq_idle_rpm",
+        "seq_egt_target_dk", "seq_hot_dk", "seq_egt_cap_dk", "seq_day_target_dk",
+        "seq_cutoff_rpm", "seq_ramp_ticks", "seq_idle_rpm",
         "seq_stabilise_ticks", "seq_relight_max", "seq_cool_cpct", "seq_cool_egt_dk",
         "seq_cool_rearm_dk", "seq_cool_rpm", "seq_cool_ticks", "seq_soak_ticks",
     )  # fmt: skip
@@ -148,6 +149,9 @@ def compile_params(p: EcuParams) -> FirmwareParams:
 
     def rpm(pct: float) -> int:
         return round(pct * N_MAX_RPM / 100.0)
+
+    inlet_ck = round(p.inlet_temp_k * 100.0)
+    cap_dk = round((p.start_egt_limit_k - p.start_egt_margin_k) * 10.0)
 
     idm, idh = _tustin(p.am_row2[0], p.am_row2[1], dt)
     ref_a21, ref_a22 = -(p.ref_wn**2), -2.0 * p.ref_zeta * p.ref_wn
@@ -249,7 +253,8 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         fuel_schedules_on=int(p.fuel_schedules_on),
         sched_n0_q24=_q(SCHED_N0_PCT, Q24, "accel_line_v"),
         sched_step_q24=_q(SCHED_STEP_PCT, Q24, "accel_line_v"),
-        ncor_k_q24=_q(math.sqrt(T_STD_K / p.inlet_temp_k), Q24, "inlet_temp_k"),
+        ncor_k_q24=ncor_k_q24(inlet_ck),
+        inlet_from_egt=int(p.inlet_from_egt),
         accel_line_q24=tuple(_q(v, Q24, "accel_line_v") for v in p.accel_line_v),
         accel_rate_q24=tuple(_q(r, Q24, "accel_rate_pct_s") for r in p.accel_rate_pct_s),
         decel_floor_q24=tuple(_q(v, Q24, "decel_floor_v") for v in p.decel_floor_v),
@@ -339,6 +344,8 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         seq_accel_q24=_q(p.start_accel_pct_s, Q24, "start_accel_pct_s"),
         seq_egt_target_dk=round(p.start_egt_target_k * 10.0),
         seq_hot_dk=round(p.start_egt_limit_k * 10.0),
+        seq_egt_cap_dk=cap_dk,
+        seq_day_target_dk=day_target_dk(round(p.start_egt_target_k * 10.0), cap_dk, inlet_ck),
         seq_cutoff_rpm=rpm(p.start_cutoff_pct),
         seq_ramp_ticks=ticks(p.start_ramp_timeout_s),
         seq_idle_rpm=rpm(p.start_idle_pct),

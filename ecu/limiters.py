@@ -52,9 +52,10 @@ def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
     s.egt_lead_q12 = sat32(y + ((p.egt_lead_ctc_q16 * (egt_dk - s.egt_dk)) >> 4))
 
 
-def schedule_at(p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
-    """A schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24)."""
-    n_cor = sat32((n_q24 * p.ncor_k_q24) >> 24)
+def schedule_at(s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
+    """A schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24), theta
+    of the day's inlet temperature (ecu.inlet)."""
+    n_cor = sat32((n_q24 * s.ncor_k_q24) >> 24)
     return interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
 
 
@@ -64,11 +65,27 @@ def schedule_v(
     """A fuel schedule's pump voltage at speed n_q24 (Q7.24): the table at corrected speed, for
     the pump as estimated: V_d + (V - V_d) Lambda_c / Lambda-hat delivers the table's fuel, with
     Lambda-hat taken within [lam_lo, lam_hi] (Q24)."""
-    v = schedule_at(p, table, n_q24)
+    v = schedule_at(s, p, table, n_q24)
     if not p.pump_scaling_on:
         return v
     lam = clamp(s.theta_q24[LAM], lam_lo, lam_hi)
     return sat32(p.pump_dead_q24 + div_trunc((v - p.pump_dead_q24) * p.lambda_comm_q24, lam))
+
+
+def pump_from_start(s: EcuState, p: FirmwareParams, n_q24: int, v_q24: int) -> None:
+    """At the hand-over from a start at speed n_q24 and pump voltage v_q24: a start that needed
+    more than the commissioned pump's acceleration line has a weaker pump (no estimate exists
+    yet, and none adapts at idle), so Lambda-hat starts at Lambda_c (V_line - V_d) / (V - V_d),
+    the pump for which the line passes through V (an upper bound on its weakness: V carried the
+    start's acceleration), and the line follows Lambda-hat down to it. The start's own cap, the
+    line of the weakest pump the schedules accept, keeps it within schedule_pump_range."""
+    line = schedule_at(s, p, p.accel_line_q24, n_q24)
+    if v_q24 > line > p.pump_dead_q24:
+        lam = div_trunc((line - p.pump_dead_q24) * p.lambda_comm_q24, v_q24 - p.pump_dead_q24)
+        lam = max(lam, p.sched_lam_lo_q24)
+        s.theta_q24[LAM] = lam
+        s.theta_ext[LAM] = 0
+        s.line_lam_min_q24 = lam
 
 
 def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:
@@ -103,7 +120,7 @@ def select_voltage(
         s.egt_e_prev_q24 = e
     ndot_max = p.accel_max_q24
     if p.fuel_schedules_on:  # the acceleration schedule, under the overall limit
-        ndot_max = min(ndot_max, schedule_at(p, p.accel_rate_q24, n_q24))
+        ndot_max = min(ndot_max, schedule_at(s, p, p.accel_rate_q24, n_q24))
     e = sub_sat(ndot_max, rate_q24)
     if e < p.rate_engage_q24:
         v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
@@ -120,7 +137,8 @@ def select_voltage(
     s.nlim_e_prev_q24 = e
     if p.fuel_schedules_on:
         # one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it
-        v_line = schedule_v(s, p, p.accel_line_q24, n_q24, p.lambda_comm_q24, p.sched_lam_hi_q24)
+        # (unless a start showed the weaker pump: pump_from_start)
+        v_line = schedule_v(s, p, p.accel_line_q24, n_q24, s.line_lam_min_q24, p.sched_lam_hi_q24)
         if v_line < v:
             v = v_line
             owner = OWNER_ACCEL

@@ -34,6 +34,7 @@ SCHED_POINTS = 12  # fuel schedule breakpoints: 45, 50, ..., 100 %N corrected
 SCHED_N0_PCT = 45.0
 SCHED_STEP_PCT = 5.0
 T_STD_K = 288.15
+INLET_RANGE_K = (223.0, 333.0)  # the day's inlet temperatures the ECU accepts
 
 # eq. 3.23: fast-model parameters identified offline on the aero-thermal model
 AP_ROW2_EQ_3_23 = (-1.8054, -2.3360)
@@ -186,7 +187,11 @@ class EcuParams:
     accel_rate_pct_s: tuple[float, ...] = (
         5.0, 7.9, 10.1, 11.7, 12.9, 13.3, 13.7, 13.2, 11.6, 9.3, 5.1, 5.0,
     )  # fmt: skip
-    inlet_temp_k: float = 288.15  # no inlet sensor: the day's temperature, set by the operator
+    # no inlet sensor: the day's temperature, set by the operator; with inlet_from_egt a start
+    # from rest takes the EGT read before it (a cold engine's thermocouple reads the air) when
+    # it lies in INLET_RANGE_K (ecu.inlet)
+    inlet_temp_k: float = 288.15
+    inlet_from_egt: bool = True
 
     # pump driver
     duty_min: float = 0.0
@@ -255,8 +260,9 @@ class EcuParams:
     start_starter_ramp_s: float = 3.0  # starter from start_duty to full after light-off
     start_ramp_v_rate: float = 0.2  # V/s, the fuel ramp of the lit engine, up while ...
     start_accel_pct_s: float = 4.0  # ... it accelerates slower than this, down ...
-    start_egt_target_k: float = 1180.0  # ... over this EGT
+    start_egt_target_k: float = 1180.0  # ... over this EGT on a 288.15 K day (times theta on ...
     start_egt_limit_k: float = 1250.0  # HOT_START over this during the start
+    start_egt_margin_k: float = 20.0  # ... the day, kept this far under the HOT_START limit)
     start_cutoff_pct: float = 51.0  # starter off
     start_ramp_timeout_s: float = 25.0  # SLOW_ACCEL: light-off to cut-off
     start_idle_pct: float = 52.0  # the start hands over to the speed control (RUN) here
@@ -407,6 +413,12 @@ def _check_sequencer(p: EcuParams) -> None:
         "start_egt_limit_k",
         p.start_egt_limit_k,
         "need 400 K <= start_egt_target_k < start_egt_limit_k <= egt_max_k",
+    )
+    _check(
+        0.0 <= p.start_egt_margin_k <= p.start_egt_limit_k - 400.0,
+        "start_egt_margin_k",
+        p.start_egt_margin_k,
+        "need 0 <= start_egt_margin_k <= start_egt_limit_k - 400 K",
     )
     _check(5.0 <= p.start_light_rise_k <= 300.0, "start_light_rise_k", p.start_light_rise_k,
            "must be in 5-300 K")  # fmt: skip
@@ -574,7 +586,8 @@ def validate(p: EcuParams) -> None:
     lo, hi = p.schedule_pump_range
     _check(0.3 <= lo <= 1.0 <= hi <= 3.0, "schedule_pump_range", p.schedule_pump_range,
            "needs 0.3 <= low <= 1 <= high <= 3")  # fmt: skip
-    _check(223.0 <= p.inlet_temp_k <= 333.0, "inlet_temp_k", p.inlet_temp_k, "must be in 223-333 K")
+    lo, hi = INLET_RANGE_K
+    _check(lo <= p.inlet_temp_k <= hi, "inlet_temp_k", p.inlet_temp_k, "must be in 223-333 K")
     _check(
         0.2 <= p.pi_bandwidth <= 10.0, "pi_bandwidth", p.pi_bandwidth, "must be in [0.2, 10] rad/s"
     )

@@ -97,11 +97,12 @@ def start_begin(s: EcuState, relight: int) -> None:
 
 
 def _fuel_ramp(s: EcuState, p: FirmwareParams, egt_dk: int, rate_q24: int, v_cap_q24: int) -> None:
-    """The lit engine's fuel: down by ramp_v_step over the start's EGT target, else up by it
+    """The lit engine's fuel: down by ramp_v_step over the start's EGT target on the day
+    (ecu.inlet), else up by it
     while the shaft accelerates slower than accel_q24 (held while faster), within
     [ign_v0, min(v_cap, v_max)]."""
     step = 0
-    if egt_dk >= p.seq_egt_target_dk:
+    if egt_dk >= s.seq_target_dk:
         step = -p.seq_ramp_v_step_q24
     elif rate_q24 < p.seq_accel_q24:
         step = p.seq_ramp_v_step_q24

@@ -47,6 +47,8 @@ class EcuState:
         # the EGT the limiter sees (lead on the thermocouple, 0.1 K in Q12; 0: no reading yet)
         "egt_lead_q12",
         "v_applied_q24", "owner", "v_saturated",
+        # the least Lambda-hat the acceleration line follows (Lambda_c; a start's weaker pump)
+        "line_lam_min_q24",
         # last valid inputs held on frame loss
         "speed_rpm", "egt_dk", "supply_mv", "pump_ma", "demand_q24", "open_loop_q24",
         "arm", "stop",
@@ -59,9 +61,11 @@ class EcuState:
         "speed_failed", "speed_seen",
         # start/stop sequencer (ecu.start_sequencer): state, abort reason, ticks in the state,
         # pump voltage, the light-off detector's reference EGT (0.1 K in Q8), relights since the
-        # last start, commands of this tick
+        # last start, commands of this tick, the start's EGT target on the day (0.1 K)
         "seq_state", "seq_reason", "seq_timer", "seq_v_q24", "seq_egt_ref_q8", "relights",
-        "starter_cpct", "igniter",
+        "starter_cpct", "igniter", "seq_target_dk",
+        # 1 / sqrt(theta) of corrected speed at the day's inlet temperature (ecu.inlet)
+        "ncor_k_q24",
         # modes, faults, counters
         "mode", "faults", "sat_events", "ticks",
     )  # fmt: skip

@@ -437,11 +437,12 @@ static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_pre
     return sat32(e, v_prev + ((kp_q24 * (err - err_prev)) >> 24) + ((ki_dt_q24 * err) >> 24));
 }
 
-/* a schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24) */
+/* a schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24), theta of
+ * the day's inlet temperature (ecu/inlet.py) */
 ECU_INLINE int32_t schedule_at(ecu_t *e, const int32_t *table, int32_t n_q24)
 {
     const ecu_params_t *p = e->p;
-    int32_t n_cor = sat32(e, ((int64_t)n_q24 * p->ncor_k_q24) >> 24);
+    int32_t n_cor = sat32(e, ((int64_t)n_q24 * e->s.ncor_k_q24) >> 24);
     return interp_uniform(e, table, ECU_SCHED_POINTS, p->sched_n0_q24, p->sched_step_q24, n_cor);
 }
 
@@ -457,6 +458,27 @@ static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24, int32_t
     lam = (int32_t)clamp(e->s.theta_q24[ECU_LAM], lam_lo, lam_hi);
     return sat32(e, (int64_t)p->pump_dead_q24 +
                         div_trunc(e, ((int64_t)v - p->pump_dead_q24) * p->lambda_comm_q24, lam));
+}
+
+/* pump_from_start: at the hand-over from a start at speed n_q24 and pump voltage v_q24, a start
+ * that needed more than the commissioned pump's acceleration line has a weaker pump: Lambda-hat
+ * starts at Lambda_c (V_line - V_d) / (V - V_d), and the line follows it down to there */
+static void pump_from_start(ecu_t *e, int32_t n_q24, int32_t v_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t line = schedule_at(e, p->accel_line_q24, n_q24);
+    int32_t lam;
+    if (v_q24 > line && line > p->pump_dead_q24) {
+        lam = div_trunc(e, ((int64_t)line - p->pump_dead_q24) * p->lambda_comm_q24,
+                        (int64_t)v_q24 - p->pump_dead_q24);
+        if (lam < p->sched_lam_lo_q24) {
+            lam = p->sched_lam_lo_q24;
+        }
+        s->theta_q24[ECU_LAM] = lam;
+        s->theta_ext[ECU_LAM] = 0;
+        s->line_lam_min_q24 = lam;
+    }
 }
 
 static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, int egt_ok,
@@ -510,8 +532,9 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     s->nlim_e_prev_q24 = err;
     if (p->fuel_schedules_on) {
-        /* one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it */
-        v_loop = schedule_v(e, p->accel_line_q24, n_q24, p->lambda_comm_q24, p->sched_lam_hi_q24);
+        /* one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it
+         * (unless a start showed the weaker pump: pump_from_start) */
+        v_loop = schedule_v(e, p->accel_line_q24, n_q24, s->line_lam_min_q24, p->sched_lam_hi_q24);
         if (v_loop < v) {
             v = v_loop;
             owner = OWNER_ACCEL;
@@ -660,6 +683,46 @@ static void seq_enter(ecu_state_t *s, int32_t state)
     s->seq_timer = 0;
 }
 
+/* the day's inlet temperature (ecu/inlet.py) */
+#define ECU_T_STD_CK 28815 /* 288.15 K */
+#define ECU_INLET_MIN_DK 2230 /* INLET_RANGE_K */
+#define ECU_INLET_MAX_DK 3330
+
+/* floor(sqrt(x)), bit by bit */
+ECU_INLINE uint32_t isqrt_u64(uint64_t x)
+{
+    uint64_t r = 0;
+    uint64_t bit = (uint64_t)1 << 62;
+    while (bit > x) {
+        bit >>= 2;
+    }
+    while (bit != 0) {
+        if (x >= r + bit) {
+            x -= r + bit;
+            r = (r >> 1) + bit;
+        } else {
+            r >>= 1;
+        }
+        bit >>= 2;
+    }
+    return (uint32_t)r;
+}
+
+/* take_egt_at_rest: at a start from rest, the EGT read now as the day's temperature, if in
+ * range: 1 / sqrt(theta) in Q24 for corrected speed, and the start's EGT target (the same
+ * corrected temperature, under the cap) */
+ECU_INLINE void take_egt_at_rest(ecu_t *e)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    if (p->inlet_from_egt && s->egt_dk >= ECU_INLET_MIN_DK && s->egt_dk <= ECU_INLET_MAX_DK) {
+        int32_t inlet_ck = s->egt_dk * 10;
+        int64_t target = (int64_t)p->seq_egt_target_dk * inlet_ck / ECU_T_STD_CK;
+        s->ncor_k_q24 = (int32_t)isqrt_u64((uint64_t)(((int64_t)ECU_T_STD_CK << 48) / inlet_ck));
+        s->seq_target_dk = (int32_t)(target < p->seq_egt_cap_dk ? target : p->seq_egt_cap_dk);
+    }
+}
+
 /* start_begin: a start (SPIN_UP) or, for a relight, the ignition with the engine still turning */
 static void start_begin(ecu_state_t *s, int relight)
 {
@@ -673,13 +736,13 @@ static void start_begin(ecu_state_t *s, int relight)
     }
 }
 
-/* _fuel_ramp: down by ramp_v_step over the start's EGT target, else up by it while the shaft
+/* _fuel_ramp: down by ramp_v_step over the start's EGT target on the day, else up by it while the shaft
  * accelerates slower than accel_q24 (held while faster), within [ign_v0, min(v_cap, v_max)] */
 static void fuel_ramp(ecu_t *e, int32_t egt_dk, int32_t rate_q24, int32_t v_cap_q24)
 {
     const ecu_params_t *p = e->p;
     int64_t step = 0;
-    if (egt_dk >= p->seq_egt_target_dk) {
+    if (egt_dk >= e->s.seq_target_dk) {
         step = -(int64_t)p->seq_ramp_v_step_q24;
     } else if (rate_q24 < p->seq_accel_q24) {
         step = p->seq_ramp_v_step_q24;
@@ -861,6 +924,9 @@ void ecu_init(ecu_t *e, const ecu_params_t *p)
     e->s.supply_mv = p->supply_nominal_mv;
     e->s.demand_q24 = p->idle_q24;
     e->s.mode = ECU_OFF;
+    e->s.ncor_k_q24 = p->ncor_k_q24; /* the operator's day (ecu/inlet.py) */
+    e->s.seq_target_dk = p->seq_day_target_dk;
+    e->s.line_lam_min_q24 = p->lambda_comm_q24;
     e->sat_pending = 0;
 }
 
@@ -1028,6 +1094,9 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             s->relights = 0;
         }
         start_begin(s, mode == ECU_RUN);
+        if (mode != ECU_RUN) {
+            take_egt_at_rest(e);
+        }
     }
     if (new_mode == ECU_OFF) {
         s->seq_state = ECU_SEQ_OFF;
@@ -1036,6 +1105,9 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         int32_t v_entry = p->entry_v_q24;
         if (mode == ECU_ARMED && p->start_on) {
             v_entry = s->seq_v_q24; /* where the start left the pump */
+            if (p->fuel_schedules_on && p->pump_scaling_on) {
+                pump_from_start(e, n_q24, v_entry);
+            }
         }
         s->seq_state = ECU_SEQ_RUN;
         reset_loops(s, v_entry);

@@ -103,7 +103,7 @@ enum {
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
     X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) \
     X(pi_n0_q24) X(pi_step_q24) A(pi_kp_q24, ECU_PI_POINTS) A(pi_ki_dt_q28, ECU_PI_POINTS) \
-    X(fuel_schedules_on) X(sched_n0_q24) X(sched_step_q24) X(ncor_k_q24) \
+    X(fuel_schedules_on) X(sched_n0_q24) X(sched_step_q24) X(ncor_k_q24) X(inlet_from_egt) \
     A(accel_line_q24, ECU_SCHED_POINTS) A(decel_floor_q24, ECU_SCHED_POINTS) \
     A(accel_rate_q24, ECU_SCHED_POINTS) X(pump_dead_q24) X(sched_lam_lo_q24) X(sched_lam_hi_q24) X(idle_q24) X(demand_max_q24) \
     X(limiters_on) X(egt_limit_dk) X(egt_engage_q24) X(rate_engage_q24) \
@@ -124,7 +124,7 @@ enum {
     X(start_on) X(seq_start_cpct) X(seq_purge_ticks) X(seq_ign_rpm) X(seq_spinup_ticks) \
     X(seq_ign_v0_q24) X(seq_ign_v_step_q24) X(seq_ign_v_max_q24) X(seq_light_rise_dk) \
     X(seq_light_track_q8) X(seq_ign_ticks) X(seq_igniter_hold_ticks) X(seq_starter_step_cpct) \
-    X(seq_ramp_v_step_q24) X(seq_accel_q24) X(seq_egt_target_dk) X(seq_hot_dk) \
+    X(seq_ramp_v_step_q24) X(seq_accel_q24) X(seq_egt_target_dk) X(seq_hot_dk) X(seq_egt_cap_dk) X(seq_day_target_dk) \
     X(seq_cutoff_rpm) X(seq_ramp_ticks) X(seq_idle_rpm) X(seq_stabilise_ticks) \
     X(seq_relight_max) X(seq_cool_cpct) X(seq_cool_egt_dk) X(seq_cool_rearm_dk) \
     X(seq_cool_rpm) X(seq_cool_ticks) X(seq_soak_ticks)
@@ -136,14 +136,14 @@ enum {
     X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) \
     X(rf_n_q24) X(rf_v_q24) X(rf_a_q16) X(xm1_q24) X(xm2_q24) \
     X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q12) \
-    X(v_applied_q24) X(owner) X(v_saturated) \
+    X(v_applied_q24) X(owner) X(v_saturated) X(line_lam_min_q24) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \
     X(speed_range_cnt) X(speed_rate_cnt) X(speed_stuck_cnt) X(speed_stuck_v_q24) \
     X(egt_open_cnt) X(egt_over_cnt) X(overspeed_cnt) X(flameout_cnt) X(flame_egt_cnt) \
     X(pump_stall_cnt) X(pump_dry_cnt) X(speed_failed) X(speed_seen) \
     X(seq_state) X(seq_reason) X(seq_timer) X(seq_v_q24) X(seq_egt_ref_q8) X(relights) \
-    X(starter_cpct) X(igniter) \
+    X(starter_cpct) X(igniter) X(seq_target_dk) X(ncor_k_q24) \
     X(mode) X(faults) X(sat_events) X(ticks)
 
 /* ecu.firmware.EcuInputs: raw integers in the CAN contract's units */

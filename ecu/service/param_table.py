@@ -112,6 +112,7 @@ TABLE: tuple[ParamSpec, ...] = (
     # a set whose tables fall or cross is refused whole (ecu.params.validate)
     _s("fuel_schedules_on", "bool", 0, 0, 1, False),
     _s("inlet_temp_k", "K", Q16, 223.0, 333.0, False),
+    _s("inlet_from_egt", "bool", 0, 0, 1, False),
     *(_s(f"accel_line_v[{k}]", "V", Q24, 0.0, 30.0, False) for k in range(SCHED_POINTS)),
     *(_s(f"decel_floor_v[{k}]", "V", Q24, 0.0, 30.0, False) for k in range(SCHED_POINTS)),
     *(_s(f"accel_rate_pct_s[{k}]", "%N/s", Q24, 0.5, 100.0, False) for k in range(SCHED_POINTS)),
@@ -134,6 +135,7 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("start_accel_pct_s", "%N/s", Q24, 0.2, 20.0, False),
     _s("start_egt_target_k", "K", Q16, 400.0, 1400.0, False),
     _s("start_egt_limit_k", "K", Q16, 400.0, 1500.0, False),
+    _s("start_egt_margin_k", "K", Q16, 0.0, 500.0, False),
     _s("start_cutoff_pct", "%N", Q24, 5.0, 60.0, False),
     _s("start_ramp_timeout_s", "s", Q16, 1.0, 120.0, False),
     _s("start_idle_pct", "%N", Q24, 10.0, 60.0, False),

@@ -51,6 +51,7 @@ def test_schedule_voltage_follows_its_definition(inlet_k: float, lam_ratio: floa
     p = preset("default", inlet_temp_k=inlet_k)
     fw = compile_params(p)
     s = EcuState()
+    s.ncor_k_q24 = fw.ncor_k_q24
     s.theta_q24[LAM] = round(p.lambda_commissioned * lam_ratio * Q)
     lam = s.theta_q24[LAM] / Q
     for n in np.linspace(30.0, 110.0, 81):
@@ -107,6 +108,7 @@ def test_rate_loop_holds_the_acceleration_under_its_schedule(n: float) -> None:
     ):
         fw = compile_params(replace(p, fuel_schedules_on=schedules_on))
         s = EcuState()
+        s.ncor_k_q24 = fw.ncor_k_q24
         v_start = float(np.interp(n, SPEEDS, p.accel_line_v)) - 1.0  # under the line
         v = int(v_start * Q)
         s.v_applied_q24 = v

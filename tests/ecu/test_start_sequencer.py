@@ -129,7 +129,11 @@ def test_starter_failure_aborts_before_any_fuel() -> None:
 
 def test_a_start_over_the_egt_limit_aborts_as_a_hot_start() -> None:
     # a limit just over the target: the EGT overshoots the target as the fuel backs off
-    rig = StartRig(params=replace(EcuParams(), start_egt_target_k=600.0, start_egt_limit_k=605.0))
+    rig = StartRig(
+        params=replace(
+            EcuParams(), start_egt_target_k=600.0, start_egt_limit_k=605.0, start_egt_margin_k=0.0
+        )
+    )
     rig.run_until(lambda o: o.mode == M.SHUTDOWN, 30.0)
     assert rig.ecu.out.seq_reason == Q.HOT_START
     assert rig.i.egt_dk > 6050  # what the ECU saw
