@@ -41,9 +41,8 @@ def pump_voltage_for(model: EngineModel, x: np.ndarray, g_fuel: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def linearise(model: EngineModel, steady: SteadyState, g_fuel: float) -> Linearisation:
-    """A and b by central differences about a steady state at fuel flow g_fuel."""
-    x, v = steady.x, pump_voltage_for(model, steady.x, g_fuel)
+def state_space(model: EngineModel, x: np.ndarray, v: float) -> tuple[np.ndarray, np.ndarray]:
+    """A and b by central differences about the state x at pump voltage v."""
     a = np.empty((4, 4))
     for j in range(4):
         up, down = x.copy(), x.copy()
@@ -51,6 +50,23 @@ def linearise(model: EngineModel, steady: SteadyState, g_fuel: float) -> Lineari
         down[j] -= STEP[j]
         a[:, j] = (_rates(model, up, v) - _rates(model, down, v)) / (2.0 * STEP[j])
     b = (_rates(model, x, v + STEP_V) - _rates(model, x, v - STEP_V)) / (2.0 * STEP_V)
+    return a, b
+
+
+def speed_rate_per_volt(
+    model: EngineModel, steady: SteadyState, g_fuel: float, omegas: np.ndarray
+) -> np.ndarray:
+    """|dN/dt / dV|, %N/s per V, at the angular frequencies omegas (rad/s): the fuel reaches
+    the turbine's torque within milliseconds, so the shaft's rate answers a pump step at once
+    (a first-order shaft, relative degree one) and this stays flat far above the shaft's pole."""
+    a, b = state_space(model, steady.x, pump_voltage_for(model, steady.x, g_fuel))
+    return np.array([abs(1j * w * np.linalg.solve(1j * w * np.eye(4) - a, b)[3]) for w in omegas])
+
+
+def linearise(model: EngineModel, steady: SteadyState, g_fuel: float) -> Linearisation:
+    """A and b by central differences about a steady state at fuel flow g_fuel."""
+    x, v = steady.x, pump_voltage_for(model, steady.x, g_fuel)
+    a, b = state_space(model, x, v)
     poles = np.linalg.eigvals(a)
     poles = poles[np.argsort(np.abs(poles))]
     gain = float(-np.linalg.solve(a, b)[3])
@@ -59,6 +75,11 @@ def linearise(model: EngineModel, steady: SteadyState, g_fuel: float) -> Lineari
 
 def linearise_at_speed(model: EngineModel, n_pct: float) -> Linearisation:
     """The linearisation at the steady state of speed n_pct (the fuel flow found by bisection)."""
+    return linearise(model, *steady_at_speed(model, n_pct))
+
+
+def steady_at_speed(model: EngineModel, n_pct: float) -> tuple[SteadyState, float]:
+    """The steady state of speed n_pct and its fuel flow (bisection on the fuel flow)."""
     lo, hi = 1e-3, 0.02
     x0 = None
     for _ in range(40):
@@ -71,4 +92,4 @@ def linearise_at_speed(model: EngineModel, n_pct: float) -> Linearisation:
         x0 = s.x
         lo, hi = (g, hi) if s.x[3] < n_pct else (lo, g)
     g = 0.5 * (lo + hi)
-    return linearise(model, solve_steady(model, g, x0=x0, settle_s=3.0), g)
+    return solve_steady(model, g, x0=x0, settle_s=3.0), g

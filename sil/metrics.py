@@ -75,6 +75,29 @@ def tracking_rms_pct(trace: dict[str, np.ndarray], t0: float = 0.0, t1: float = 
     return _rms(trace["speed_true"][window] - trace["ReferenceSpeed"][window])
 
 
+def command_smoothness(trace: dict[str, np.ndarray], t0: float, t1: float) -> dict[str, float]:
+    """The pump command and the gas over [t0, t1) (a constant demand): the command's standard
+    deviation, peak to peak and mean change per tick (V), the frequency of its strongest swing
+    (Hz), and T4's peak to peak (K, the plant's truth)."""
+    t = trace["time"]
+    window = (t >= t0) & (t < t1) & np.isfinite(trace["PumpVoltageTarget"])
+    v = trace["PumpVoltageTarget"][window]
+    peak_hz = math.nan
+    if v.size > 2:
+        power = np.abs(np.fft.rfft(v - v.mean())) ** 2
+        hz = np.fft.rfftfreq(v.size, float(np.median(np.diff(t[window]))))
+        peak_hz = float(hz[1:][np.argmax(power[1:])])
+    t4 = trace["T4"][window]
+    t4 = t4[np.isfinite(t4)]
+    return {
+        "pump_v_std": float(np.std(v)) if v.size else math.nan,
+        "pump_v_p2p": float(np.ptp(v)) if v.size else math.nan,
+        "pump_v_step_mean": float(np.mean(np.abs(np.diff(v)))) if v.size > 1 else math.nan,
+        "pump_v_peak_hz": peak_hz,
+        "t4_p2p_K": float(np.ptp(t4)) if t4.size else math.nan,
+    }
+
+
 def speed_loop_rms_pct(trace: dict[str, np.ndarray]) -> float:
     """Tracking RMS over the ticks where the control law owned the pump command: the tracking
     itself, without the time a protection (EGT, acceleration, overspeed, floor) held the engine

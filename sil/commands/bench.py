@@ -24,6 +24,7 @@ TARGETS = {
     "realtime": "sil.realtime_bench",
     "pil": "sil.pil_bench",
     "starts": "sil.start_bench",
+    "control": "sil.control_bench",
 }
 
 
