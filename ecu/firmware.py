@@ -36,7 +36,7 @@ from ecu.limiters import (
     schedule_v,
     select_voltage,
 )
-from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
+from ecu.mrac import command_lag, mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, RATE_BUF_LEN, EcuParams
 from ecu.pi import pi_control, pi_track
 from ecu.pid import pid_control, pid_track
@@ -333,6 +333,7 @@ class Ecu:
             s.hist_fill = 0
             s.theta_q24[PID_I] = sub_sat(v_entry, p.trim_v_q24)
             s.theta_ext[PID_I] = 0
+            s.u_lag_q24 = s.theta_q24[PID_I]
             s.xm1_q24 = dn
             s.xm2_q24 = 0
             s.obs_n_q24 = dn
@@ -361,7 +362,7 @@ class Ecu:
                 )
             r = sub_sat(demand, p.trim_n_q24)
             if p.controller == CTRL_MRAC:
-                u = mrac_control(s, p, dn, ctrl_rate, r)
+                u = command_lag(s, p, mrac_control(s, p, dn, ctrl_rate, r))
                 mrac_gain_update(s, p)
             elif p.controller == CTRL_PID:
                 u = pid_control(s, p, sat32(demand - n_q24), ctrl_rate)
@@ -379,6 +380,8 @@ class Ecu:
                 pid_track(s, p, sat32(demand - n_q24), ctrl_rate, u_applied)
             elif p.controller == CTRL_PI:
                 pi_track(s, p, sat32(demand - n_q24), n_q24, u_applied)
+            if s.owner != OWNER_SPEED:  # the lag tracks what a limit applies (anti-windup)
+                s.u_lag_q24 = u_applied
             observer_step(s, p, u_applied, dn, speed_ok)
             s.u_hist_q24[s.hist_idx] = u_applied
             pump_mv = volts_q24_to_mv(v)

@@ -38,6 +38,15 @@ def mrac_control(s: EcuState, p: FirmwareParams, dn: int, dv: int, r: int) -> in
     return add_sat(div_trunc(num << 24, den), th[KB])
 
 
+def command_lag(s: EcuState, p: FirmwareParams, u: int) -> int:
+    """The MRAC's command through the first-order lag of mrac_cmd_lag_s (backward Euler,
+    c = dt / (tau + dt) in Q24; c = 1 passes u): lag and engine are then the fast model. While
+    a limit owns the pump the lag tracks the applied voltage (the firmware sets it), so the
+    speed loop takes over from there."""
+    s.u_lag_q24 = sat32(s.u_lag_q24 + ((p.mrac_lag_c_q24 * (u - s.u_lag_q24)) >> 24))
+    return s.u_lag_q24
+
+
 def mrac_gain_update(s: EcuState, p: FirmwareParams) -> None:
     """Eq. 5.15-5.16 for K_x, K_r, K_f and K_b, driven by the current estimates."""
     th = s.theta_q24

@@ -113,6 +113,13 @@ class EcuParams:
     init_kr: float = 5.185
     init_kf: tuple[float, float] = (0.03805, 0.00002)
     u_den_min: float = 0.5  # floor of (1 - K_f g(dN)) when solving eq. 5.4 for u
+    # the MRAC's command through a first-order lag of this time constant (0: none). The fast
+    # model (eq. 3.24) puts the pump in the shaft's acceleration; our engine's shaft answers the
+    # pump at once, its rate K / tau_shaft = 2.7 %N/s per V above the shaft's pole at 90 %N. A lag
+    # of K / tau_shaft / Lambda makes lag and engine the model the MRAC is designed on, with its
+    # high-frequency gain Lambda (`sil bench control`: matching_lag_s); without it the rate gain
+    # K_x2 meets a flat loop gain of about 4 and limit-cycles on the pump's slew
+    mrac_cmd_lag_s: float = 0.55
 
     # PID baseline (chapter 6)
     pid_kp: float = 2.0
@@ -289,6 +296,7 @@ def _doc_common(**kw: object) -> EcuParams:
         limiters_on=False,
         rate_window_s=0.02,
         fuel_schedules_on=False,
+        mrac_cmd_lag_s=0.0,
     )
     return replace(base, **kw)  # type: ignore[arg-type]
 
@@ -502,6 +510,7 @@ def validate(p: EcuParams) -> None:
     _check(p.speed_noise_rpm >= 0.0, "speed_noise_rpm", p.speed_noise_rpm, "must be >= 0")
     _check(p.ref_wn > 0.0 and p.ref_zeta > 0.0, "ref_wn", (p.ref_wn, p.ref_zeta), "must be > 0")
     _check(0.05 <= p.u_den_min <= 1.0, "u_den_min", p.u_den_min, "must be in [0.05, 1]")
+    _check(0.0 <= p.mrac_cmd_lag_s <= 5.0, "mrac_cmd_lag_s", p.mrac_cmd_lag_s, "must be in 0-5 s")
     for name in ("pid_kp", "pid_ki", "pid_kd", "egt_kp", "egt_ki", "rate_kp", "rate_ki"):
         _check(getattr(p, name) >= 0.0, name, getattr(p, name), "must be >= 0")
     _check(0.0 < p.idle_pct < p.demand_max_pct, "idle_pct", p.idle_pct, "0 < idle < max demand")

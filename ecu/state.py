@@ -40,8 +40,8 @@ class EcuState:
         "obs_n_q24", "obs_v_q24",
         # speed-rate filter (ecu.rate_filter): speed and rate deviations, acceleration (Q15.16)
         "rf_n_q24", "rf_v_q24", "rf_a_q16",
-        # reference model (eq. 5.18-5.19) state, deviations from trim
-        "xm1_q24", "xm2_q24",
+        # reference model (eq. 5.18-5.19) state, deviations from trim; the MRAC's lagged command
+        "xm1_q24", "xm2_q24", "u_lag_q24",
         # limit loops: previous errors (velocity form) and the applied pump voltage
         "egt_e_prev_q24", "acc_e_prev_q24", "dec_e_prev_q24", "nlim_e_prev_q24",
         # the EGT the limiter sees (lead on the thermocouple, 0.1 K in Q12; 0: no reading yet)

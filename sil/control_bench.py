@@ -2,16 +2,15 @@
 tracking, for the MRAC, the document's PID and the tuned PI, on the aero-thermal plant.
 
 The figures are those of the window 3-9.5 s of the 70-100 %N staircase (a constant 90 %N demand):
-the pump command's standard deviation, peak to peak and mean change per tick, and the gas
-temperature T4's peak to peak (the plant's truth); with each run's tracking RMS (speed minus the
-reference model; also over the ticks the control law owned the fuel). The MRAC also flies:
-
-- without sensor noise (speed and EGT): what is left is the MRAC's own limit cycle;
-- with a gentler reference model and the speed-rate filter (ecu.rate_filter), the trade between
-  smoothness and tracking (quick: two of the points).
+the pump command's standard deviation, peak to peak, mean change per tick and strongest
+frequency, and the gas temperature T4's peak to peak (the plant's truth); with each run's
+tracking RMS (speed minus the reference model; also over the ticks the control law owned the
+fuel). The MRAC also flies without its command lag (``mrac_cmd_lag_s = 0``, the document's
+command), with and without sensor noise, and with other lags (quick: one).
 
 And the plant's shaft rate per pump volt at 1, 8 and 50 rad/s (linearised at 90 %N) against the
-commissioned fast model's (eq. 3.24), which explains the limit cycle (docs/ecu.md).
+commissioned fast model's (eq. 3.24), with the lag that gives lag and engine the model's
+high-frequency gain (docs/ecu.md).
 
 Targets (the MRAC, the document's scenario): pump command std <= 0.05 V and T4 peak to peak <=
 25 K at constant demand, with the staircase's tracking RMS <= 0.20 %N."""
@@ -26,7 +25,7 @@ import numpy as np
 
 from ecu.params import AP_ROW2_EQ_3_23, EcuParams
 from plant.aerothermal import make_model
-from plant.linearise import speed_rate_per_volt, steady_at_speed
+from plant.linearise import linearise, speed_rate_per_volt, steady_at_speed
 from sil import metrics
 from sil.bench import completed_run
 from sil.campaign.tomlw import dumps
@@ -34,9 +33,8 @@ from sil.scenario import load
 
 WINDOW_S = (3.0, 9.5)
 RUNS = {"mrac": "thesis-5.4-staircase", "pid": "thesis-6.2-staircase-pid", "pi": "staircase-pi"}
-# (reference natural frequency rad/s, damping, rate filter bandwidth rad/s or 0 for off)
-TRADE = ((5.0, 1.0, 8.0), (3.0, 0.85, 8.0), (3.0, 0.7, 6.0), (2.5, 0.7, 6.0))
-QUICK_TRADE = TRADE[1:3]
+LAGS_S = (0.25, 0.35, 0.8)  # the MRAC's command lag, against the default
+QUICK_LAGS_S = (0.25,)
 OMEGAS = (1.0, 8.0, 50.0)
 
 TARGET_TEXT = {
@@ -67,22 +65,6 @@ def _fly(path: Path, out: Path) -> dict:
     }
 
 
-def _reference(wn: float, zeta: float, rf_bw: float) -> dict:
-    """ECU parameters for a reference model (and the rate filter), with the ideal gains of the
-    commissioned fast model as the MRAC's start (eq. 5.15: K_x = (A_m - A_p) / Lambda)."""
-    lam = EcuParams().init_lambda
-    a21, a22 = AP_ROW2_EQ_3_23
-    params = {
-        "ref_wn": wn,
-        "ref_zeta": zeta,
-        "init_kx": [(-wn * wn - a21) / lam, (-2.0 * zeta * wn - a22) / lam],
-        "init_kr": wn * wn / lam,
-    }
-    if rf_bw:
-        params.update(rate_filter_on=1, rate_filter_bw=rf_bw)
-    return params
-
-
 def _plant_rate() -> dict:
     """The shaft's rate per pump volt, linearised at 90 %N, against the fast model's."""
     model = make_model()
@@ -90,7 +72,12 @@ def _plant_rate() -> dict:
     plant = speed_rate_per_volt(model, steady, g_fuel, np.array(OMEGAS))
     lam = EcuParams().init_lambda
     a21, a22 = AP_ROW2_EQ_3_23
-    out = {}
+    lin = linearise(model, steady, g_fuel)
+    rate_gain = lin.gain_pct_per_v / lin.tau_s  # a first-order shaft's rate per volt, K / tau
+    out = {
+        "plant_rate_gain_pct_s_per_v": round(rate_gain, 3),
+        "matching_lag_s": round(rate_gain / lam, 3),
+    }
     for w, got in zip(OMEGAS, plant, strict=True):
         s = 1j * w
         out[f"plant_rate_per_v_{w:g}_rad_s"] = round(float(got), 3)
@@ -105,13 +92,17 @@ def run(quick: bool = False) -> dict:
         for key, name in RUNS.items():
             for field, value in _fly(load(name).path, folder / key).items():
                 figures[f"{key}_{field}"] = round(value, 4)
-        quiet = _variant(RUNS["mrac"], folder, {"speed_noise_rpm": 0.0, "egt_noise_K": 0.0}, {})
-        for field, value in _fly(quiet, folder / "quiet").items():
-            figures[f"mrac_noise_free_{field}"] = round(value, 4)
-        for wn, zeta, rf_bw in QUICK_TRADE if quick else TRADE:
-            tag = f"mrac_wn{wn:g}_z{zeta:g}_rf{rf_bw:g}"
-            path = _variant(RUNS["mrac"], folder, {}, _reference(wn, zeta, rf_bw))
-            got = _fly(path, folder / tag)
+        no_lag = {"mrac_cmd_lag_s": 0.0}
+        quiet = {"speed_noise_rpm": 0.0, "egt_noise_K": 0.0}
+        for tag, plant, params in (("mrac_no_lag", {}, no_lag),
+                                   ("mrac_no_lag_noise_free", quiet, no_lag)):  # fmt: skip
+            for field, value in _fly(
+                _variant(RUNS["mrac"], folder, plant, params), folder / tag
+            ).items():
+                figures[f"{tag}_{field}"] = round(value, 4)
+        for lag in QUICK_LAGS_S if quick else LAGS_S:
+            tag = f"mrac_lag_{lag:g}_s"
+            got = _fly(_variant(RUNS["mrac"], folder, {}, {"mrac_cmd_lag_s": lag}), folder / tag)
             for field in ("pump_v_std", "t4_p2p_K", "tracking_rms_pct"):
                 figures[f"{tag}_{field}"] = round(got[field], 4)
     figures.update(_plant_rate())

@@ -309,6 +309,16 @@ static int32_t mrac_control(ecu_t *e, int32_t dn, int32_t dv, int32_t r)
     return sat32(e, (int64_t)div_trunc(e, (int64_t)num * ONE_Q24, den) + th[ECU_KB]);
 }
 
+/* command_lag: the MRAC's command through the first-order lag of mrac_cmd_lag_s (backward Euler,
+ * c = dt / (tau + dt) in Q24; c = 1 passes u): lag and engine are then the fast model */
+ECU_INLINE int32_t command_lag(ecu_t *e, int32_t u)
+{
+    ecu_state_t *s = &e->s;
+    s->u_lag_q24 = sat32(e, (int64_t)s->u_lag_q24 +
+                                (((int64_t)e->p->mrac_lag_c_q24 * ((int64_t)u - s->u_lag_q24)) >> 24));
+    return s->u_lag_q24;
+}
+
 static void mrac_gain_update(ecu_t *e)
 {
     const ecu_params_t *p = e->p;
@@ -1114,6 +1124,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         s->hist_fill = 0;
         th[ECU_PID_I] = sat32(e, (int64_t)v_entry - p->trim_v_q24);
         s->theta_ext[ECU_PID_I] = 0;
+        s->u_lag_q24 = th[ECU_PID_I];
         s->xm1_q24 = dn;
         s->xm2_q24 = 0;
         s->obs_n_q24 = dn;
@@ -1140,7 +1151,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         }
         r = sat32(e, (int64_t)demand - p->trim_n_q24);
         if (p->controller == ECU_CTRL_MRAC) {
-            u = mrac_control(e, dn, ctrl_rate, r);
+            u = command_lag(e, mrac_control(e, dn, ctrl_rate, r));
             mrac_gain_update(e);
         } else if (p->controller == ECU_CTRL_PID) {
             u = pid_control(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate);
@@ -1158,6 +1169,9 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             pid_track(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate, u_applied);
         } else if (p->controller == ECU_CTRL_PI) {
             pi_track(e, sat32(e, (int64_t)demand - n_q24), n_q24, u_applied);
+        }
+        if (s->owner != OWNER_SPEED) { /* the lag tracks what a limit applies (anti-windup) */
+            s->u_lag_q24 = u_applied;
         }
         observer_step(e, u_applied, dn, speed_ok);
         s->u_hist_q24[s->hist_idx] = u_applied;

@@ -95,12 +95,13 @@ enum {
     X(trim_v_q24) X(entry_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) \
     X(idm21_q24) X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) \
     X(g_th1_q28) X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
-    X(rate_half_window) X(rate_den) X(lambda_floor_on) X(lambda_floor_q24) X(dead_zone_on) \
+    X(rate_half_window) X(lambda_floor_on) X(lambda_floor_q24) X(dead_zone_on) \
     X(dead_zone_q24) X(freeze_on) X(adapt_band_q24) X(p12_ratio_q24) X(pump_scaling_on) \
     X(th_per_lam1_q28) X(th_per_lam2_q28) X(pump_v0_q24) X(lam_comm_v0_q16) X(g_b_q28) \
     X(ref_am21_q24) X(ref_am22_q24) X(ref_bm2_q24) \
     X(refm11_q24) X(refm12_q24) X(refm21_q24) X(refm22_q24) X(refh1_q24) X(refh2_q24) \
     X(g_x1_q28) X(g_x2_q28) X(g_r_q28) X(g_f1_q28) X(g_f2_q28) X(u_den_min_q24) \
+    X(mrac_lag_c_q24) \
     X(pid_kp_q24) X(pid_ki_dt_q28) X(pid_kd_q24) \
     X(pi_n0_q24) X(pi_step_q24) A(pi_kp_q24, ECU_PI_POINTS) A(pi_ki_dt_q28, ECU_PI_POINTS) \
     X(fuel_schedules_on) X(sched_n0_q24) X(sched_step_q24) X(ncor_k_q24) X(inlet_from_egt) \
@@ -134,7 +135,7 @@ enum {
     A(theta_q24, ECU_N_THETA) A(theta_ext, ECU_N_THETA) \
     A(n_hist_rpm, ECU_RATE_BUF_LEN) A(u_hist_q24, ECU_RATE_BUF_LEN) X(hist_idx) X(hist_fill) \
     X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) \
-    X(rf_n_q24) X(rf_v_q24) X(rf_a_q16) X(xm1_q24) X(xm2_q24) \
+    X(rf_n_q24) X(rf_v_q24) X(rf_a_q16) X(xm1_q24) X(xm2_q24) X(u_lag_q24) \
     X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q12) \
     X(v_applied_q24) X(owner) X(v_saturated) X(line_lam_min_q24) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \

@@ -26,6 +26,8 @@ class FloatLoop:
         self.pid = FloatPid(params)
         self.pi = FloatPi(params)
         self.pid.i = self.pi.i = params.entry_v - params.trim_v  # bumpless entry into RUN
+        self.u_lag = params.entry_v - params.trim_v  # the MRAC's lagged command
+        self.lag_c = (1.0 / params.rate_hz) / (params.mrac_cmd_lag_s + 1.0 / params.rate_hz)
         self.rate_filter = FloatRateFilter(params)
         self.m = max(1, round(params.rate_window_s * params.rate_hz / 2.0))
         self.n_hist: deque[float] = deque(maxlen=2 * self.m + 2)  # newest last
@@ -71,7 +73,8 @@ class FloatLoop:
             )
         r = demand_pct - p.trim_n_pct
         if self.ctrl == CTRL_MRAC:
-            u = self.mrac.control(dn, rate, r)
+            self.u_lag += self.lag_c * (self.mrac.control(dn, rate, r) - self.u_lag)
+            u = self.u_lag
             self.mrac.gain_update(self.est)
         elif self.ctrl == CTRL_PID:
             u = self.pid.control(demand_pct - n_pct, rate)

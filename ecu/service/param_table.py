@@ -105,6 +105,7 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("pump_scaling_on", "bool", 0, 0, 1, False),
     _s("ref_wn", "rad/s", Q24, 0.5, 20.0, False),
     _s("ref_zeta", "-", Q24, 0.3, 2.0, False),
+    _s("mrac_cmd_lag_s", "s", Q16, 0.0, 5.0, False),
     _s("limiters_on", "bool", 0, 0, 1, False),
     _s("rate_filter_on", "bool", 0, 0, 1, False),
     _s("rate_filter_bw", "rad/s", Q24, 2.0, 50.0, False),

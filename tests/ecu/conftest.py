@@ -17,7 +17,8 @@ RPM_PER_PCT = 1125.0
 
 @dataclass
 class Rig:
-    params: EcuParams = field(default_factory=EcuParams)
+    # the plant is the fast model itself: the command lag that matches it is none
+    params: EcuParams = field(default_factory=lambda: EcuParams(mrac_cmd_lag_s=0.0))
     hot_k: float = 0.0  # EGT offset (hot day, degraded turbine)
 
     def __post_init__(self) -> None:

@@ -166,7 +166,7 @@ def test_egt_limiter_holds_the_limit_on_a_hot_day(make_rig: Any) -> None:
 
 
 def test_acceleration_limit_and_slew_limit(make_rig: Any) -> None:
-    p = replace(EcuParams(), accel_max_pct_s=3.0, v_slew_v_s=5.0)
+    p = replace(EcuParams(), accel_max_pct_s=3.0, v_slew_v_s=5.0, mrac_cmd_lag_s=0.0)
     r = make_rig(params=p)
     r.step(100)
     worst_rate = 0.0

@@ -102,7 +102,8 @@ def test_noise_is_what_the_transfer_function_says_and_far_under_the_difference()
 
 def _noisy_run(make_rig: Any, filtered: bool, sigma_rpm: float, seconds: float) -> dict:
     """The ECU at constant demand on the fast plant, its speed reading with white noise."""
-    p = preset("default", rate_filter_on=filtered, limiters_on=False)
+    # the fast plant is the fast model: the command lag that matches it is none
+    p = preset("default", rate_filter_on=filtered, limiters_on=False, mrac_cmd_lag_s=0.0)
     rig = make_rig(params=p)
     rig.step(2)
     noise = random.Random(7)

@@ -11,7 +11,7 @@ import pytest
 
 from ecu.estimator import estimator_step
 from ecu.firmware_params import compile_params
-from ecu.mrac import mrac_control, mrac_gain_update, reference_model_step
+from ecu.mrac import command_lag, mrac_control, mrac_gain_update, reference_model_step
 from ecu.params import EcuParams, preset
 from ecu.pid import pid_control
 from ecu.reference.estimator import FloatEstimator
@@ -145,7 +145,8 @@ def test_pid_integrator_is_exact_for_constant_error(rate_hz: int) -> None:
 
 @pytest.mark.parametrize("rate_hz", [50, 100, 1000])
 def test_closed_loop_tracks_the_reference_model_at_every_rate(make_rig: Any, rate_hz: int) -> None:
-    rig = make_rig(params=preset("default", rate_hz=rate_hz, limiters_on=False))
+    # the fast plant is the fast model: the command lag that matches it is none
+    rig = make_rig(params=preset("default", rate_hz=rate_hz, limiters_on=False, mrac_cmd_lag_s=0.0))
     rig.step(2)
     err2 = 0.0
     n = 0
@@ -155,3 +156,19 @@ def test_closed_loop_tracks_the_reference_model_at_every_rate(make_rig: Any, rat
         n += 1
     assert math.sqrt(err2 / n) < 0.05  # %N RMS, plant against the reference model
     assert abs(rig.plant.n_pct - 88.0) < 0.02 and rig.out.sat_events == 0
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.55])
+def test_the_mracs_command_lag_is_a_first_order_lag(tau: float) -> None:
+    """command_lag (ecu.mrac): u passes unchanged without a lag; with one, a step reaches
+    1 - 1/e of its size after tau (backward Euler, within a tick)."""
+    p = compile_params(preset("default", mrac_cmd_lag_s=tau))
+    s = EcuState()
+    step = round(2.0 * (1 << 24))  # 2 V
+    out = [command_lag(s, p, step) for _ in range(200)]
+    if tau == 0.0:
+        assert out[0] == step
+        return
+    k63 = next(k for k, u in enumerate(out) if u >= step * (1.0 - math.exp(-1.0)))
+    assert abs((k63 + 1) * 0.01 - tau) <= 0.011
+    assert abs(out[-1] - step) < step * math.exp(-2.0 / tau / 1.05)  # still closing, no overshoot

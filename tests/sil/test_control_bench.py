@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from ecu.params import EcuParams
 from sil import metrics
 
 
@@ -26,7 +27,7 @@ def test_a_sine_on_the_command_reads_back(amplitude: float, hz: float) -> None:
     assert got["t4_p2p_K"] == pytest.approx(80.0 * amplitude, rel=0.05)
 
 
-def test_the_bench_shows_the_limit_cycle_and_its_trade() -> None:
+def test_the_bench_shows_the_limit_cycle_and_its_cure() -> None:
     done = subprocess.run(
         [sys.executable, "-m", "sil.cli", "bench", "control", "--quick", "--json"],
         capture_output=True,
@@ -35,14 +36,17 @@ def test_the_bench_shows_the_limit_cycle_and_its_trade() -> None:
     )
     assert done.returncode == 0, done.stderr
     f = json.loads(done.stdout)
-    # without any sensor noise the MRAC's command still swings: its own limit cycle, fast
-    assert f["mrac_noise_free_pump_v_std"] > 0.1
-    assert 4.0 < f["mrac_noise_free_pump_v_peak_hz"] < 20.0
     # the plant's shaft answers the pump at once; the fast model's rate rolls off
     assert f["plant_rate_per_v_50_rad_s"] > 10.0 * f["fast_model_rate_per_v_50_rad_s"]
-    # the PI, without rate feedback, is smooth; a gentler MRAC is smoother and tracks worse
-    assert f["pi_pump_v_std"] < 0.25 * f["mrac_pump_v_std"]
-    gentle = "mrac_wn3_z0.7_rf6"
-    assert f[f"{gentle}_pump_v_std"] < 0.25 * f["mrac_pump_v_std"]
-    assert f[f"{gentle}_tracking_rms_pct"] > f["mrac_tracking_rms_pct"]
+    assert f["matching_lag_s"] == pytest.approx(EcuParams().mrac_cmd_lag_s, abs=0.02)
+    # without the lag, and without any sensor noise, the MRAC's command swings: a limit cycle
+    assert f["mrac_no_lag_noise_free_pump_v_std"] > 0.1
+    assert 4.0 < f["mrac_no_lag_noise_free_pump_v_peak_hz"] < 20.0
+    # with it the command is smooth and the tracking no worse
+    assert f["mrac_pump_v_std"] < 0.2 * f["mrac_no_lag_pump_v_std"]
+    assert f["mrac_t4_p2p_K"] < 0.2 * f["mrac_no_lag_t4_p2p_K"]
+    assert f["mrac_tracking_rms_pct"] <= f["mrac_no_lag_tracking_rms_pct"]
+    # the PI, without rate feedback, is smooth too and tracks the reference model far less closely
+    assert f["pi_pump_v_std"] < 0.25 * f["mrac_no_lag_pump_v_std"]
+    assert f["pi_tracking_rms_pct"] > 3.0 * f["mrac_tracking_rms_pct"]
     assert set(f["targets_met"]) == {"mrac_std", "mrac_t4", "mrac_rms"}
