@@ -43,7 +43,11 @@ def test_start_nominal_summary_plot_and_python_c_agree(tmp_path):
     states = trace["SequencerState"][np.isfinite(trace["SequencerState"])]
     visited = list(dict.fromkeys(states.astype(int).tolist()))
     assert visited[:4] == [seq.SPIN_UP, seq.IGNITION, seq.RAMP, seq.STABILISE]
-    assert {seq.SPOOL_DOWN, seq.COOL_DOWN, seq.DONE} <= set(visited)
+    assert visited[-2:] == [seq.COOL_DOWN, seq.DONE]
+    # the stop spools down first unless the rotor is already slow enough for the starter
+    at_cut = trace["speed_true"][np.searchsorted(trace["time"], s.stop_s)]
+    spooled = seq.SPOOL_DOWN in visited
+    assert spooled == (at_cut > p.cool_speed_pct), (at_cut, visited)
 
 
 def test_start_no_light_aborts_and_reports_the_unburnt_fuel(tmp_path):
