@@ -26,6 +26,13 @@ def fast_model_derivative(
     return dn_dot, dn_ddot
 
 
+def rate_per_volt(omega: float, theta: tuple[float, ...] = THETA_EQ_3_23) -> float:
+    """|dN' / dV| at trim at omega rad/s, %N/s per V: the pump in the shaft's acceleration,
+    s theta2 / (s^2 - theta1 s - theta0), which rolls off above the model's poles."""
+    s = 1j * omega
+    return float(abs(s * theta[2] / (s * s - theta[1] * s - theta[0])))
+
+
 @dataclass
 class FastEngine:
     """Eq. 3.24 integrated with RK4 (input held over a step), in deviations from trim.

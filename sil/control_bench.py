@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ecu.params import AP_ROW2_EQ_3_23, EcuParams
+from ecu.params import EcuParams
 from plant.aerothermal import make_model
+from plant.fast_model import rate_per_volt
 from plant.linearise import linearise, speed_rate_per_volt, steady_at_speed
 from sil import metrics
 from sil.bench import completed_run
@@ -71,7 +72,6 @@ def _plant_rate() -> dict:
     steady, g_fuel = steady_at_speed(model, 90.0)
     plant = speed_rate_per_volt(model, steady, g_fuel, np.array(OMEGAS))
     lam = EcuParams().init_lambda
-    a21, a22 = AP_ROW2_EQ_3_23
     lin = linearise(model, steady, g_fuel)
     rate_gain = lin.gain_pct_per_v / lin.tau_s  # a first-order shaft's rate per volt, K / tau
     out = {
@@ -79,9 +79,8 @@ def _plant_rate() -> dict:
         "matching_lag_s": round(rate_gain / lam, 3),
     }
     for w, got in zip(OMEGAS, plant, strict=True):
-        s = 1j * w
         out[f"plant_rate_per_v_{w:g}_rad_s"] = round(float(got), 3)
-        out[f"fast_model_rate_per_v_{w:g}_rad_s"] = round(abs(s * lam / (s * s - a22 * s - a21)), 3)
+        out[f"fast_model_rate_per_v_{w:g}_rad_s"] = round(rate_per_volt(w), 3)
     return out
 
 
