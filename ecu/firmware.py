@@ -371,7 +371,10 @@ class Ecu:
             else:
                 u = sat32(s.open_loop_q24 - p.trim_v_q24)
             reference_model_step(s, p, r)
-            e_dk = clamp(p.egt_limit_dk - (s.egt_lead_q12 >> 12), -1000, 1000)
+            # the gas (the lead) against the limit, which it may pass by what the probe is still
+            # under it, up to the transient allowance
+            room_dk = clamp(p.egt_limit_dk - s.egt_dk, 0, p.egt_gas_margin_dk)
+            e_dk = clamp(p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12), -1000, 1000)
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, ctrl_rate
             )

@@ -147,6 +147,9 @@ class EcuParams:
     # thermocouple's lag, T_tc its commissioned time constant (0 with T_f 0: the raw reading)
     egt_lead_tau_s: float = 0.5
     egt_lead_filter_s: float = 0.1  # T_f: gain on probe noise (T_tc + dt)/(T_f + dt), 4.6
+    # a transient allowance: the gas the lead sees may pass the limit by what the probe still
+    # reads under it, up to this much (0: the gas is held at the limit)
+    egt_gas_margin_k: float = 0.0
     egt_max_k: float = 1330.0  # shutdown above this ...
     egt_max_time_s: float = 1.0  # ... for this long
     accel_max_pct_s: float = 20.0
@@ -522,6 +525,12 @@ def validate(p: EcuParams) -> None:
         "need demand_max_pct < n_limit_pct < overspeed_pct <= 110",
     )
     _check(800.0 <= p.egt_limit_k < p.egt_max_k, "egt_limit_k", p.egt_limit_k, "800 <= x < max")
+    _check(
+        0.0 <= p.egt_gas_margin_k <= p.egt_max_k - p.egt_limit_k,
+        "egt_gas_margin_k",
+        p.egt_gas_margin_k,
+        "need 0 <= x <= egt_max_k - egt_limit_k (the gas stays under the shutdown level)",
+    )
     _check(p.egt_max_k < p.egt_open_high_k, "egt_max_k", p.egt_max_k, "below open-circuit level")
     _check(
         p.egt_open_high_k < EGT_FULL_SCALE_K,

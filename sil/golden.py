@@ -353,14 +353,14 @@ def record_start_stop(ticks: int) -> Golden:
 
 
 _HOT_LIMITS = """
-description = "MRAC on a hot day, steps up to the speed limit and down fast: limit loops engage"
+description = "MRAC on a hot day, speed limit steps up and down fast: limit loops, EGT allowance"
 duration_s = 40
 [plant]
 model = "aero"
 ambient_temperature_K = 318
 [controller]
 kind = "mrac"
-params = { egt_limit_k = 1060, accel_max_pct_s = 5, decel_max_pct_s = 6 }
+params = { egt_limit_k = 1060, egt_gas_margin_k = 20, accel_max_pct_s = 5, decel_max_pct_s = 6 }
 [command]
 base = 0
 [[command.component]]

@@ -1135,7 +1135,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     /* 5. control */
     if (new_mode == ECU_RUN) {
         int adapt = speed_ok;
-        int32_t r, u, e_dk, v, u_applied;
+        int32_t r, u, e_dk, room_dk, v, u_applied;
         if (s->hist_fill < ECU_RATE_BUF_LEN) {
             s->hist_fill++;
         }
@@ -1161,7 +1161,11 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
         }
         reference_model_step(e, r);
-        e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - (s->egt_lead_q12 >> 12), -1000, 1000);
+        /* the gas (the lead) against the limit, which it may pass by what the probe is still
+           under it, up to the transient allowance */
+        room_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - s->egt_dk, 0, p->egt_gas_margin_dk);
+        e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12),
+                              -1000, 1000);
         v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
                            div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, ctrl_rate);
         u_applied = sat32(e, (int64_t)v - p->trim_v_q24);

@@ -107,7 +107,7 @@ enum {
     X(fuel_schedules_on) X(sched_n0_q24) X(sched_step_q24) X(ncor_k_q24) X(inlet_from_egt) \
     A(accel_line_q24, ECU_SCHED_POINTS) A(decel_floor_q24, ECU_SCHED_POINTS) \
     A(accel_rate_q24, ECU_SCHED_POINTS) X(pump_dead_q24) X(sched_lam_lo_q24) X(sched_lam_hi_q24) X(idle_q24) X(demand_max_q24) \
-    X(limiters_on) X(egt_limit_dk) X(egt_engage_q24) X(rate_engage_q24) \
+    X(limiters_on) X(egt_limit_dk) X(egt_gas_margin_dk) X(egt_engage_q24) X(rate_engage_q24) \
     X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_lead_cf_q16) X(egt_lead_ctc_q16) \
     X(egt_max_dk) X(egt_max_ticks) \
     X(accel_max_q24) X(decel_max_q24) X(rate_kp_q24) X(rate_ki_dt_q24) X(n_limit_q24) \

@@ -1,6 +1,7 @@
 """The EGT limiter's lead on the thermocouple: the fixed-point filter against its float64 twin,
 exact in steady state and off when asked, and the gas temperature it recovers through a probe
-with the commissioned time constant; in closed loop the gas overshoots the limit less."""
+with the commissioned time constant; in closed loop the gas overshoots the limit less, and a
+transient allowance lets it pass the limit only while the probe still reads under it."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+import pytest
 
 from ecu.firmware_params import compile_params
 from ecu.limiters import egt_lead_step
@@ -108,6 +110,39 @@ def test_the_gas_overshoots_the_egt_limit_less_with_the_lead(make_rig: Any) -> N
     with_lead = peak_gas(EcuParams())
     without = peak_gas(replace(EcuParams(), egt_lead_tau_s=0.0, egt_lead_filter_s=0.0))
     assert without - 1280.0 > 2.0 * (with_lead - 1280.0) > 0.0
+
+
+def test_a_transient_allowance_lets_the_gas_pass_the_limit_while_the_probe_reads_under_it(
+    make_rig: Any,
+) -> None:
+    def fly(margin_k: float) -> tuple[float, float, float, float]:
+        """Peak gas, peak probe, speed 1 s into the step, final speed."""
+        rig = make_rig(params=replace(rig_params, egt_gas_margin_k=margin_k), hot_k=150.0)
+        rig.step(300)
+        gas, probe, speed = [], [], []
+        for _ in range(1500):
+            rig.step(1, demand_cpct=9500)
+            gas.append(rig.egt_steady())
+            probe.append(rig.egt_k)
+            speed.append(rig.plant.n_pct)
+        return max(gas), max(probe), speed[99], speed[-1]
+
+    rig_params = make_rig().params
+    held, allowed = fly(0.0), fly(30.0)
+    assert held[0] < 1280.0 + 10.0  # without one the gas is held at the limit
+    assert 1280.0 + 15.0 < allowed[0] < 1280.0 + 30.0 + 5.0  # it used the allowance, no more
+    assert allowed[1] < allowed[0]  # the probe lags the gas
+    assert allowed[2] > held[2] + 0.5  # the engine gets there sooner ...
+    assert abs(allowed[3] - held[3]) < 0.1  # ... to the same steady speed within the limit
+
+
+def test_the_transient_allowance_is_checked() -> None:
+    from ecu.params import ParamError, validate
+
+    validate(replace(EcuParams(), egt_gas_margin_k=50.0))
+    for bad in (-1.0, EcuParams().egt_max_k - EcuParams().egt_limit_k + 1.0):
+        with pytest.raises(ParamError, match="egt_gas_margin_k"):
+            validate(replace(EcuParams(), egt_gas_margin_k=bad))
 
 
 def test_an_open_thermocouple_does_not_saturate_the_lead() -> None:

@@ -49,4 +49,8 @@ def test_the_bench_shows_the_limit_cycle_and_its_cure() -> None:
     # the PI, without rate feedback, is smooth too and tracks the reference model far less closely
     assert f["pi_pump_v_std"] < 0.25 * f["mrac_no_lag_pump_v_std"]
     assert f["pi_tracking_rms_pct"] > 3.0 * f["mrac_tracking_rms_pct"]
+    # a transient EGT allowance lets the step to 100 %N follow the reference model (the gas is
+    # held at the limit without one), and the command at constant demand is untouched
+    assert f["mrac_egt_allowance_40_K_tracking_rms_pct"] < 0.8 * f["mrac_tracking_rms_pct"]
+    assert f["mrac_egt_allowance_40_K_pump_v_std"] == pytest.approx(f["mrac_pump_v_std"], rel=0.1)
     assert set(f["targets_met"]) == {"mrac_std", "mrac_t4", "mrac_rms"}
