@@ -148,7 +148,6 @@ class Ecu:
         s.mode = M.OFF
         s.ncor_k_q24 = p.ncor_k_q24  # the operator's day (ecu.inlet)
         s.seq_target_dk = p.seq_day_target_dk
-        s.line_lam_min_q24 = p.lambda_comm_q24
         take_sat_events()
 
     def _rate_q24(self, age: int) -> int:
@@ -345,7 +344,11 @@ class Ecu:
             if s.hist_fill < RATE_BUF_LEN:
                 s.hist_fill += 1
             adapt = speed_ok
-            if p.freeze_on and (s.owner != OWNER_SPEED or s.v_saturated):
+            # under the acceleration line the estimator learns the pump the line needs, from a
+            # reading that answers the pump (not one that stays put while the pump moves: a
+            # stuck sensor, before its fault trips, would teach a weak pump and raise the line)
+            line_learns = s.line_owns and s.speed_stuck_cnt == 0
+            if p.freeze_on and (s.v_saturated or (s.owner != OWNER_SPEED and not line_learns)):
                 adapt = 0
             if p.adapt_band_q24 and (dn > p.adapt_band_q24 or dn < -p.adapt_band_q24):
                 adapt = 0  # off the trim speed the fast model no longer holds
@@ -371,10 +374,12 @@ class Ecu:
             else:
                 u = sat32(s.open_loop_q24 - p.trim_v_q24)
             reference_model_step(s, p, r)
-            # the gas (the lead) against the limit, which it may pass by what the probe is still
-            # under it, up to the transient allowance
-            room_dk = clamp(p.egt_limit_dk - s.egt_dk, 0, p.egt_gas_margin_dk)
-            e_dk = clamp(p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12), -1000, 1000)
+            # the hotter of the probe and the gas (the lead) against the limit; the gas may pass
+            # it by what the probe still reads under it, up to the transient allowance
+            probe_dk = p.egt_limit_dk - s.egt_dk
+            room_dk = clamp(probe_dk, 0, p.egt_gas_margin_dk)
+            gas_dk = p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12)
+            e_dk = clamp(min(probe_dk, gas_dk), -1000, 1000)
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, ctrl_rate
             )

@@ -77,15 +77,14 @@ def pump_from_start(s: EcuState, p: FirmwareParams, n_q24: int, v_q24: int) -> N
     more than the commissioned pump's acceleration line has a weaker pump (no estimate exists
     yet, and none adapts at idle), so Lambda-hat starts at Lambda_c (V_line - V_d) / (V - V_d),
     the pump for which the line passes through V (an upper bound on its weakness: V carried the
-    start's acceleration), and the line follows Lambda-hat down to it. The start's own cap, the
-    line of the weakest pump the schedules accept, keeps it within schedule_pump_range."""
+    start's acceleration), and the line with it. The start's own cap, the line of the weakest
+    pump the schedules accept, keeps it within schedule_pump_range."""
     line = schedule_at(s, p, p.accel_line_q24, n_q24)
     if v_q24 > line > p.pump_dead_q24:
         lam = div_trunc((line - p.pump_dead_q24) * p.lambda_comm_q24, v_q24 - p.pump_dead_q24)
         lam = max(lam, p.sched_lam_lo_q24)
         s.theta_q24[LAM] = lam
         s.theta_ext[LAM] = 0
-        s.line_lam_min_q24 = lam
 
 
 def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:
@@ -101,15 +100,18 @@ def select_voltage(
     n_q24: int,
     rate_q24: int,
 ) -> int:
-    """Min/max selection, voltage limits and slew; sets s.owner, s.v_saturated, s.v_applied_q24."""
+    """Min/max selection, voltage limits and slew; sets s.owner, s.v_saturated, s.line_owns (the
+    acceleration line, not its rate loop, owns) and s.v_applied_q24."""
     if not p.limiters_on:
         s.owner = OWNER_SPEED
         s.v_saturated = 0
+        s.line_owns = 0
         s.v_applied_q24 = v_speed
         return v_speed
     v_prev = s.v_applied_q24
     v = v_speed
     owner = OWNER_SPEED
+    by_line = 0
     if egt_ok:
         e = egt_err_q24
         if e < p.egt_engage_q24:
@@ -136,12 +138,13 @@ def select_voltage(
             owner = OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
     if p.fuel_schedules_on:
-        # one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it
-        # (unless a start showed the weaker pump: pump_from_start)
-        v_line = schedule_v(s, p, p.accel_line_q24, n_q24, s.line_lam_min_q24, p.sched_lam_hi_q24)
+        # the line's fuel with the pump as estimated, within schedule_pump_range both ways (the
+        # estimator learns the pump while the line holds it: a weak pump's line rises)
+        v_line = schedule_v(s, p, p.accel_line_q24, n_q24, p.sched_lam_lo_q24, p.sched_lam_hi_q24)
         if v_line < v:
             v = v_line
             owner = OWNER_ACCEL
+            by_line = 1
     e = add_sat(rate_q24, p.decel_max_q24)  # margin above the deceleration limit
     if e < p.rate_engage_q24:
         v_dec = _loop(v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
@@ -159,6 +162,7 @@ def select_voltage(
     s.v_saturated = 1 if v_lim != v else 0  # at a voltage limit (the slew alone is not)
     v_lim = clamp(v_lim, v_prev - p.v_slew_q24, v_prev + p.v_slew_q24)
     s.owner = owner
+    s.line_owns = by_line if owner == OWNER_ACCEL else 0
     s.v_applied_q24 = v_lim
     return v_lim
 
@@ -166,6 +170,7 @@ def select_voltage(
 def reset_loops(s: EcuState, v_q24: int) -> None:
     """Start the limit loops from voltage v with no error history (entry into RUN)."""
     s.v_applied_q24 = v_q24
+    s.line_owns = 0
     s.egt_e_prev_q24 = 0
     s.acc_e_prev_q24 = 0
     s.dec_e_prev_q24 = 0

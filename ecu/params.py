@@ -87,7 +87,9 @@ class EcuParams:
     dead_zone_on: bool = True
     speed_noise_rpm: float = 3.0  # speed sensor noise (1 sigma); sizes the dead zone
     dead_zone_sigmas: float = 3.0
-    freeze_on: bool = True  # no adaptation while a limiter owns the command or V saturates
+    # no adaptation while V saturates or a limit loop owns the command; while the acceleration
+    # line holds it the estimator learns on from the voltage applied (the pump the line holds)
+    freeze_on: bool = True
     # no adaptation further than this from the trim speed (0: everywhere), where the fast model,
     # linearised at trim, no longer holds: at 55 %N Lambda-hat would fall to a quarter of
     # Lambda_c within a second, carrying the model's error rather than the pump's

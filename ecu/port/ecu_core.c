@@ -472,7 +472,7 @@ static int32_t schedule_v(ecu_t *e, const int32_t *table, int32_t n_q24, int32_t
 
 /* pump_from_start: at the hand-over from a start at speed n_q24 and pump voltage v_q24, a start
  * that needed more than the commissioned pump's acceleration line has a weaker pump: Lambda-hat
- * starts at Lambda_c (V_line - V_d) / (V - V_d), and the line follows it down to there */
+ * starts at Lambda_c (V_line - V_d) / (V - V_d), and the line with it */
 static void pump_from_start(ecu_t *e, int32_t n_q24, int32_t v_q24)
 {
     const ecu_params_t *p = e->p;
@@ -487,7 +487,6 @@ static void pump_from_start(ecu_t *e, int32_t n_q24, int32_t v_q24)
         }
         s->theta_q24[ECU_LAM] = lam;
         s->theta_ext[ECU_LAM] = 0;
-        s->line_lam_min_q24 = lam;
     }
 }
 
@@ -496,10 +495,11 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
 {
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
-    int32_t v_prev, v, owner, err, v_loop, v_lim, ndot_max;
+    int32_t v_prev, v, owner, err, v_loop, v_lim, ndot_max, by_line = 0;
     if (!p->limiters_on) {
         s->owner = OWNER_SPEED;
         s->v_saturated = 0;
+        s->line_owns = 0;
         s->v_applied_q24 = v_speed;
         return v_speed;
     }
@@ -542,12 +542,13 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     s->nlim_e_prev_q24 = err;
     if (p->fuel_schedules_on) {
-        /* one-sided: a stronger pump lowers the line, an estimate under Lambda_c never raises it
-         * (unless a start showed the weaker pump: pump_from_start) */
-        v_loop = schedule_v(e, p->accel_line_q24, n_q24, s->line_lam_min_q24, p->sched_lam_hi_q24);
+        /* the line's fuel with the pump as estimated, within schedule_pump_range both ways (the
+         * estimator learns the pump while the line holds it: a weak pump's line rises) */
+        v_loop = schedule_v(e, p->accel_line_q24, n_q24, p->sched_lam_lo_q24, p->sched_lam_hi_q24);
         if (v_loop < v) {
             v = v_loop;
             owner = OWNER_ACCEL;
+            by_line = 1;
         }
     }
     err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above the decel limit */
@@ -572,6 +573,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     s->v_saturated = v_lim != v ? 1 : 0;
     v_lim = (int32_t)clamp(v_lim, (int64_t)v_prev - p->v_slew_q24, (int64_t)v_prev + p->v_slew_q24);
     s->owner = owner;
+    s->line_owns = owner == OWNER_ACCEL ? by_line : 0;
     s->v_applied_q24 = v_lim;
     return v_lim;
 }
@@ -579,6 +581,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
 static void reset_loops(ecu_state_t *s, int32_t v_q24)
 {
     s->v_applied_q24 = v_q24;
+    s->line_owns = 0;
     s->egt_e_prev_q24 = 0;
     s->acc_e_prev_q24 = 0;
     s->dec_e_prev_q24 = 0;
@@ -936,7 +939,6 @@ void ecu_init(ecu_t *e, const ecu_params_t *p)
     e->s.mode = ECU_OFF;
     e->s.ncor_k_q24 = p->ncor_k_q24; /* the operator's day (ecu/inlet.py) */
     e->s.seq_target_dk = p->seq_day_target_dk;
-    e->s.line_lam_min_q24 = p->lambda_comm_q24;
     e->sat_pending = 0;
 }
 
@@ -1135,11 +1137,16 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     /* 5. control */
     if (new_mode == ECU_RUN) {
         int adapt = speed_ok;
+        /* under the acceleration line the estimator learns the pump the line needs, from a
+           reading that answers the pump (not one that stays put while the pump moves: a stuck
+           sensor, before its fault trips, would teach a weak pump and raise the line) */
+        int line_learns = s->line_owns && s->speed_stuck_cnt == 0;
         int32_t r, u, e_dk, room_dk, v, u_applied;
+        int64_t probe_dk, gas_dk;
         if (s->hist_fill < ECU_RATE_BUF_LEN) {
             s->hist_fill++;
         }
-        if (p->freeze_on && (s->owner != OWNER_SPEED || s->v_saturated)) {
+        if (p->freeze_on && (s->v_saturated || (s->owner != OWNER_SPEED && !line_learns))) {
             adapt = 0;
         }
         if (p->adapt_band_q24 && (dn > p->adapt_band_q24 || dn < -p->adapt_band_q24)) {
@@ -1161,11 +1168,12 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
         }
         reference_model_step(e, r);
-        /* the gas (the lead) against the limit, which it may pass by what the probe is still
-           under it, up to the transient allowance */
-        room_dk = (int32_t)clamp((int64_t)p->egt_limit_dk - s->egt_dk, 0, p->egt_gas_margin_dk);
-        e_dk = (int32_t)clamp((int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12),
-                              -1000, 1000);
+        /* the hotter of the probe and the gas (the lead) against the limit; the gas may pass
+           it by what the probe still reads under it, up to the transient allowance */
+        probe_dk = p->egt_limit_dk - s->egt_dk;
+        room_dk = (int32_t)clamp(probe_dk, 0, p->egt_gas_margin_dk);
+        gas_dk = (int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12);
+        e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -1000, 1000);
         v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
                            div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, ctrl_rate);
         u_applied = sat32(e, (int64_t)v - p->trim_v_q24);

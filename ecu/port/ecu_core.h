@@ -137,7 +137,7 @@ enum {
     X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) \
     X(rf_n_q24) X(rf_v_q24) X(rf_a_q16) X(xm1_q24) X(xm2_q24) X(u_lag_q24) \
     X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q12) \
-    X(v_applied_q24) X(owner) X(v_saturated) X(line_lam_min_q24) \
+    X(v_applied_q24) X(owner) X(v_saturated) X(line_owns) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \
     X(speed_range_cnt) X(speed_rate_cnt) X(speed_stuck_cnt) X(speed_stuck_v_q24) \

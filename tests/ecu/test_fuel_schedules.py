@@ -23,13 +23,11 @@ SPEEDS = SCHED_N0_PCT + SCHED_STEP_PCT * np.arange(SCHED_POINTS)
 
 
 def _expected(p: EcuParams, table: tuple[float, ...], n: float, lam: float) -> float:
-    """The schedule's voltage by its definition, in floats: the line moves only down (Lambda-hat
-    in [Lambda_c, hi]), the floor only up (in [lo, Lambda_c])."""
+    """The schedule's voltage by its definition, in floats: the line moves both ways (Lambda-hat
+    in [lo, hi]), the floor only up (in [lo, Lambda_c])."""
     v = float(np.interp(n * math.sqrt(288.15 / p.inlet_temp_k), SPEEDS, table))
     lo, hi = (r * p.lambda_commissioned for r in p.schedule_pump_range)
-    if table is p.accel_line_v:
-        lo = p.lambda_commissioned
-    else:
+    if table is p.decel_floor_v:
         hi = p.lambda_commissioned
     return p.pump_dead_v + (v - p.pump_dead_v) * p.lambda_commissioned / min(max(lam, lo), hi)
 
@@ -56,7 +54,7 @@ def test_schedule_voltage_follows_its_definition(inlet_k: float, lam_ratio: floa
     lam = s.theta_q24[LAM] / Q
     for n in np.linspace(30.0, 110.0, 81):
         for table, raw, lo, hi in (
-            (p.accel_line_v, fw.accel_line_q24, fw.lambda_comm_q24, fw.sched_lam_hi_q24),
+            (p.accel_line_v, fw.accel_line_q24, fw.sched_lam_lo_q24, fw.sched_lam_hi_q24),
             (p.decel_floor_v, fw.decel_floor_q24, fw.sched_lam_lo_q24, fw.lambda_comm_q24),
         ):
             got = schedule_v(s, fw, raw, round(n * Q), lo, hi) / Q
@@ -94,6 +92,40 @@ def test_deceleration_floor_holds_a_large_cut(make_rig: Any) -> None:
     assert max(under) < 0.002
     assert any(o == OWNER_DECEL for _, _, o, _ in held)
     assert max(_expected(p, p.decel_floor_v, n, lam) - v for n, v, _, lam in free) > 1.0
+
+
+class _WeakPump:
+    """The rig's plant behind a pump delivering `gain` times the commissioned pump's fuel."""
+
+    def __init__(self, rig: Any, gain: float) -> None:
+        self.plant, self.gain, self.p = rig.plant, gain, rig.params
+        self.n_pct = rig.plant.n_pct
+
+    def step(self, u: float, dt: float) -> None:
+        v_d, trim = self.p.pump_dead_v, self.p.trim_v
+        self.plant.step(self.gain * (u + trim - v_d) - (trim - v_d), dt)
+        self.n_pct = self.plant.n_pct
+
+
+@pytest.mark.parametrize("scaling", [True, False])
+def test_a_weak_pump_the_line_holds_is_learnt_and_the_line_rises_with_it(
+    make_rig: Any, scaling: bool
+) -> None:
+    """The estimator learns on while the acceleration line owns the command: with pump scaling
+    the line delivers its fuel with the pump as learnt and the engine reaches its demand;
+    without, the commissioned pump's line holds the weak one under it."""
+    p = EcuParams()
+    rig = make_rig(params=replace(make_rig().params, pump_scaling_on=scaling))
+    rig.plant = _WeakPump(rig, 0.85)
+    rig.step(1000)
+    owners = [rig.step(1, demand_cpct=9500).owner for _ in range(3000)]
+    lam = rig.ecu.s.theta_q24[LAM] / Q
+    if scaling:
+        assert lam == pytest.approx(0.85 * p.lambda_commissioned, rel=0.03)
+        assert rig.plant.n_pct == pytest.approx(95.0, abs=0.1)
+        assert owners[-1] == OWNER_SPEED
+    else:
+        assert rig.plant.n_pct < 94.0 and owners[-1] == OWNER_ACCEL
 
 
 @pytest.mark.parametrize("n", [50.0, 72.5, 97.5])
