@@ -379,7 +379,7 @@ class Ecu:
             probe_dk = p.egt_limit_dk - s.egt_dk
             room_dk = clamp(probe_dk, 0, p.egt_gas_margin_dk)
             gas_dk = p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12)
-            e_dk = clamp(min(probe_dk, gas_dk), -1000, 1000)
+            e_dk = clamp(min(probe_dk, gas_dk), -1000, 1000)  # params.EGT_ERROR_MAX_K
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, ctrl_rate
             )

@@ -35,6 +35,7 @@ SCHED_N0_PCT = 45.0
 SCHED_STEP_PCT = 5.0
 T_STD_K = 288.15
 INLET_RANGE_K = (223.0, 333.0)  # the day's inlet temperatures the ECU accepts
+EGT_ERROR_MAX_K = 100.0  # the EGT loop's error is clamped to +- this (ecu.firmware: +-1000 0.1 K)
 
 # eq. 3.23: fast-model parameters identified offline on the aero-thermal model
 AP_ROW2_EQ_3_23 = (-1.8054, -2.3360)
@@ -552,6 +553,13 @@ def validate(p: EcuParams) -> None:
     _check(p.decel_max_pct_s > 0.0, "decel_max_pct_s", p.decel_max_pct_s, "must be > 0")
     for name in ("egt_engage_k", "rate_engage_pct_s", "n_limit_engage_pct"):
         _check(getattr(p, name) > 0.0, name, getattr(p, name), "must be > 0")
+    _check(
+        p.egt_engage_k <= EGT_ERROR_MAX_K,
+        "egt_engage_k",
+        p.egt_engage_k,
+        f"at most {EGT_ERROR_MAX_K:g} K, the EGT loop's error clamp (over it the loop never leaves"
+        " the min-select, and its integral caps every acceleration far from the limit)",
+    )
     _check(0.0 <= p.v_min < p.v_max <= 30.0, "v_max", p.v_max, "need 0 <= v_min < v_max <= 30")
     _check(p.v_slew_v_s > 0.0, "v_slew_v_s", p.v_slew_v_s, "must be > 0")
     _check(0.0 <= p.duty_min < p.duty_max <= 1.0, "duty_max", p.duty_max, "0 <= min < max <= 1")

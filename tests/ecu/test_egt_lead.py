@@ -182,3 +182,11 @@ def test_the_limit_holds_while_the_probe_reads_over_it_though_the_gas_cools(rig:
     assert (rig.ecu.s.egt_lead_q12 >> 12) < limit_dk  # ... under the limit
     # the loop's proportional part follows the probe's 15 K: Kp 15 K, less its integral
     assert o.pump_mv / 1000.0 - v_before < 1.2 * p.egt_kp * 15.0
+
+
+def test_the_egt_loop_cannot_be_engaged_beyond_its_error_clamp() -> None:
+    from ecu.params import EGT_ERROR_MAX_K, ParamError, validate
+
+    validate(replace(EcuParams(), egt_engage_k=EGT_ERROR_MAX_K))
+    with pytest.raises(ParamError, match="egt_engage_k"):
+        validate(replace(EcuParams(), egt_engage_k=EGT_ERROR_MAX_K + 5.0))
