@@ -37,7 +37,7 @@ from ecu.limiters import (
     select_voltage,
 )
 from ecu.mrac import command_lag, mrac_control, mrac_gain_update, reference_model_step
-from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, RATE_BUF_LEN, EcuParams
+from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, EGT_ERROR_MAX_DK, RATE_BUF_LEN, EcuParams
 from ecu.pi import pi_control, pi_track
 from ecu.pid import pid_control, pid_track
 from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv
@@ -379,7 +379,7 @@ class Ecu:
             probe_dk = p.egt_limit_dk - s.egt_dk
             room_dk = clamp(probe_dk, 0, p.egt_gas_margin_dk)
             gas_dk = p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12)
-            e_dk = clamp(min(probe_dk, gas_dk), -1000, 1000)  # params.EGT_ERROR_MAX_K
+            e_dk = clamp(min(probe_dk, gas_dk), -EGT_ERROR_MAX_DK, EGT_ERROR_MAX_DK)
             v = select_voltage(
                 s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, ctrl_rate
             )

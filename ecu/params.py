@@ -35,7 +35,8 @@ SCHED_N0_PCT = 45.0
 SCHED_STEP_PCT = 5.0
 T_STD_K = 288.15
 INLET_RANGE_K = (223.0, 333.0)  # the day's inlet temperatures the ECU accepts
-EGT_ERROR_MAX_K = 100.0  # the EGT loop's error is clamped to +- this (ecu.firmware: +-1000 0.1 K)
+EGT_ERROR_MAX_DK = 1000  # the EGT loop's error is clamped to +- this, 0.1 K (and ecu_core.c)
+EGT_ERROR_MAX_K = EGT_ERROR_MAX_DK / 10.0
 
 # eq. 3.23: fast-model parameters identified offline on the aero-thermal model
 AP_ROW2_EQ_3_23 = (-1.8054, -2.3360)

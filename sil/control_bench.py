@@ -102,15 +102,11 @@ def run(quick: bool = False) -> dict:
                 _variant(RUNS["mrac"], folder, plant, params), folder / tag
             ).items():
                 figures[f"{tag}_{field}"] = round(value, 4)
-        tag = f"mrac_egt_allowance_{ALLOWANCE_K:g}_K"
-        got = _fly(
-            _variant(RUNS["mrac"], folder, {}, {"egt_gas_margin_k": ALLOWANCE_K}), folder / tag
-        )
-        for field in ("pump_v_std", "t4_p2p_K", "tracking_rms_pct"):
-            figures[f"{tag}_{field}"] = round(got[field], 4)
+        variants = {f"mrac_egt_allowance_{ALLOWANCE_K:g}_K": {"egt_gas_margin_k": ALLOWANCE_K}}
         for lag in QUICK_LAGS_S if quick else LAGS_S:
-            tag = f"mrac_lag_{lag:g}_s"
-            got = _fly(_variant(RUNS["mrac"], folder, {}, {"mrac_cmd_lag_s": lag}), folder / tag)
+            variants[f"mrac_lag_{lag:g}_s"] = {"mrac_cmd_lag_s": lag}
+        for tag, params in variants.items():
+            got = _fly(_variant(RUNS["mrac"], folder, {}, params), folder / tag)
             for field in ("pump_v_std", "t4_p2p_K", "tracking_rms_pct"):
                 figures[f"{tag}_{field}"] = round(got[field], 4)
     figures.update(_plant_rate())

@@ -22,6 +22,7 @@
 
 #define ACC_EXT_BITS 16 /* Q7.40 split accumulator: 16 bits below the Q7.24 word */
 #define ONE_Q24 ((int64_t)1 << 24)
+#define EGT_ERROR_MAX_DK 1000 /* the EGT loop's error clamp, 0.1 K (params.EGT_ERROR_MAX_K) */
 
 static int32_t sat32(ecu_t *e, int64_t x)
 {
@@ -1173,7 +1174,8 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         probe_dk = p->egt_limit_dk - s->egt_dk;
         room_dk = (int32_t)clamp(probe_dk, 0, p->egt_gas_margin_dk);
         gas_dk = (int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12);
-        e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -1000, 1000);
+        e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -EGT_ERROR_MAX_DK,
+                              EGT_ERROR_MAX_DK);
         v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
                            div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, ctrl_rate);
         u_applied = sat32(e, (int64_t)v - p->trim_v_q24);

@@ -115,6 +115,8 @@ def test_the_gas_overshoots_the_egt_limit_less_with_the_lead(make_rig: Any) -> N
 def test_a_transient_allowance_lets_the_gas_pass_the_limit_while_the_probe_reads_under_it(
     make_rig: Any,
 ) -> None:
+    rig_params = make_rig().params
+
     def fly(margin_k: float) -> tuple[float, float, float, float]:
         """Peak gas, peak probe, time to 94 %N (s), final speed."""
         rig = make_rig(params=replace(rig_params, egt_gas_margin_k=margin_k), hot_k=150.0)
@@ -132,7 +134,6 @@ def test_a_transient_allowance_lets_the_gas_pass_the_limit_while_the_probe_reads
             speed[-1],
         )
 
-    rig_params = make_rig().params
     held, allowed = fly(0.0), fly(30.0)
     assert held[0] < 1280.0 + 10.0  # without one the gas is held at the limit
     assert 1280.0 + 15.0 < allowed[0] < 1280.0 + 30.0 + 5.0  # it used the allowance, no more
