@@ -330,6 +330,37 @@ def fleet_point(
     )
 
 
+def corner_schedules(
+    model: EngineModel,
+    speeds_pct: tuple[float, ...] = SPEEDS_PCT,
+    spread: float = HEALTH_SPREAD,
+    egt_limit_k: float = EGT_LIMIT_K,
+    surge_margin_min: float = SURGE_MARGIN,
+    lean_margin: float = LEAN_MARGIN,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[tuple[dict[str, np.ndarray], list[SchedulePoint]]]:
+    """Each corner of the health spread with its own running line and its own schedule points,
+    rising: only the speeds it runs at within the limits (over a limit in steady state there,
+    its EGT loop holds it lower)."""
+    limits = (egt_limit_k, surge_margin_min, lean_margin)
+    engines = health_corners(model, spread) if spread > 0.0 else []
+    out = []
+    for k, corner in enumerate(engines):
+        own_line = running_line(corner)
+        points = []
+        for n in sorted(speeds_pct):
+            if n < own_line["N_pct"][0]:
+                continue  # slower than this engine runs
+            try:
+                points.append(schedule_point(corner, n, own_line, *limits))
+            except ScheduleError:
+                continue
+        out.append((own_line, points))
+        if progress is not None:
+            progress(k + 1, len(engines))
+    return out
+
+
 def fleet_schedule(
     model: EngineModel,
     speeds_pct: tuple[float, ...] = SPEEDS_PCT,
@@ -338,25 +369,20 @@ def fleet_schedule(
     surge_margin_min: float = SURGE_MARGIN,
     lean_margin: float = LEAN_MARGIN,
     progress: Callable[[int, int], None] | None = None,
+    corners: list[tuple[dict[str, np.ndarray], list[SchedulePoint]]] | None = None,
 ) -> list[SchedulePoint]:
     """The schedule that holds for the nominal engine and every corner of the health spread
-    (the nominal engine's alone with spread 0)."""
+    (the nominal engine's alone with spread 0); corners: corner_schedules' result, when the
+    caller has it already."""
     limits = (egt_limit_k, surge_margin_min, lean_margin)
-    engines = health_corners(model, spread) if spread > 0.0 else []
+    if corners is None:
+        corners = corner_schedules(model, speeds_pct, spread, *limits, progress)
     line = running_line(model)
     nominal = [schedule_point(model, n, line, *limits) for n in sorted(speeds_pct)]
     at_speed: dict[float, list[SchedulePoint]] = {p.n_pct: [] for p in nominal}
-    for k, corner in enumerate(engines):
-        own_line = running_line(corner)
-        for n in at_speed:
-            if n < own_line["N_pct"][0]:
-                continue  # slower than this engine runs
-            try:
-                at_speed[n].append(schedule_point(corner, n, own_line, *limits))
-            except ScheduleError:
-                continue  # over a limit in steady state there: its EGT loop holds it lower
-        if progress is not None:
-            progress(k + 1, len(engines))
+    for _, points in corners:
+        for p in points:
+            at_speed[p.n_pct].append(p)
     return [fleet_point(model, line, p, at_speed[p.n_pct]) for p in nominal]
 
 

@@ -73,6 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from plant import schedules as s
     from plant.aerothermal import make_model
     from plant.steady_line import running_line
@@ -97,17 +99,20 @@ def run(args: argparse.Namespace) -> int:
             f"\rsil schedules: {done}/{total} engine corners", end="", file=sys.stderr, flush=True
         )
 
+    limits = (args.egt_limit, args.surge_margin, args.lean_margin)
     try:
-        points = s.fleet_schedule(
-            model, args.speeds, args.health_spread, args.egt_limit, args.surge_margin,
-            args.lean_margin, progress,
-        )  # fmt: skip
+        corners = s.corner_schedules(model, args.speeds, args.health_spread, *limits, progress)
+        points = s.fleet_schedule(model, args.speeds, args.health_spread, *limits, corners=corners)
     except s.ScheduleError as exc:
         print(f"\nsil schedules: {exc}", file=sys.stderr)
         return 1
     print(file=sys.stderr)
     if args.speeds[0] <= s.IDLE_PCT < args.speeds[-1]:
         settings["line_rise_s"] = s.line_rise_s(points, running_line(model))
+        # each corner on its own acceleration line: what no fleet schedule can beat
+        rise = [s.line_rise_s(own, line) if len(own) >= 2 else math.inf for line, own in corners]
+        settings["corner_own_line_rise_s"] = [r if math.isfinite(r) else None for r in rise]
+        settings["corner_top_pct"] = [own[-1].n_pct if own else None for _, own in corners]
     paths = {"csv": args.out / "schedules.csv", "json": args.out / "schedules.json"}
     s.write_csv(points, paths["csv"])
     s.write_json(points, settings, paths["json"])
@@ -126,6 +131,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"along the acceleration line, the nominal engine from {s.IDLE_PCT:g} %N to 95 % of "
               f"the thrust at {args.speeds[-1]:g} %N: {settings['line_rise_s']:.2f} s at best "
               "(frozen speed, lags neglected)")  # fmt: skip
+    if settings.get("corner_own_line_rise_s"):
+        rise = np.array(settings["corner_own_line_rise_s"], dtype=float)  # None: nan
+        top = np.array(settings["corner_top_pct"], dtype=float)
+        print(f"each of the {len(rise)} health corners on its own acceleration line (the best any "
+              f"schedule could do for it), to 95 % of the thrust at the highest speed it holds "
+              f"within the limits: {np.nanmin(rise):.2f} to {np.nanmax(rise):.2f} s, "
+              f"{np.sum(rise <= 5.0)} within 5 s; {np.sum(~(top >= args.speeds[-1]))} hold "
+              f"less than {args.speeds[-1]:g} %N")  # fmt: skip
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0

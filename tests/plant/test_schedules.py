@@ -20,6 +20,7 @@ from plant.schedules import (
     RATE_MARGIN,
     SURGE_MARGIN,
     ScheduleError,
+    corner_schedules,
     fleet_schedule,
     frozen_state,
     health_corners,
@@ -165,6 +166,27 @@ def test_fleet_line_holds_for_every_corner_that_runs_and_keeps_the_nominal_accel
     assert fleet[0].accel_limited_by == "egt" and fleet[0].accel_v < nominal[0].accel_v - 0.3
     assert fleet[1].accel_limited_by == "keep"
     assert nominal[1].steady_fuel_kg_s < fleet[1].accel_fuel_kg_s < nominal[1].accel_fuel_kg_s
+
+
+def test_each_corner_on_its_own_line_bounds_what_the_fleet_line_can_do():
+    """Every corner's own schedule, as fleet_schedule builds on it: the points it runs at
+    within the limits, each the corner's own; the nominal engine is slower on the fleet line
+    than on its own, and a hot corner holds less than full speed within the EGT limit."""
+    model = make_model()
+    speeds = (55.0, 70.0, 85.0, 100.0)
+    corners = corner_schedules(model, speeds)
+    assert len(corners) == 16
+    assert fleet_schedule(model, speeds, corners=corners) == fleet_schedule(model, speeds)
+    engine = health_corners(model, HEALTH_SPREAD)
+    for corner, (line, own) in zip(engine, corners, strict=True):
+        assert [p.n_pct for p in own] == sorted(p.n_pct for p in own)
+        for p in own[:: max(1, len(own) - 1)]:  # the first and the last
+            assert p == schedule_point(corner, p.n_pct, line)
+    tops = [own[-1].n_pct for _, own in corners if own]
+    assert min(tops) < 100.0 <= max(tops)
+    nominal_line = running_line(model)
+    own_rise = line_rise_s(schedule(model, speeds), nominal_line)
+    assert own_rise < line_rise_s(fleet_schedule(model, speeds, corners=corners), nominal_line)
 
 
 def test_line_rise_is_the_integral_of_the_lines_rate():
