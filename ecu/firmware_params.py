@@ -65,7 +65,7 @@ class FirmwareParams:
     """Integer constants of the firmware (a C ``const`` struct). Built by :func:`compile_params`."""
 
     __slots__ = (
-        "rate_hz", "controller", "dt_q24", "n_max_rpm", "rpm_to_q24_k", "trim_n_q24", "trim_v_q24",
+        "rate_hz", "controller", "dt_q24", "rpm_to_q24_k", "trim_n_q24", "trim_v_q24",
         "entry_v_q24",
         "am21_q24", "am22_q24", "idm11_q24", "idm12_q24", "idm21_q24", "idm22_q24",
         "idh1_q24", "idh2_q24",
@@ -86,7 +86,8 @@ class FirmwareParams:
         "accel_line_q24", "decel_floor_q24", "accel_rate_q24", "pump_dead_q24", "sched_lam_lo_q24",
         "sched_lam_hi_q24",
         "idle_q24", "demand_max_q24",
-        "limiters_on", "egt_limit_dk", "egt_gas_margin_dk", "egt_engage_q24", "rate_engage_q24",
+        "limiters_on", "egt_limit_dk", "egt_gas_margin_dk", "egt_zero_fuel_dk",
+        "egt_engage_q24", "rate_engage_q24",
         "n_limit_engage_q24",
         "egt_kp_q24", "egt_ki_dt_q24", "egt_lead_cf_q16", "egt_lead_ctc_q16", "egt_max_dk",
         "egt_max_ticks", "accel_max_q24", "decel_max_q24", "rate_kp_q24", "rate_ki_dt_q24",
@@ -177,7 +178,6 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         rate_hz=hz,
         controller=CONTROLLERS.index(p.controller),
         dt_q24=_q(dt, Q24, "rate_hz"),
-        n_max_rpm=N_MAX_RPM,
         # rpm -> Q7.24 %N: (rpm * K) >> 16 with K = 2^40 / 1125 (exact to 2^-16 LSB)
         rpm_to_q24_k=_q(pct_per_rpm, Q24 + 16, "n_max_rpm"),
         trim_n_q24=_q(p.trim_n_pct, Q24, "trim_n_pct"),
@@ -272,6 +272,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         limiters_on=int(p.limiters_on),
         egt_limit_dk=round(p.egt_limit_k * 10.0),
         egt_gas_margin_dk=round(p.egt_gas_margin_k * 10.0),
+        egt_zero_fuel_dk=round(p.egt_zero_fuel_k * 10.0),
         egt_engage_q24=_q(p.egt_engage_k, Q24, "egt_engage_k"),
         rate_engage_q24=_q(p.rate_engage_pct_s, Q24, "rate_engage_pct_s"),
         n_limit_engage_q24=_q(p.n_limit_engage_pct, Q24, "n_limit_engage_pct"),

@@ -1,8 +1,12 @@
 """Limit protection: limit loops and fuel schedules combined with the speed loop by min/max
 selection.
 
-    V = max( V_floor(Nc), V_decel, min( V_speed, V_egt, V_accel, V_nlimit, V_line(Nc) ) ),
-    then [V_min, V_max] and slew.
+    V = max( V_floor(Nc), V_decel, min( V_speed, V_egt, V_egt_line, V_accel, V_nlimit,
+    V_line(Nc) ) ), then [V_min, V_max] and slew.
+
+V_egt_line (egt_line_v, with the fuel schedules) is this engine's own EGT-limited acceleration
+line at its present speed, from the gas estimate and the applied voltage: it owns as the EGT loop
+does (OWNER_EGT).
 
 V_accel holds the shaft's acceleration under the acceleration schedule Ndot_max(Nc) (and under
 accel_max_pct_s); V_decel its deceleration under decel_max_pct_s.
@@ -87,6 +91,22 @@ def pump_from_start(s: EcuState, p: FirmwareParams, n_q24: int, v_q24: int) -> N
         s.theta_ext[LAM] = 0
 
 
+def egt_line_v(s: EcuState, p: FirmwareParams, v_prev: int) -> int | None:
+    """This engine's EGT-limited acceleration line at its present speed: at frozen speed the gas
+    rises linearly with the fuel from T_0 = egt_zero_fuel at none, so the voltage that puts it at
+    the limit is  V_d + (V_f - V_d) (T_lim - T_0) / (T_gas - T_0),  T_gas the gas estimate (the
+    lead) and V_f the applied voltage through the same lag (the lead's filter c_f), so that the
+    two belong together in a transient. None while the gas is under a quarter of the limit's
+    rise (an engine far from it, or not lit: no cap, and the ratio stays under 4). Updates V_f."""
+    vf = sat32(s.egt_vf_q24 + ((p.egt_lead_cf_q16 * (v_prev - s.egt_vf_q24)) >> 16))
+    s.egt_vf_q24 = vf
+    rise_dk = (s.egt_lead_q12 >> 12) - p.egt_zero_fuel_dk
+    limit_rise_dk = p.egt_limit_dk - p.egt_zero_fuel_dk
+    if not p.egt_zero_fuel_dk or 4 * rise_dk < limit_rise_dk or vf <= p.pump_dead_q24:
+        return None
+    return sat32(p.pump_dead_q24 + div_trunc((vf - p.pump_dead_q24) * limit_rise_dk, rise_dk))
+
+
 def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:
     return sat32(v_prev + ((kp_q24 * (e - e_prev)) >> 24) + ((ki_dt_q24 * e) >> 24))
 
@@ -120,6 +140,10 @@ def select_voltage(
                 v = v_egt
                 owner = OWNER_EGT
         s.egt_e_prev_q24 = e
+    v_line = egt_line_v(s, p, v_prev) if p.fuel_schedules_on else None
+    if egt_ok and v_line is not None and v_line < v:
+        v = v_line
+        owner = OWNER_EGT
     ndot_max = p.accel_max_q24
     if p.fuel_schedules_on:  # the acceleration schedule, under the overall limit
         ndot_max = min(ndot_max, schedule_at(s, p, p.accel_rate_q24, n_q24))
@@ -172,6 +196,7 @@ def reset_loops(s: EcuState, v_q24: int) -> None:
     s.v_applied_q24 = v_q24
     s.line_owns = 0
     s.egt_e_prev_q24 = 0
+    s.egt_vf_q24 = v_q24
     s.acc_e_prev_q24 = 0
     s.dec_e_prev_q24 = 0
     s.nlim_e_prev_q24 = 0

@@ -154,6 +154,12 @@ class EcuParams:
     # a transient allowance: the gas the lead sees may pass the limit by what the probe still
     # reads under it, up to this much (0: the gas is held at the limit)
     egt_gas_margin_k: float = 0.0
+    # the EGT-limited acceleration line of this engine (with fuel_schedules_on): at frozen speed
+    # the gas rises linearly with the pump's fuel, from T_0 at none, so the voltage that puts it
+    # at the limit is V_d + (V_f - V_d) (T_lim - T_0) / (T_gas - T_0), V_f the applied voltage
+    # through the gas estimate's own lag; `sil schedules`: T_0 291-367 K over the +-5 % health
+    # corners and 45-100 %N, the lowest the safe one (a lower T_0, a lower line); 0: off
+    egt_zero_fuel_k: float = 290.0
     egt_max_k: float = 1330.0  # shutdown above this ...
     egt_max_time_s: float = 1.0  # ... for this long
     accel_max_pct_s: float = 20.0
@@ -534,6 +540,12 @@ def validate(p: EcuParams) -> None:
         "egt_gas_margin_k",
         p.egt_gas_margin_k,
         "need 0 <= x <= egt_max_k - egt_limit_k (the gas stays under the shutdown level)",
+    )
+    _check(
+        p.egt_zero_fuel_k == 0.0 or 150.0 <= p.egt_zero_fuel_k <= p.egt_limit_k - 300.0,
+        "egt_zero_fuel_k",
+        p.egt_zero_fuel_k,
+        "need 0 (off) or 150 K <= x <= egt_limit_k - 300 K",
     )
     _check(p.egt_max_k < p.egt_open_high_k, "egt_max_k", p.egt_max_k, "below open-circuit level")
     _check(

@@ -46,8 +46,9 @@ class EcuState:
         "egt_e_prev_q24", "acc_e_prev_q24", "dec_e_prev_q24", "nlim_e_prev_q24",
         # the EGT the limiter sees (lead on the thermocouple, 0.1 K in Q12; 0: no reading yet)
         "egt_lead_q12",
+        # the applied voltage through the lag of the gas estimate (the EGT line's V_f)
+        "egt_vf_q24",
         "v_applied_q24", "owner", "v_saturated", "line_owns",
-        # the least Lambda-hat the acceleration line follows (Lambda_c; a start's weaker pump)
         # last valid inputs held on frame loss
         "speed_rpm", "egt_dk", "supply_mv", "pump_ma", "demand_q24", "open_loop_q24",
         "arm", "stop",

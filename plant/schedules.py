@@ -406,6 +406,14 @@ def line_rise_s(
     return float(np.trapezoid(1.0 / r, way))
 
 
+def zero_fuel_egt_k(point: SchedulePoint, pump_dead_v: float) -> float:
+    """The EGT at no fuel on the frozen-speed line through the point's steady state and its
+    acceleration line (the gas rises linearly with the fuel there, so with the pump's voltage
+    over its dead voltage): the intercept the ECU's EGT line takes (egt_zero_fuel_k)."""
+    slope = (point.accel_egt_k - point.steady_egt_k) / (point.accel_v - point.steady_v)
+    return point.steady_egt_k - slope * (point.steady_v - pump_dead_v)
+
+
 def write_csv(points: list[SchedulePoint], path: Path) -> None:
     names = list(asdict(points[0]))
     with path.open("w", newline="") as f:

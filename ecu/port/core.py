@@ -62,7 +62,7 @@ class _Lib:
                     ("p", ctypes.POINTER(self.params_t)),
                     ("s", self.state_t),
                     ("o", self.outputs_t),
-                    ("sat_pending", ctypes.c_int64),
+                    ("sat_pending", ctypes.c_int32),
                 ]
             },
         )

@@ -491,6 +491,24 @@ static void pump_from_start(ecu_t *e, int32_t n_q24, int32_t v_q24)
     }
 }
 
+/* this engine's EGT-limited acceleration line at its present speed (ecu/limiters.py egt_line_v):
+ * V_d + (V_f - V_d) (T_lim - T_0) / (T_gas - T_0); updates V_f; 0 with *on clear: no cap */
+static int32_t egt_line_v(ecu_t *e, int32_t v_prev, int *on)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t vf = sat32(e, (int64_t)s->egt_vf_q24 +
+                              (((int64_t)p->egt_lead_cf_q16 * ((int64_t)v_prev - s->egt_vf_q24)) >> 16));
+    int64_t rise_dk = (int64_t)(s->egt_lead_q12 >> 12) - p->egt_zero_fuel_dk;
+    int64_t limit_rise_dk = (int64_t)p->egt_limit_dk - p->egt_zero_fuel_dk;
+    s->egt_vf_q24 = vf;
+    *on = p->egt_zero_fuel_dk != 0 && 4 * rise_dk >= limit_rise_dk && vf > p->pump_dead_q24;
+    if (!*on)
+        return 0;
+    return sat32(e, (int64_t)p->pump_dead_q24 +
+                        div_trunc(e, ((int64_t)vf - p->pump_dead_q24) * limit_rise_dk, rise_dk));
+}
+
 static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, int egt_ok,
                               int32_t n_q24, int32_t rate_q24)
 {
@@ -517,6 +535,14 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
             }
         }
         s->egt_e_prev_q24 = err;
+    }
+    if (p->fuel_schedules_on) {
+        int on;
+        v_loop = egt_line_v(e, v_prev, &on);
+        if (egt_ok && on && v_loop < v) {
+            v = v_loop;
+            owner = OWNER_EGT;
+        }
     }
     ndot_max = p->accel_max_q24;
     if (p->fuel_schedules_on) { /* the acceleration schedule, under the overall limit */
@@ -584,6 +610,7 @@ static void reset_loops(ecu_state_t *s, int32_t v_q24)
     s->v_applied_q24 = v_q24;
     s->line_owns = 0;
     s->egt_e_prev_q24 = 0;
+    s->egt_vf_q24 = v_q24;
     s->acc_e_prev_q24 = 0;
     s->dec_e_prev_q24 = 0;
     s->nlim_e_prev_q24 = 0;

@@ -91,7 +91,7 @@ enum {
 /* ecu.firmware_params.FirmwareParams, in its order; init_theta_q24 holds the ECU_N_THETA start
  * values */
 #define ECU_PARAM_FIELDS(X, A) \
-    X(rate_hz) X(controller) X(dt_q24) X(n_max_rpm) X(rpm_to_q24_k) X(trim_n_q24) \
+    X(rate_hz) X(controller) X(dt_q24) X(rpm_to_q24_k) X(trim_n_q24) \
     X(trim_v_q24) X(entry_v_q24) X(am21_q24) X(am22_q24) X(idm11_q24) X(idm12_q24) \
     X(idm21_q24) X(idm22_q24) X(idh1_q24) X(idh2_q24) X(g_a1_q28) X(g_a2_q28) X(g_lam_q28) \
     X(g_th1_q28) X(g_th2_q28) A(init_theta_q24, ECU_N_THETA) X(lambda_comm_q24) X(health_alarm_pm) \
@@ -107,7 +107,7 @@ enum {
     X(fuel_schedules_on) X(sched_n0_q24) X(sched_step_q24) X(ncor_k_q24) X(inlet_from_egt) \
     A(accel_line_q24, ECU_SCHED_POINTS) A(decel_floor_q24, ECU_SCHED_POINTS) \
     A(accel_rate_q24, ECU_SCHED_POINTS) X(pump_dead_q24) X(sched_lam_lo_q24) X(sched_lam_hi_q24) X(idle_q24) X(demand_max_q24) \
-    X(limiters_on) X(egt_limit_dk) X(egt_gas_margin_dk) X(egt_engage_q24) X(rate_engage_q24) \
+    X(limiters_on) X(egt_limit_dk) X(egt_gas_margin_dk) X(egt_zero_fuel_dk) X(egt_engage_q24) X(rate_engage_q24) \
     X(n_limit_engage_q24) X(egt_kp_q24) X(egt_ki_dt_q24) X(egt_lead_cf_q16) X(egt_lead_ctc_q16) \
     X(egt_max_dk) X(egt_max_ticks) \
     X(accel_max_q24) X(decel_max_q24) X(rate_kp_q24) X(rate_ki_dt_q24) X(n_limit_q24) \
@@ -137,6 +137,7 @@ enum {
     X(xh1_q24) X(xh2_q24) X(e2_q24) X(obs_n_q24) X(obs_v_q24) \
     X(rf_n_q24) X(rf_v_q24) X(rf_a_q16) X(xm1_q24) X(xm2_q24) X(u_lag_q24) \
     X(egt_e_prev_q24) X(acc_e_prev_q24) X(dec_e_prev_q24) X(nlim_e_prev_q24) X(egt_lead_q12) \
+    X(egt_vf_q24) \
     X(v_applied_q24) X(owner) X(v_saturated) X(line_owns) \
     X(speed_rpm) X(egt_dk) X(supply_mv) X(pump_ma) X(demand_q24) X(open_loop_q24) \
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \
@@ -204,7 +205,7 @@ typedef struct {
     const ecu_params_t *p;
     ecu_state_t s;
     ecu_outputs_t o;
-    int64_t sat_pending; /* saturation events not yet added to s.sat_events (ARM Q flag) */
+    int32_t sat_pending; /* saturation events not yet added to s.sat_events (ARM Q flag) */
 } ecu_t;
 
 /*

@@ -97,6 +97,7 @@ TABLE: tuple[ParamSpec, ...] = (
     _s("egt_lead_tau_s", "s", Q16, 0.0, 5.0, False),  # what the EGT limiter sees
     _s("egt_lead_filter_s", "s", Q16, 0.0, 5.0, False),
     _s("egt_gas_margin_k", "K", Q16, 0.0, 200.0, False),  # the gas over the limit, in a transient
+    _s("egt_zero_fuel_k", "K", Q16, 0.0, 1000.0, False),  # the gas at no fuel: the EGT line
     _s("v_min", "V", Q24, 0.0, 10.0, False),
     _s("v_max", "V", Q24, 5.0, 30.0, False),
     _s("v_slew_v_s", "V/s", Q24, 1.0, 100.0, False),

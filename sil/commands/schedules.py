@@ -75,6 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from ecu.params import EcuParams
     from plant import schedules as s
     from plant.aerothermal import make_model
     from plant.steady_line import running_line
@@ -107,6 +108,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"\nsil schedules: {exc}", file=sys.stderr)
         return 1
     print(file=sys.stderr)
+    # the EGT at no fuel of each engine's frozen-speed line, at the ECU's pump dead voltage
+    dead_v = EcuParams().pump_dead_v
+    nominal = s.schedule(model, args.speeds, *limits)
+    t0 = [s.zero_fuel_egt_k(p, dead_v) for p in nominal]
+    t0 += [s.zero_fuel_egt_k(p, dead_v) for _, own in corners for p in own]
+    settings["zero_fuel_egt_k"] = [min(t0), max(t0)]
     if args.speeds[0] <= s.IDLE_PCT < args.speeds[-1]:
         settings["line_rise_s"] = s.line_rise_s(points, running_line(model))
         # each corner on its own acceleration line: what no fleet schedule can beat
@@ -139,6 +146,10 @@ def run(args: argparse.Namespace) -> int:
               f"within the limits: {np.nanmin(rise):.2f} to {np.nanmax(rise):.2f} s, "
               f"{np.sum(rise <= 5.0)} within 5 s; {np.sum(~(top >= args.speeds[-1]))} hold "
               f"less than {args.speeds[-1]:g} %N")  # fmt: skip
+    lo, hi = settings["zero_fuel_egt_k"]
+    print(f"EGT at no fuel on the frozen-speed lines (V_d {dead_v:g} V): {lo:.0f} to {hi:.0f} K; "
+          f"with egt_zero_fuel_k = {math.floor(lo):g} K the ECU's EGT line puts no engine over the "
+          "limit at frozen speed")  # fmt: skip
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0

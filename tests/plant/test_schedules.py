@@ -120,6 +120,9 @@ def test_command_writes_its_table_and_refuses_bad_options(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert [p["n_pct"] for p in data["points"]] == [70.0, 95.0]
     assert data["settings"]["egt_limit_k"] == 1280.0 and data["settings"]["health_spread"] == 0
+    lo, hi = data["settings"]["zero_fuel_egt_k"]  # the nominal engine's, at 70 and 95 %N
+    assert 250.0 < lo <= hi < 400.0
+    assert "corner_own_line_rise_s" not in data["settings"]  # idle (55 %N) is not in the table
     assert {f.name for f in out.iterdir()} == {"schedules.csv", "schedules.json", "schedules.png"}
     bads = (["--surge-margin", "1.5"], ["--speeds", "20"], ["--egt-limit", "nan"])
     for bad in (*bads, ["--health-spread", "-0.1"]):
