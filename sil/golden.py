@@ -353,7 +353,7 @@ def record_start_stop(ticks: int) -> Golden:
 
 
 _HOT_LIMITS = """
-description = "MRAC on a hot day, speed limit steps up and down fast: limit loops, EGT line and allowance"
+description = "MRAC, hot day, speed limit steps up and down fast: limit loops, EGT line, allowance"
 duration_s = 40
 [plant]
 model = "aero"

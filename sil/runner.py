@@ -62,7 +62,7 @@ from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
 from sil.command_node import CommandNode
 from sil.compiled_loop import CompiledLoop, compile_loop
-from sil.parent_death import die_with_parent
+from sil.parent_death import child_env, die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.scenario import HEALTH, Scenario
@@ -196,7 +196,7 @@ def ecu_params(s: Scenario, plant: Plant) -> EcuParams:
 
 def _spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
     log = (out_dir / f"{name}.log").open("w")
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **child_env()}
     return subprocess.Popen(
         [sys.executable, "-m", "sil.cli", *args],
         stdout=log,

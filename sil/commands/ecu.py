@@ -5,13 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
-import threading
 from pathlib import Path
 
 from ecu.params import CONTROLLERS
 from sil.node_options import add_launcher_options, add_pil_link
+from sil.parent_death import NodeStop
 from sil.validation import option
 
 NAME = "ecu"
@@ -191,9 +190,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.ready_file:
         args.ready_file.write_text("ready\n")
-    stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
     try:
         if args.mode == "lockstep":
             stats = run_lockstep(node, bus, guard_s=args.guard, should_stop=stop.is_set)
@@ -234,9 +231,7 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
     block = calibration_block(params, lockstep=lockstep, guard_s=args.guard, profile=lockstep)
     codec = Codec()
     frame_ids = [codec[m].frame_id for m in RECEIVED]
-    stop = threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = NodeStop()
     try:
         image = PilImage(block, link=args.pil_link, icount=lockstep)
     except (PortBuildError, PilError) as exc:

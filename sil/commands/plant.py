@@ -6,15 +6,14 @@ import argparse
 import gc
 import json
 import math
-import signal
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from sil.node_options import add_launcher_options
+from sil.parent_death import NodeStop
 from sil.validation import option
 
 NAME = "plant"
@@ -194,9 +193,7 @@ def run(args: argparse.Namespace) -> int:
         except BusSpecError as exc:
             print(f"sil plant: error: {exc}", file=sys.stderr)
             return 2
-    stop = threading.Event()  # SIGTERM ends the run cleanly, with the summary
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
     if args.ready_file is not None:
         args.ready_file.write_text("ready\n")
     if args.start_file is not None:
