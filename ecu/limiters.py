@@ -140,9 +140,9 @@ def select_voltage(
                 v = v_egt
                 owner = OWNER_EGT
         s.egt_e_prev_q24 = e
-    v_line = egt_line_v(s, p, v_prev) if p.fuel_schedules_on else None
-    if egt_ok and v_line is not None and v_line < v:
-        v = v_line
+    v_egt_line = egt_line_v(s, p, v_prev) if p.fuel_schedules_on else None
+    if egt_ok and v_egt_line is not None and v_egt_line < v:
+        v = v_egt_line
         owner = OWNER_EGT
     ndot_max = p.accel_max_q24
     if p.fuel_schedules_on:  # the acceleration schedule, under the overall limit
