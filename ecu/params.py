@@ -146,7 +146,7 @@ class EcuParams:
     egt_limit_k: float = 1280.0
     egt_kp: float = 0.01  # V per K
     egt_ki: float = 0.02  # V per K s
-    egt_engage_k: float = 100.0  # the EGT loop joins the min-select within this of its limit
+    egt_engage_k: float = 50.0  # the EGT loop joins the min-select within this of its limit
     # the EGT loop sees the gas, not the probe: lead (T_tc s + 1)/(T_f s + 1) against the
     # thermocouple's lag, T_tc its commissioned time constant (0 with T_f 0: the raw reading)
     egt_lead_tau_s: float = 0.5

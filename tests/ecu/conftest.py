@@ -19,9 +19,12 @@ RPM_PER_PCT = 1125.0
 class Rig:
     # the plant is the fast model itself: the command lag that matches it is none; its EGT
     # follows the speed alone, not the fuel, so the EGT line's model (ecu.limiters.egt_line_v)
-    # does not hold for it
+    # does not hold for it, and the EGT loop joins the selection from 100 K, as it must where
+    # it is the only protection (docs/ecu.md)
     params: EcuParams = field(
-        default_factory=lambda: EcuParams(mrac_cmd_lag_s=0.0, egt_zero_fuel_k=0.0)
+        default_factory=lambda: EcuParams(
+            mrac_cmd_lag_s=0.0, egt_zero_fuel_k=0.0, egt_engage_k=100.0
+        )
     )
     hot_k: float = 0.0  # EGT offset (hot day, degraded turbine)
 

@@ -98,6 +98,9 @@ def test_steady_reading_is_exact_and_the_lead_can_be_switched_off() -> None:
 
 
 def test_the_gas_overshoots_the_egt_limit_less_with_the_lead(make_rig: Any) -> None:
+    # the rig's EGT follows the speed alone, so the EGT line is off and the loop is the only
+    # protection: engaged from before the step (100 K band, the engine starts 82 K under), the
+    # lead lets it see the gas coming; joining it at 50 K (the default) it is too late for either
     def peak_gas(p: EcuParams) -> float:
         rig = make_rig(params=p, hot_k=150.0)  # 150 K hotter: the limit is met near 90 %N
         rig.step(300)
@@ -107,9 +110,12 @@ def test_the_gas_overshoots_the_egt_limit_less_with_the_lead(make_rig: Any) -> N
             peak = max(peak, rig.egt_steady())
         return peak
 
-    with_lead = peak_gas(EcuParams())
-    without = peak_gas(replace(EcuParams(), egt_lead_tau_s=0.0, egt_lead_filter_s=0.0))
+    wide = make_rig().params
+    with_lead = peak_gas(wide)
+    without = peak_gas(replace(wide, egt_lead_tau_s=0.0, egt_lead_filter_s=0.0))
     assert without - 1280.0 > 2.0 * (with_lead - 1280.0) > 0.0
+    late = peak_gas(replace(wide, egt_engage_k=EcuParams().egt_engage_k))
+    assert late - 1280.0 > 2.0 * (with_lead - 1280.0)
 
 
 def test_a_transient_allowance_lets_the_gas_pass_the_limit_while_the_probe_reads_under_it(

@@ -53,4 +53,7 @@ def test_the_bench_shows_the_limit_cycle_and_its_cure() -> None:
     # held at the limit without one), and the command at constant demand is untouched
     assert f["mrac_egt_allowance_40_K_tracking_rms_pct"] < 0.8 * f["mrac_tracking_rms_pct"]
     assert f["mrac_egt_allowance_40_K_pump_v_std"] == pytest.approx(f["mrac_pump_v_std"], rel=0.1)
+    # the EGT loop joining the selection at 100 K instead of 50 K: the step to 100 %N rises under
+    # its cap, and at 100 %N (about 25 K under the limit) it holds the engine under its demand
+    assert f["mrac_egt_engage_100_K_tracking_rms_pct"] > 1.2 * f["mrac_tracking_rms_pct"]
     assert set(f["targets_met"]) == {"mrac_std", "mrac_t4", "mrac_rms"}
