@@ -23,8 +23,14 @@ started from the voltage applied last tick:  V_loop = V_applied[k-1] + Kp (e[k] 
 Ki dt e[k]  (forward Euler). A loop that is not selected therefore tracks the applied voltage by
 construction (integrator tracking) and takes over bumplessly as its margin shrinks. A loop joins
 the selection only inside its engagement band (margin below ``*_engage``); far from its limit it
-would otherwise act as a voltage rate limit and own every large step of the speed loop. The speed
-loop's own tracking is done by the controller (PID back-calculation; MRAC has no integrator).
+would otherwise act as a voltage rate limit and own every large step of the speed loop. A loop
+that did not own the command last tick joins on its integral part alone: its P part acts on the
+change of its error, at a steady operating point inside the band the sensors' noise (the EGT
+lead's, the differentiated speed's), and the min-select would take each of its downward kicks
+and none of its upward ones (at maximum demand the nominal engine, 26 K inside the EGT band and
+at the acceleration schedule's 5 %N/s floor, stalled at 98.5 %N). Once it owns, its P part
+acts. The speed loop's own tracking is done by the controller (PID back-calculation; MRAC has no
+integrator).
 """
 
 from __future__ import annotations
@@ -107,8 +113,10 @@ def egt_line_v(s: EcuState, p: FirmwareParams, v_prev: int) -> int | None:
     return sat32(p.pump_dead_q24 + div_trunc((vf - p.pump_dead_q24) * limit_rise_dk, rise_dk))
 
 
-def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int) -> int:
-    return sat32(v_prev + ((kp_q24 * (e - e_prev)) >> 24) + ((ki_dt_q24 * e) >> 24))
+def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int, owns: bool) -> int:
+    """A limit loop's voltage, its P part only while it owns the command."""
+    p_part = (kp_q24 * (e - e_prev)) >> 24 if owns else 0
+    return sat32(v_prev + p_part + ((ki_dt_q24 * e) >> 24))
 
 
 def select_voltage(
@@ -135,7 +143,9 @@ def select_voltage(
     if egt_ok:
         e = egt_err_q24
         if e < p.egt_engage_q24:
-            v_egt = _loop(v_prev, e, s.egt_e_prev_q24, p.egt_kp_q24, p.egt_ki_dt_q24)
+            v_egt = _loop(
+                v_prev, e, s.egt_e_prev_q24, p.egt_kp_q24, p.egt_ki_dt_q24, s.owner == OWNER_EGT
+            )
             if v_egt < v:
                 v = v_egt
                 owner = OWNER_EGT
@@ -144,19 +154,27 @@ def select_voltage(
     if egt_ok and v_egt_line is not None and v_egt_line < v:
         v = v_egt_line
         owner = OWNER_EGT
+    rate_owned = s.owner == OWNER_ACCEL and not s.line_owns  # the rate loop, not the line
     ndot_max = p.accel_max_q24
     if p.fuel_schedules_on:  # the acceleration schedule, under the overall limit
         ndot_max = min(ndot_max, schedule_at(s, p, p.accel_rate_q24, n_q24))
     e = sub_sat(ndot_max, rate_q24)
     if e < p.rate_engage_q24:
-        v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+        v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24, rate_owned)
         if v_acc < v:
             v = v_acc
             owner = OWNER_ACCEL
     s.acc_e_prev_q24 = e
     e = sub_sat(p.n_limit_q24, n_q24)
     if e < p.n_limit_engage_q24:
-        v_nl = _loop(v_prev, e, s.nlim_e_prev_q24, p.n_limit_kp_q24, p.n_limit_ki_dt_q24)
+        v_nl = _loop(
+            v_prev,
+            e,
+            s.nlim_e_prev_q24,
+            p.n_limit_kp_q24,
+            p.n_limit_ki_dt_q24,
+            s.owner == OWNER_NLIMIT,
+        )
         if v_nl < v:
             v = v_nl
             owner = OWNER_NLIMIT
@@ -171,7 +189,9 @@ def select_voltage(
             by_line = 1
     e = add_sat(rate_q24, p.decel_max_q24)  # margin above the deceleration limit
     if e < p.rate_engage_q24:
-        v_dec = _loop(v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24)
+        v_dec = _loop(
+            v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24, s.owner == OWNER_DECEL
+        )
         if v_dec > v:
             v = v_dec
             owner = OWNER_DECEL

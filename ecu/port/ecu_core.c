@@ -442,10 +442,12 @@ static void egt_lead_step(ecu_t *e, int32_t egt_dk)
         sat32(e, y + (((int64_t)p->egt_lead_ctc_q16 * ((int64_t)egt_dk - s->egt_dk)) >> 4));
 }
 
+/* a limit loop's voltage, its P part only while it owns the command (ecu/limiters.py _loop) */
 static int32_t limit_loop(ecu_t *e, int64_t v_prev, int64_t err, int64_t err_prev, int32_t kp_q24,
-                          int32_t ki_dt_q24)
+                          int32_t ki_dt_q24, int owns)
 {
-    return sat32(e, v_prev + ((kp_q24 * (err - err_prev)) >> 24) + ((ki_dt_q24 * err) >> 24));
+    int64_t p_part = owns ? (kp_q24 * (err - err_prev)) >> 24 : 0;
+    return sat32(e, v_prev + p_part + ((ki_dt_q24 * err) >> 24));
 }
 
 /* a schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24), theta of
@@ -515,6 +517,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
     int32_t v_prev, v, owner, err, v_loop, v_lim, ndot_max, by_line = 0;
+    int rate_owned;
     if (!p->limiters_on) {
         s->owner = OWNER_SPEED;
         s->v_saturated = 0;
@@ -528,7 +531,8 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     if (egt_ok) {
         err = egt_err_q24;
         if (err < p->egt_engage_q24) {
-            v_loop = limit_loop(e, v_prev, err, s->egt_e_prev_q24, p->egt_kp_q24, p->egt_ki_dt_q24);
+            v_loop = limit_loop(e, v_prev, err, s->egt_e_prev_q24, p->egt_kp_q24, p->egt_ki_dt_q24,
+                                s->owner == OWNER_EGT);
             if (v_loop < v) {
                 v = v_loop;
                 owner = OWNER_EGT;
@@ -544,6 +548,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
             owner = OWNER_EGT;
         }
     }
+    rate_owned = s->owner == OWNER_ACCEL && !s->line_owns; /* the rate loop, not the line */
     ndot_max = p->accel_max_q24;
     if (p->fuel_schedules_on) { /* the acceleration schedule, under the overall limit */
         int32_t sched = schedule_at(e, p->accel_rate_q24, n_q24);
@@ -551,7 +556,8 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     err = sat32(e, (int64_t)ndot_max - rate_q24);
     if (err < p->rate_engage_q24) {
-        v_loop = limit_loop(e, v_prev, err, s->acc_e_prev_q24, p->rate_kp_q24, p->rate_ki_dt_q24);
+        v_loop = limit_loop(e, v_prev, err, s->acc_e_prev_q24, p->rate_kp_q24, p->rate_ki_dt_q24,
+                            rate_owned);
         if (v_loop < v) {
             v = v_loop;
             owner = OWNER_ACCEL;
@@ -561,7 +567,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     err = sat32(e, (int64_t)p->n_limit_q24 - n_q24);
     if (err < p->n_limit_engage_q24) {
         v_loop = limit_loop(e, v_prev, err, s->nlim_e_prev_q24, p->n_limit_kp_q24,
-                            p->n_limit_ki_dt_q24);
+                            p->n_limit_ki_dt_q24, s->owner == OWNER_NLIMIT);
         if (v_loop < v) {
             v = v_loop;
             owner = OWNER_NLIMIT;
@@ -581,7 +587,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above the decel limit */
     if (err < p->rate_engage_q24) {
         v_loop = limit_loop(e, v_prev, -(int64_t)err, -(int64_t)s->dec_e_prev_q24, p->rate_kp_q24,
-                            p->rate_ki_dt_q24);
+                            p->rate_ki_dt_q24, s->owner == OWNER_DECEL);
         if (v_loop > v) {
             v = v_loop;
             owner = OWNER_DECEL;
