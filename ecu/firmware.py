@@ -337,6 +337,8 @@ class Ecu:
             s.xm2_q24 = 0
             s.obs_n_q24 = dn
             s.obs_v_q24 = rate
+            s.xh1_q24 = dn  # the identification model starts where the engine is
+            s.xh2_q24 = rate
         s.mode = new_mode
 
         # 5. control
@@ -409,6 +411,8 @@ class Ecu:
             s.xm2_q24 = 0
             s.obs_n_q24 = dn
             s.obs_v_q24 = rate
+            s.xh1_q24 = dn
+            s.xh2_q24 = rate
             pump_mv = volts_q24_to_mv(seq.v_q24)
             duty = pump_duty(s, p, pump_mv, s.supply_mv) if pump_mv > 0 else 0
             enable = 1 if duty > 0 else 0

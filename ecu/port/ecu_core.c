@@ -1165,6 +1165,8 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         s->xm2_q24 = 0;
         s->obs_n_q24 = dn;
         s->obs_v_q24 = rate;
+        s->xh1_q24 = dn; /* the identification model starts where the engine is */
+        s->xh2_q24 = rate;
     }
     s->mode = new_mode;
 
@@ -1238,6 +1240,8 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         s->xm2_q24 = 0;
         s->obs_n_q24 = dn;
         s->obs_v_q24 = rate;
+        s->xh1_q24 = dn;
+        s->xh2_q24 = rate;
         pump_mv = volts_q24_to_mv(seq_v);
     }
     /* the pump driver, in one place for both branches above: in RUN always (enabled, its

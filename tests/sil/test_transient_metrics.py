@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from ecu.params import EcuParams
 from plant.aerothermal import make_model
 from plant.compressor import surge_margin
 from sil import metrics
@@ -121,32 +122,34 @@ def test_chop_reports_its_transient(tmp_path):
 
 @pytest.mark.parametrize(("band", "moves"), [(25.0, False), (0.0, True)])
 def test_no_adaptation_off_the_trim_speed(tmp_path, band, moves):
-    """At idle, 35 %N under the trim, the fast model does not hold: within adapt_band_pct the
-    estimator leaves Lambda-hat where it was; with the band off it drags it away in a second."""
+    """Far from the trim speed the fast model does not hold: in the chop's fall towards idle,
+    once the speed is more than adapt_band_pct under the trim, the estimator leaves Lambda-hat
+    where it was; with the band off the fall keeps moving it (by about 10 %)."""
     from sil import scenario
 
-    text = (scenario.SCENARIO_DIR / "accel-idle-to-max.toml").read_text()
-    text = text.replace('kind = "mrac"', 'kind = "pi"').replace("duration_s = 12", "duration_s = 1")
+    text = (scenario.SCENARIO_DIR / "throttle-chop.toml").read_text()
+    text = text.replace("duration_s = 12", "duration_s = 8")
     text = text.replace("params = { ", f"params = {{ adapt_band_pct = {band}, ")
-    path = tmp_path / "idle.toml"
+    path = tmp_path / "chop.toml"
     path.write_text(text)
     out = tmp_path / "out"
     args = ["run", str(path), "--mode", "inproc", "--ecu-impl", "c", "--out", str(out)]
     assert main([*args, "--no-plots"]) == 0
-    lam = metrics.load_trace(out / "trace.csv")["Est_Lambda"]
-    lam = lam[np.isfinite(lam)]
-    assert (abs(lam[-1] - lam[0]) > 0.1 * abs(lam[0])) == moves
+    trace = metrics.load_trace(out / "trace.csv")
+    lam = trace["Est_Lambda"]
+    far = np.isfinite(lam) & (trace["speed_true"] < EcuParams().trim_n_pct - 25.5)
+    assert far.sum() > 100
+    assert (np.ptp(lam[far]) > 0.05 * lam[far][0]) == moves
 
 
-def test_speed_loop_tracking_leaves_out_the_ticks_a_protection_owned():
-    n = 1000
-    reference = np.full(n, 90.0)
-    speed = reference + np.where(np.arange(n) % 2, 0.1, -0.1)  # 0.1 %N RMS under the law
-    owner = np.zeros(n)
-    owner[600:800] = 1  # EGT loop: 3 %N under the reference
-    speed[600:800] = 87.0
-    trace = _trace(np.arange(n) * 0.01, reference, np.zeros(n))
-    trace |= {"speed_true": speed, "ReferenceSpeed": reference, "LoopOwner": owner}
-    assert metrics.speed_loop_rms_pct(trace) == pytest.approx(0.1)
-    whole = math.sqrt((800 * 0.01 + 200 * 9.0) / n)
-    assert metrics.tracking_rms_pct(trace) == pytest.approx(whole)
+@pytest.mark.parametrize("kind", ["mrac", "pi"])
+def test_a_takeover_at_full_speed_holds_it(tmp_path, kind):
+    """The ECU takes over an engine running steady at 100 %N, 10 %N over its trim: the
+    identification model starts at the measured state, so the estimator has no start-up error to
+    learn from. (From the trim state instead, Lambda-hat ran to 7.3 in 0.3 s, the acceleration
+    line it scales fell under the steady voltage and pulled the engine to 94.9 %N before the
+    chop.)"""
+    trace, _ = _run(tmp_path, "throttle-chop", kind, 1)
+    lam = trace["Est_Lambda"][np.isfinite(trace["Est_Lambda"])]
+    assert np.nanmin(trace["speed_true"]) > 99.5
+    assert np.max(np.abs(lam / lam[0] - 1.0)) < 0.02
