@@ -142,6 +142,20 @@ def test_no_adaptation_off_the_trim_speed(tmp_path, band, moves):
     assert (np.ptp(lam[far]) > 0.05 * lam[far][0]) == moves
 
 
+def test_speed_loop_tracking_leaves_out_the_ticks_a_protection_owned():
+    n = 1000
+    reference = np.full(n, 90.0)
+    speed = reference + np.where(np.arange(n) % 2, 0.1, -0.1)  # 0.1 %N RMS under the law
+    owner = np.zeros(n)
+    owner[600:800] = 1  # EGT loop: 3 %N under the reference
+    speed[600:800] = 87.0
+    trace = _trace(np.arange(n) * 0.01, reference, np.zeros(n))
+    trace |= {"speed_true": speed, "ReferenceSpeed": reference, "LoopOwner": owner}
+    assert metrics.speed_loop_rms_pct(trace) == pytest.approx(0.1)
+    whole = math.sqrt((800 * 0.01 + 200 * 9.0) / n)
+    assert metrics.tracking_rms_pct(trace) == pytest.approx(whole)
+
+
 @pytest.mark.parametrize("kind", ["mrac", "pi"])
 def test_a_takeover_at_full_speed_holds_it(tmp_path, kind):
     """The ECU takes over an engine running steady at 100 %N, 10 %N over its trim: the
