@@ -25,6 +25,7 @@ TARGETS = {
     "pil": "sil.pil_bench",
     "starts": "sil.start_bench",
     "control": "sil.control_bench",
+    "fleet": "sil.fleet_bench",
 }
 
 
