@@ -180,8 +180,8 @@ def select_voltage(
             owner = OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
     if p.fuel_schedules_on:
-        # the line's fuel with the pump as estimated, within schedule_pump_range both ways (the
-        # estimator learns the pump while the line holds it: a weak pump's line rises)
+        # the line's fuel with the pump as estimated, within schedule_pump_range (the estimator
+        # learns the pump while the line holds it: a weak pump's line rises)
         v_line = schedule_v(s, p, p.accel_line_q24, n_q24, p.sched_lam_lo_q24, p.sched_lam_hi_q24)
         if v_line < v:
             v = v_line

@@ -194,7 +194,11 @@ class EcuParams:
     # floor into an over-temperature). Within the limit loops (limiters_on): the acceleration
     # line caps the pump voltage from the first tick, the floor holds it up against every other
     fuel_schedules_on: bool = True
-    schedule_pump_range: tuple[float, float] = (0.7, 1.3)
+    # (0.7, 1.0): the line rises for a weaker pump and never falls for a stronger one, whose
+    # extra fuel the EGT line, the EGT loop and the rate loop hold; off trim Lambda-hat reads a
+    # nominal pump 2-3 % strong (the fast model's bias), which with a range over 1 put the line
+    # under the steady line near 100 %N and held the engine short of it at maximum demand
+    schedule_pump_range: tuple[float, float] = (0.7, 1.0)
     accel_line_v: tuple[float, ...] = (
         5.34, 6.91, 7.96, 8.9, 9.88, 10.88, 11.91, 12.96, 14.03, 15.28, 16.41, 17.96,
     )  # fmt: skip

@@ -575,8 +575,8 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     s->nlim_e_prev_q24 = err;
     if (p->fuel_schedules_on) {
-        /* the line's fuel with the pump as estimated, within schedule_pump_range both ways (the
-         * estimator learns the pump while the line holds it: a weak pump's line rises) */
+        /* the line's fuel with the pump as estimated, within schedule_pump_range (the estimator
+         * learns the pump while the line holds it: a weak pump's line rises) */
         v_loop = schedule_v(e, p->accel_line_q24, n_q24, p->sched_lam_lo_q24, p->sched_lam_hi_q24);
         if (v_loop < v) {
             v = v_loop;

@@ -23,8 +23,8 @@ SPEEDS = SCHED_N0_PCT + SCHED_STEP_PCT * np.arange(SCHED_POINTS)
 
 
 def _expected(p: EcuParams, table: tuple[float, ...], n: float, lam: float) -> float:
-    """The schedule's voltage by its definition, in floats: the line moves both ways (Lambda-hat
-    in [lo, hi]), the floor only up (in [lo, Lambda_c])."""
+    """The schedule's voltage by its definition, in floats: the line moves within
+    schedule_pump_range (Lambda-hat in [lo, hi]), the floor only up (in [lo, Lambda_c])."""
     v = float(np.interp(n * math.sqrt(288.15 / p.inlet_temp_k), SPEEDS, table))
     lo, hi = (r * p.lambda_commissioned for r in p.schedule_pump_range)
     if table is p.decel_floor_v:
