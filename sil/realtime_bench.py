@@ -5,7 +5,9 @@ plant and the ECU as separate processes on the run's loopback bus, both at the c
 (the plant steps its 1 ms steps within a period), the recorder writing beside them. From each
 node's summary: the lateness of its period starts against their absolute deadlines (p50, p99,
 max), its overruns (periods started more than a period late) and the scheduling it had. The
-machine's load before the runs is given: the figures are of the machine as it was.
+machine's load before the runs is given, and, on a virtual machine, the CPU time its hypervisor
+took from it during each case (steal time, /proc/stat): the figures are of the machine as it was,
+and a host that stalls the machine shows as overruns no node could prevent.
 """
 
 from __future__ import annotations
@@ -28,6 +30,19 @@ TARGET_TEXT = {
 }
 
 
+PROC_STAT = Path("/proc/stat")
+
+
+def steal_s(stat: Path = PROC_STAT) -> float | None:
+    """CPU time the hypervisor has taken from this machine's CPUs since boot (the steal column of
+    /proc/stat's cpu line, in clock ticks), in seconds; None where the kernel does not tell."""
+    try:
+        fields = stat.read_text().splitlines()[0].split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def run(quick: bool = False) -> dict:
     seconds = QUICK_S if quick else DURATION_S
     figures: dict = {
@@ -41,7 +56,10 @@ def run(quick: bool = False) -> dict:
         for rate in RATES_HZ:
             path = scenario_cut(SCENARIO, seconds, Path(tmp), head=f"ecu_rate_hz = {rate}\n")
             # a run that lost ticks to overruns ends early (aborted): its figures still count
+            stolen = steal_s()
             summary = finished_run(path, Path(tmp) / f"out-{rate}", "--mode", "realtime")
+            if stolen is not None:
+                figures[f"host_steal_{rate}hz_ms"] = round(1000.0 * (steal_s() - stolen), 1)
             status = summary.get("status")
             figures[f"status_{rate}hz"] = (
                 status if status == "completed" else f"{status}: {summary.get('abort_reason')}"

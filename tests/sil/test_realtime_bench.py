@@ -1,6 +1,8 @@
 """`sil bench realtime`: each node's period-start lateness and overruns at 100 Hz and 1 kHz, from
 real-time runs as a user makes them."""
 
+import os
+
 from sil import realtime_bench
 
 
@@ -19,4 +21,15 @@ def test_realtime_bench_reports_each_node_at_each_rate(monkeypatch):
             periods = figures[f"{key}_periods"]
             expected = 2.0 * rate
             assert 0.9 * expected <= periods + figures[f"{key}_overruns"] <= 1.2 * expected
+        if realtime_bench.steal_s() is not None:  # Linux: what a hypervisor took, never negative
+            assert 0.0 <= figures[f"host_steal_{rate}hz_ms"] < 2000.0 * 2 * figures["cpus"]
     assert isinstance(figures["targets_met"], bool)
+
+
+def test_steal_time_is_read_from_the_cpu_line(tmp_path):
+    stat = tmp_path / "stat"
+    stat.write_text("cpu  10 0 5 900 2 0 1 250 0 0\ncpu0 5 0 2 450 1 0 0 125 0 0\n")
+    assert realtime_bench.steal_s(stat) == 250 / os.sysconf("SC_CLK_TCK")
+    stat.write_text("cpu  10 0 5\n")  # a kernel without the column
+    assert realtime_bench.steal_s(stat) is None
+    assert realtime_bench.steal_s(tmp_path / "none") is None
