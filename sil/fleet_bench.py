@@ -84,6 +84,9 @@ def _variation(rows: list[dict]) -> dict:
         out[f"variation_{name}_rms_p95_pct"] = round(t["p95"], 4)
         out[f"variation_{name}_held_engines"] = t["limited"]
         out[f"variation_{name}_rms_p95_free_pct"] = round(t["p95_free"], 4)
+        out[f"variation_{name}_limiter_time_nominal_s"] = round(t["limiter_s_nominal"], 2)
+        out[f"variation_{name}_limiter_time_median_s"] = round(t["limiter_s_p50"], 2)
+        out[f"variation_{name}_limiter_time_mean_s"] = round(t["limiter_s_mean"], 2)
     return out
 
 

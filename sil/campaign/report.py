@@ -70,6 +70,10 @@ def tracking(rows: list[dict]) -> dict[str, dict]:
         limited &= np.isfinite(varied)
         varied = varied[np.isfinite(varied)]
         nominal = [_float(r["tracking_rms_pct"]) for r in rs if r["sample"] == "-1"]
+        # time on limiters: a protection, not the speed loop, owned the fuel
+        held_s = np.array([_float(r.get("protection_time_s", "")) for r in engines])
+        held_s = held_s[np.isfinite(held_s)]
+        nominal_held_s = [_float(r.get("protection_time_s", "")) for r in rs if r["sample"] == "-1"]
         offset = np.array([abs(_float(r.get("tracking_mean_pct", ""))) for r in rs])
         out[name] = {
             "runs": int(varied.size),
@@ -79,6 +83,9 @@ def tracking(rows: list[dict]) -> dict[str, dict]:
             "limited": int(limited.sum()),
             "p95_free": _pct(free, 95),
             "offset": float(np.nanmedian(offset)) if np.isfinite(offset).any() else math.nan,
+            "limiter_s_nominal": nominal_held_s[0] if nominal_held_s else math.nan,
+            "limiter_s_p50": _pct(held_s, 50),
+            "limiter_s_mean": float(held_s.mean()) if held_s.size else math.nan,
             "values": varied,
         }
     return out
@@ -253,13 +260,15 @@ def write(out: Path, title: str, speed: dict | None = None) -> Path:
     if any(t["runs"] for t in track.values()):
         lines += ["## Tracking RMS across engine variation [%N]", "",
                   "| controller | engines | nominal | p5 | median | p95 | max | p95 / nominal "
-                  "| median of mean error |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+                  "| median of mean error | time on limiters [s] nominal / median / mean |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for name, t in track.items():
             ratio = t["p95"] / t["nominal"] if t["nominal"] else math.nan
             lines.append(
                 f"| {name} | {t['runs']} | {_fmt(t['nominal'])} | {_fmt(t['p5'])} | "
                 f"{_fmt(t['p50'])} | {_fmt(t['p95'])} | {_fmt(t['max'])} | {_fmt(ratio, '.2f')} "
-                f"| {_fmt(t['offset'])} |"
+                f"| {_fmt(t['offset'])} | {_fmt(t['limiter_s_nominal'], '.1f')} / "
+                f"{_fmt(t['limiter_s_p50'], '.1f')} / {_fmt(t['limiter_s_mean'], '.1f')} |"
             )
         lines.append("")
         if not steps:  # the staircase's targets: of no meaning across idle-to-maximum steps

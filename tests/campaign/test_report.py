@@ -29,6 +29,9 @@ def test_engines_held_by_a_protection_are_counted_and_left_out_of_the_free_perce
     assert t["runs"] == 50 and t["limited"] == 10
     assert t["p95"] == np.percentile(np.concatenate([free, held]), 95)
     assert t["p95_free"] == np.percentile(free, 95)
+    # time on limiters over the varied engines: 40 brushes of 0.3 s and 10 holds of 5 s
+    assert t["limiter_s_nominal"] == 0.0 and t["limiter_s_p50"] == 0.3
+    assert abs(t["limiter_s_mean"] - (40 * 0.3 + 10 * 5.0) / 50) < 1e-12
     text = "\n".join(_targets(tracking(rows)))
     assert "NOT met" in text and "On 10 of the 50 engines a protection" in text
     assert f"{np.percentile(free, 95) / 0.1:.2f}x" in text

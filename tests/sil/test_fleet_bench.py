@@ -60,6 +60,10 @@ def test_variation_figures_split_the_held_engines() -> None:
     assert got["variation_mrac_rms_nominal_pct"] == 0.15
     assert got["variation_mrac_held_engines"] == 1
     assert got["variation_mrac_rms_p95_free_pct"] < 0.4 < got["variation_mrac_rms_p95_pct"]
+    # time on limiters: the held engine's 12 s over the 20 varied engines, the nominal's none
+    assert got["variation_mrac_limiter_time_nominal_s"] == 0.0
+    assert got["variation_mrac_limiter_time_median_s"] == 0.0
+    assert got["variation_mrac_limiter_time_mean_s"] == 0.6
 
 
 def test_the_quick_bench_no_engine_beats_its_physics_and_the_mrac_tracks_closest() -> None:
