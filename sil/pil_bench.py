@@ -11,10 +11,13 @@ flash and RAM.
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
-from sil.bench import completed_run, scenario_cut
+from ecu.port.build import ARM_CC
+from ecu.port.qemu import QEMU
+from sil.bench import BenchError, completed_run, scenario_cut
 
 SCENARIO = "thesis-5.2-mrac-fast"
 DURATION_S = 60.0
@@ -34,6 +37,12 @@ def run(quick: bool = False) -> dict:
     from sil import golden as sources
     from sil import port_bench
 
+    missing = [tool for tool in (ARM_CC, QEMU) if shutil.which(tool) is None]
+    if missing:  # said here: the ecu.log that would tell it goes with the bench's folder
+        raise BenchError(
+            f"{' and '.join(missing)} not found (apt-get install gcc-arm-none-eabi "
+            "libnewlib-arm-none-eabi qemu-system-arm)"
+        )
     seconds = QUICK_S if quick else DURATION_S
     with tempfile.TemporaryDirectory() as tmp:
         path = scenario_cut(SCENARIO, seconds, Path(tmp))
