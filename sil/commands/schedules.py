@@ -95,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
         "keep_accel": s.KEEP_ACCEL,
     }
 
+    tty = sys.stderr.isatty()  # progress on a terminal; a log gets no carriage returns
+
     def progress(done: int, total: int) -> None:
         print(
             f"\rsil schedules: {done}/{total} engine corners", end="", file=sys.stderr, flush=True
@@ -102,12 +104,15 @@ def run(args: argparse.Namespace) -> int:
 
     limits = (args.egt_limit, args.surge_margin, args.lean_margin)
     try:
-        corners = s.corner_schedules(model, args.speeds, args.health_spread, *limits, progress)
+        corners = s.corner_schedules(
+            model, args.speeds, args.health_spread, *limits, progress if tty else None
+        )
         points = s.fleet_schedule(model, args.speeds, args.health_spread, *limits, corners=corners)
     except s.ScheduleError as exc:
-        print(f"\nsil schedules: {exc}", file=sys.stderr)
+        print(("\n" if tty else "") + f"sil schedules: {exc}", file=sys.stderr)
         return 1
-    print(file=sys.stderr)
+    if tty:
+        print(file=sys.stderr)
     # the EGT at no fuel of each engine's frozen-speed line, at the ECU's pump dead voltage
     dead_v = EcuParams().pump_dead_v
     nominal = s.schedule(model, args.speeds, *limits)
