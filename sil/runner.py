@@ -547,7 +547,11 @@ def _run_on_bus(
             while not path.exists():
                 if state.children[node].poll() is not None or time.monotonic() > deadline:
                     state.status = "aborted"
-                    state.abort_reason = f"{node} process did not come up (see {node}.log)"
+                    said = _last_line(opts.out_dir / f"{node}.log")
+                    state.abort_reason = (
+                        f"{node} process did not come up{f': {said}' if said else ''} "
+                        f"(see {node}.log)"
+                    )
                     return
                 time.sleep(0.02)
         _drain(bus)
@@ -563,6 +567,15 @@ def _run_on_bus(
             realtime=opts.mode == "realtime",
             period=1.0 / s.ecu_rate_hz,
         )
+
+
+def _last_line(log: Path) -> str:
+    """The last line a node wrote to its log (why it stopped), or ""."""
+    try:
+        lines = log.read_text(errors="replace").split("\n")
+    except OSError:
+        return ""
+    return next((line.strip() for line in reversed(lines) if line.strip()), "")
 
 
 def _drain(bus: can.BusABC) -> None:

@@ -404,3 +404,21 @@ def test_an_open_thermocouple_reading_its_burnout_value_is_flagged(tmp_path):
     assert np.all(egt[:90] < 1200.0)  # before the fault (1 s at 100 Hz)
     flagged = [f["time_s"] for f in summary["faults"] if f["fault"] == "EGT_OPEN"]
     assert flagged and 1.0 < flagged[0] <= 1.0 + EcuParams().egt_fault_time_s + 0.02
+
+
+def test_a_node_that_cannot_come_up_says_why_in_the_abort(tmp_path):
+    # no QEMU on the PATH: the ECU node of --ecu-impl pil stops before it is ready
+    spec = _udp_spec()
+    out = tmp_path / "out"
+    env = {**os.environ, "PATH": str(tmp_path)}
+    result = subprocess.run(
+        [sys.executable, "-m", "sil.cli", "run", str(_scenario(tmp_path)), "--out", str(out),
+         "--bus", spec, "--ecu-impl", "pil"],
+        capture_output=True, text=True, timeout=120, env=env,
+    )  # fmt: skip
+    assert result.returncode == 1
+    summary = json.loads((out / "summary.json").read_text())
+    reason = summary["abort_reason"]
+    assert reason.startswith("ecu process did not come up: ") and reason.endswith("(see ecu.log)")
+    assert "qemu-system-arm not found" in reason, reason
+    assert _no_nodes_left(spec)
