@@ -15,8 +15,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ecu.port.build import ARM_CC
-from ecu.port.qemu import QEMU
+from ecu.port.build import ARM_CC, ARM_CC_NOT_FOUND
+from ecu.port.qemu import QEMU, QEMU_NOT_FOUND
 from sil.bench import BenchError, completed_run, scenario_cut
 
 SCENARIO = "thesis-5.2-mrac-fast"
@@ -37,12 +37,10 @@ def run(quick: bool = False) -> dict:
     from sil import golden as sources
     from sil import port_bench
 
-    missing = [tool for tool in (ARM_CC, QEMU) if shutil.which(tool) is None]
-    if missing:  # said here: the ecu.log that would tell it goes with the bench's folder
-        raise BenchError(
-            f"{' and '.join(missing)} not found (apt-get install gcc-arm-none-eabi "
-            "libnewlib-arm-none-eabi qemu-system-arm)"
-        )
+    tools = ((ARM_CC, ARM_CC_NOT_FOUND), (QEMU, QEMU_NOT_FOUND))
+    missing = [text for tool, text in tools if shutil.which(tool) is None]
+    if missing:  # before any run: each would fail on it
+        raise BenchError("; ".join(missing))
     seconds = QUICK_S if quick else DURATION_S
     with tempfile.TemporaryDirectory() as tmp:
         path = scenario_cut(SCENARIO, seconds, Path(tmp))

@@ -46,6 +46,7 @@ HEADERS = (
     "board_mps2.h",
 )
 ARM_CC = "arm-none-eabi-gcc"
+ARM_CC_NOT_FOUND = f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
 ARM_FLAGS = ("-mcpu=cortex-m4", "-mthumb", "-Os", "-ffunction-sections", "-fdata-sections")
 
 
@@ -117,13 +118,15 @@ def host_replayer(cc: str | None = None, *, sanitize: bool = False) -> Path:
     return _compile(cc, flags, (*CORE_SOURCES, "replay.c"), "replay-san" if sanitize else "replay")
 
 
+def _require_arm_cc() -> None:
+    if not shutil.which(ARM_CC):
+        raise PortBuildError(ARM_CC_NOT_FOUND)
+
+
 def arm_replayer(systick: bool = False) -> Path:
     """The replayer for a Cortex-M4 (mps2-an386 under QEMU), reading vectors by semihosting;
     ``systick``: the variant that counts SysTick around each tick (see replay.c)."""
-    if not shutil.which(ARM_CC):
-        raise PortBuildError(
-            f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
-        )
+    _require_arm_cc()
     flags = (
         *WARNINGS,
         *ARM_FLAGS,
@@ -148,10 +151,7 @@ def arm_pil_image(link: str = "eth") -> Path:
     heap (a call that needs one would not link)."""
     if link not in PIL_LINKS:
         raise ValueError(f"unknown CAN link {link!r} (known: {', '.join(PIL_LINKS)})")
-    if not shutil.which(ARM_CC):
-        raise PortBuildError(
-            f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
-        )
+    _require_arm_cc()
     flags = (
         *WARNINGS,
         *ARM_FLAGS,
@@ -168,10 +168,7 @@ def arm_pil_image(link: str = "eth") -> Path:
 def arm_objects() -> dict[str, Path]:
     """The control core, the frame codec and the CAN node, each compiled alone for the
     Cortex-M4 (for sizes): source name -> object."""
-    if not shutil.which(ARM_CC):
-        raise PortBuildError(
-            f"{ARM_CC} not found (apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi)"
-        )
+    _require_arm_cc()
     flags = (*WARNINGS, *ARM_FLAGS, "-c")
     return {s: _compile(ARM_CC, flags, (s,), Path(s).stem + ".o") for s in CORE_SOURCES}
 

@@ -40,7 +40,7 @@ from ecu.firmware_params import FirmwareParams
 from ecu.port import build, qemu
 from ecu.port.core import param_words
 from ecu.port.eth_can import EthCanBus
-from ecu.port.qemu import QEMU
+from ecu.port.qemu import QEMU, QEMU_NOT_FOUND
 
 MAGIC = b"ECUC"
 VERSION = 1
@@ -189,7 +189,7 @@ class PilImage:
         if link not in build.PIL_LINKS:
             raise PilError(f"unknown CAN link {link!r} (known: {', '.join(build.PIL_LINKS)})")
         if not shutil.which(QEMU):
-            raise PilError(f"{QEMU} not found (apt-get install qemu-system-arm)")
+            raise PilError(QEMU_NOT_FOUND)
         self.link = link
         self.elf = elf or build.arm_pil_image(link)
         self._dir = tempfile.TemporaryDirectory(prefix="ecu-pil-")

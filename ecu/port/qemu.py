@@ -8,6 +8,7 @@ from pathlib import Path
 
 QEMU = "qemu-system-arm"
 MACHINE = "mps2-an386"
+QEMU_NOT_FOUND = f"{QEMU} not found (apt-get install qemu-system-arm)"
 
 
 def command(*, icount: bool) -> list[str]:
@@ -20,7 +21,7 @@ def command(*, icount: bool) -> list[str]:
 def run(elf: Path, vectors: Path, *, icount: bool = False, timeout: float = 300.0):  # noqa: ANN201
     """``replay VECTORS`` on the emulated board; returns the CompletedProcess (text output)."""
     if not shutil.which(QEMU):
-        raise FileNotFoundError(f"{QEMU} not found (apt-get install qemu-system-arm)")
+        raise FileNotFoundError(QEMU_NOT_FOUND)
     cmd = [
         *command(icount=icount),
         "-serial",
