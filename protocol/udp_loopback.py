@@ -1,9 +1,14 @@
 """python-can's ``udp_multicast`` bus, kept on this machine.
 
-python-can binds its socket to every address of the host and sends with a hop limit of 1, which
-puts simulated traffic on the local network. This backend keeps the same wire format (so it
-interoperates with plain ``udp_multicast`` peers on the same group and port) but:
+python-can binds its socket to every address of the host, joins its group on the interface of
+the default route and sends with a hop limit of 1, which puts simulated traffic (and the IGMP
+membership reports of the join) on the local network. This backend keeps the same wire format
+but:
 
+- joins the group on the loopback interface only (``lo``, by its index) and sends through it
+  (IP_MULTICAST_IF 127.0.0.1), so no membership report goes out on a network interface; a plain
+  ``udp_multicast`` peer, which joins and sends on the default route's interface, is therefore not
+  on the same bus;
 - sends with multicast TTL 0: a datagram never leaves the host;
 - loops multicast back to local sockets (IP_MULTICAST_LOOP = 1);
 - binds the socket to the multicast group address, not to the wildcard address, so nothing
@@ -48,6 +53,7 @@ SO_ATTACH_FILTER, SO_DETACH_FILTER = 26, 27  # <asm-generic/socket.h>
 _TIMESPEC = struct.Struct("@ll")
 _TIMEVAL = struct.Struct("@ll")  # SO_RCVTIMEO: seconds, microseconds
 _ANCILLARY_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+LOOPBACK_INTERFACE, LOOPBACK_ADDRESS = "lo", "127.0.0.1"
 
 # Where python-can's packing puts the frame ID: a msgpack map of 11 entries whose first keys are
 # "timestamp" (a float64) and "arbitration_id"; the filter's offsets count from the UDP header.
@@ -77,41 +83,63 @@ _ACCEPT, _DROP = "accept", "drop"
 
 
 class _LoopbackSocket:
-    """The group's UDP socket, configured as the module docstring says."""
+    """The group's UDP sockets, configured as the module docstring says."""
 
     @staticmethod
     def open(group: str, port: int) -> socket.socket:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
             sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
             sock.bind((group, port))
-            request = socket.inet_aton(group) + struct.pack("@I", socket.INADDR_ANY)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, request)
-            return sock
         except OSError as error:
             sock.close()
             raise can.CanInitializationError(
                 f"could not open loopback multicast {group}:{port}: {error}"
             ) from error
+        try:
+            _keep_on_loopback(sock)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, _loopback_request(group))
+        except OSError as error:
+            sock.close()
+            raise can.CanInitializationError(
+                f"could not join multicast group {group} on the loopback interface "
+                f"{LOOPBACK_INTERFACE} ({error.strerror or error}); the udp bus needs "
+                f"{LOOPBACK_INTERFACE} up with {LOOPBACK_ADDRESS} (ip link set lo up)"
+            ) from error
+        return sock
 
     @staticmethod
     def open_sender(group: str, port: int) -> socket.socket:
         """The socket the bus sends from, connected to the group (see the module docstring)."""
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            _keep_on_loopback(sock)
             sock.connect((group, port))
             return sock
         except OSError as error:
             sock.close()
             raise can.CanInitializationError(
-                f"could not send to loopback multicast {group}:{port}: {error}"
+                f"could not send to loopback multicast {group}:{port} through "
+                f"{LOOPBACK_INTERFACE} ({error.strerror or error}); the udp bus needs "
+                f"{LOOPBACK_INTERFACE} up with {LOOPBACK_ADDRESS} (ip link set lo up)"
             ) from error
+
+
+def _keep_on_loopback(sock: socket.socket) -> None:
+    """Multicast from ``sock`` goes out through the loopback interface with TTL 0, and is looped
+    back to the host's sockets."""
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(LOOPBACK_ADDRESS))
+
+
+def _loopback_request(group: str) -> bytes:
+    """``struct ip_mreqn`` joining ``group`` on the loopback interface, named by its index (the
+    kernel then joins there whatever the routes say)."""
+    index = socket.if_nametoindex(LOOPBACK_INTERFACE)
+    return socket.inet_aton(group) + socket.inet_aton(LOOPBACK_ADDRESS) + struct.pack("@i", index)
 
 
 def kernel_filter(filters: Sequence[CanFilter]) -> bytes | None:

@@ -2,6 +2,8 @@
 
 import random
 import socket
+import struct
+from pathlib import Path
 
 import can
 import pytest
@@ -65,6 +67,33 @@ def test_udp_socket_never_leaves_the_host():
         sender = bus.sender
         assert sender.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
         assert sender.getpeername() == (spec.channel, spec.port)
+        for each in (sock, sender):  # both send through the loopback interface
+            interface = each.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)
+            assert socket.inet_ntoa(interface) == "127.0.0.1"
+
+
+def _igmp_memberships() -> dict[str, set[str]]:
+    """The kernel's IPv4 multicast memberships: group address -> the interfaces joined."""
+    members: dict[str, set[str]] = {}
+    device = ""
+    for line in Path("/proc/net/igmp").read_text().splitlines()[1:]:
+        fields = line.split()
+        if not line[0].isspace():  # "Idx Device : Count Querier", one per interface
+            device = fields[1]
+        elif fields:  # "Group Users Timer Reporter", the group as the kernel's 32-bit word
+            group = socket.inet_ntoa(struct.pack("=I", int(fields[0], 16)))
+            members.setdefault(group, set()).add(device)
+    return members
+
+
+def test_udp_bus_joins_its_group_on_loopback_only():
+    spec = unique_udp_spec(random.Random(19))
+    assert spec.channel not in _igmp_memberships()
+    with open_bus(spec) as a, open_bus(spec) as b:
+        a.send(can.Message(arbitration_id=0x100, data=bytes(8), is_extended_id=False))
+        assert b.recv(1.0).arbitration_id == 0x100
+        assert _igmp_memberships()[spec.channel] == {"lo"}
+    assert spec.channel not in _igmp_memberships()
 
 
 def test_udp_round_trip_between_two_endpoints_and_isolation():
