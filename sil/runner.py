@@ -538,9 +538,10 @@ def _run_on_bus(
             bridge = stack.enter_context(Bridge(plant_side, ecu_side, injector, ticks=clock))
             state.bridge_errors = bridge.errors
             state.ecu_heard = bridge.ecu_side_heard  # the ECU's frames before the injector
-        # once both are ready (the ECU listening, the plant built and waiting for its start
-        # file), the demands begin and the plant sends tick 0: in real time too,
-        # the ECU is armed only when the engine's frames are coming
+        # once both are ready (each listening on the bus; the plant built and waiting for its
+        # start file, keeping what it hears meanwhile), the frames due before tick 0 go out and
+        # the plant sends tick 0: in real time too, the ECU is armed only when the engine's
+        # frames are coming
         deadline = time.monotonic() + START_TIMEOUT_S
         for node in ("ecu", "plant"):
             path = _ready_file(opts.out_dir, node)

@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     from ecu.node import EcuNode
     from ecu.params import ParamError, preset
     from protocol.bus import BusSpecError, open_bus
-    from protocol.node import realtime_scheduling, run_lockstep, run_realtime
+    from protocol.node import listen_for, realtime_scheduling, run_lockstep, run_realtime
     from protocol.run_bus import RunBus
 
     try:
@@ -188,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
     except (BusSpecError, ValueError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
+    listen_for(node, bus)  # its filters set before it says it is ready
     if args.ready_file:
         args.ready_file.write_text("ready\n")
     stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary

@@ -8,7 +8,7 @@ import json
 import math
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -106,15 +106,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--ready-file",
         type=Path,
         metavar="PATH",
-        help="create this file once the node is built (with --start-file: when it waits for it)",
+        help="create this file once the node is built and listens on the bus (with "
+        "--start-file: when it waits for it)",
     )
     parser.add_argument(
         "--start-file",
         type=Path,
         metavar="PATH",
-        help="get ready, then wait until this file exists before joining the bus and sending "
-        "tick 0 (a launcher starts the plant and the ECU at once and creates it when the ECU "
-        "listens)",
+        help="get ready and join the bus, then wait until this file exists before sending tick 0 "
+        "(frames heard meanwhile are kept; a launcher starts the plant and the ECU at once and "
+        "creates it when both are ready)",
     )
     add_launcher_options(parser)
     parser.add_argument(
@@ -172,9 +173,15 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
     )
 
 
+def _wait_for(path: Path, stopped: Callable[[], bool]) -> None:
+    """Wait until ``path`` exists (the launcher's go) or a stop is asked for."""
+    while not path.exists() and not stopped():
+        time.sleep(START_POLL_S)
+
+
 def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
-    from protocol.node import realtime_scheduling, run_lockstep, run_realtime
+    from protocol.node import listen_for, realtime_scheduling, run_lockstep, run_realtime
     from protocol.run_bus import RunBus
 
     _skip_blas_probe()
@@ -194,16 +201,18 @@ def run(args: argparse.Namespace) -> int:
             print(f"sil plant: error: {exc}", file=sys.stderr)
             return 2
     stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
-    if args.ready_file is not None:
-        args.ready_file.write_text("ready\n")
-    if args.start_file is not None:
-        while not args.start_file.exists() and not stop.is_set():
-            time.sleep(START_POLL_S)
     try:
         bus = RunBus(open_bus(spec), args.run_tag)
     except (BusSpecError, ValueError) as exc:
         print(f"sil plant: error: {exc}", file=sys.stderr)
         return 2
+    # on the bus, with its filters, before it says it is ready: the frames sent before tick 0
+    # (the FaultInjects and Demands due at tick 0) wait in its queue until it starts
+    listen_for(node, bus)
+    if args.ready_file is not None:
+        args.ready_file.write_text("ready\n")
+    if args.start_file is not None:
+        _wait_for(args.start_file, stop.is_set)
     try:
         if args.realtime:
             policy = realtime_scheduling()
