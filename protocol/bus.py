@@ -17,8 +17,11 @@ never leaves the machine (see :mod:`protocol.udp_loopback`).
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import random
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +32,17 @@ UDP_DEFAULT_PORT = 43113
 
 class BusSpecError(ValueError):
     """A bus spec that cannot be parsed or opened; the message is one line for the user."""
+
+
+class BusDriverError(BusSpecError):
+    """A python-can interface whose driver (its library, Python module or platform) is not
+    available on this machine."""
+
+
+# what python-can raises when an interface's driver is missing: its own error, a failed import,
+# or (kvaser) a call to a function of the library that never loaded
+_MISSING_DRIVER = (can.CanInterfaceNotImplementedError, ImportError, NameError, AttributeError)
+_DRIVER_WORDS = ("library", "driver", "dll", "not installed", "only supported on", "install ")
 
 
 @dataclass(frozen=True)
@@ -105,7 +119,8 @@ def default_spec() -> tuple[BusSpec, str]:
 
 
 def open_bus(spec: str | BusSpec, **kwargs) -> can.BusABC:
-    """Open the python-can bus a spec names; failures become one :class:`BusSpecError` line."""
+    """Open the python-can bus a spec names; failures become one :class:`BusSpecError` line
+    (:class:`BusDriverError` when the interface's driver is missing)."""
     parsed = parse_spec(spec) if isinstance(spec, str) else spec
     try:
         if parsed.interface == "udp":
@@ -124,8 +139,55 @@ def open_bus(spec: str | BusSpec, **kwargs) -> can.BusABC:
                 f"(create it with: ip link add dev {parsed.channel} type vcan && "
                 f"ip link set up {parsed.channel})"
             )
-        return can.Bus(interface=parsed.interface, channel=parsed.channel, **kwargs)
     except BusSpecError:
         raise
     except (can.CanError, OSError, ImportError, ValueError) as exc:
-        raise BusSpecError(f"bus {parsed}: {exc}") from exc
+        raise BusSpecError(f"bus {parsed}: {_one_line(str(exc))}") from exc
+    return _open_python_can(parsed, **kwargs)
+
+
+def _open_python_can(parsed: BusSpec, **kwargs) -> can.BusABC:
+    """A python-can interface's bus. Its driver is third-party code that may fail in any way
+    (or log warnings on import): every failure becomes one line, with what it logged."""
+    with _driver_notes() as notes:
+        try:
+            return can.Bus(interface=parsed.interface, channel=parsed.channel, **kwargs)
+        except Exception as exc:  # a driver's failure, whatever its type
+            error = _driver_error(parsed, exc, notes)
+        # the half-built bus (freed with the exception) may log on its way out: still captured
+    raise error
+
+
+def _driver_error(parsed: BusSpec, exc: Exception, notes: list[str]) -> BusSpecError:
+    """The one-line error for a python-can interface that failed to open."""
+    text = _one_line(str(exc))
+    if isinstance(exc, (NameError, AttributeError)) or not text:
+        text = _one_line("; ".join(notes)) or "python-can could not load its library"
+    if isinstance(exc, _MISSING_DRIVER) or any(word in text.lower() for word in _DRIVER_WORDS):
+        return BusDriverError(
+            f"bus {parsed}: the {parsed.interface} driver is not installed or cannot load on "
+            f"this machine: {text}"
+        )
+    return BusSpecError(f"bus {parsed}: cannot open it: {text}")
+
+
+@contextlib.contextmanager
+def _driver_notes() -> Iterator[list[str]]:
+    """Collect what is logged (python-can's drivers warn on import when their library is
+    missing) instead of letting it reach stderr; yields the messages."""
+    notes: list[str] = []
+
+    class _Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            notes.append(record.getMessage())
+
+    handler, root = _Collect(logging.WARNING), logging.getLogger()
+    root.addHandler(handler)
+    try:
+        yield notes
+    finally:
+        root.removeHandler(handler)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())

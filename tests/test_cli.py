@@ -58,3 +58,25 @@ def test_bench_codec_json():
     result = _sil("bench", "codec", "--quick", "--json")
     figures = json.loads(result.stdout)
     assert figures["codec_encode_us"] > 0 and figures["cantools_decode_us"] > 0
+
+
+@pytest.mark.parametrize(
+    ("command", "spec", "words"),
+    [
+        (("run", "thesis-5.2-mrac-fast"), "kvaser:0", "Kvaser canlib is unavailable"),
+        (("ecu",), "kvaser:0", "kvaser driver is not installed"),
+        (("selfcheck",), "pcan:PCAN_USBBUS1", "pcanbasic library not found"),
+        (("replay", "{log}"), "vector:0", "vector driver is not installed"),
+        (("plant",), "gs_usb:0", "gs_usb driver is not installed"),
+    ],
+)
+def test_a_missing_bus_driver_is_one_line_and_exit_2(tmp_path, command, spec, words):
+    log = tmp_path / "frames.log"
+    log.write_text("(1.000000) can0 100#0011223344556677\n")
+    args = [part.format(log=log) for part in command]
+    extra = ("--out", str(tmp_path / "run")) if command[0] == "run" else ()
+    result = _sil(*args, "--bus", spec, *extra)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1, result.stderr  # the driver's own warnings swallowed
+    assert f"bus {spec}" in result.stderr and words in result.stderr
+    assert "Traceback" not in result.stderr

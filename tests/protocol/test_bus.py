@@ -1,5 +1,6 @@
 """Bus specs, clear errors, and simulated traffic kept on this machine."""
 
+import logging
 import random
 import socket
 import struct
@@ -199,3 +200,19 @@ def test_udp_frame_path_sends_the_message_datagram_and_reads_frames():
         a.send_frame(0x110, payload)
         assert b.recv_frame(1.0) == (0x7, bytes(8))
         assert b.recv_frame(0.1) is None and a.recv_frame(0.1) is None  # filtered; own frames
+
+
+def test_a_driver_that_fails_in_any_way_is_one_bus_spec_error(monkeypatch, capsys):
+    from protocol.bus import BusDriverError
+
+    def kvaser_without_its_library(**kwargs):
+        logging.getLogger("can.kvaser").warning("Kvaser canlib is unavailable.")
+        raise NameError("name 'canGetNumberOfChannels' is not defined")
+
+    monkeypatch.setattr(can, "Bus", kvaser_without_its_library)
+    with pytest.raises(BusDriverError, match="kvaser driver is not installed.*canlib"):
+        open_bus("kvaser:0")
+    monkeypatch.setattr(can, "Bus", lambda **kwargs: [][1])  # a driver's own bug
+    with pytest.raises(BusSpecError, match=r"^bus pcan:X: cannot open it: list index"):
+        open_bus("pcan:X")
+    assert capsys.readouterr().err == ""  # what the driver logged is in the error, not on stderr
