@@ -66,7 +66,7 @@ from sil.parent_death import child_env, die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.scenario import HEALTH, Scenario
-from sil.watchdog import Watchdog, interrupt_reason
+from sil.watchdog import Starting, StartWatch, Watchdog, interrupt_reason
 
 # fault bits listed in the summary: all but the two that only describe the present tick
 REPORTED_FAULTS = {
@@ -80,7 +80,7 @@ GRACE_S = NODE_GUARD_S + 2.0  # recording continues this long after a node died
 # node reads it at most this often while frames come; they queue in between, so that one read
 # takes a tick's frames and no sender has to wake this process for each of them
 LOCKSTEP_READ_S = 100e-6
-START_TIMEOUT_S = 300.0  # a node process must be ready by then (numba loads slowly in a VM)
+READY_POLL_S = 0.02  # how often the start-up looks at the node processes
 BRIDGED_GUARD_S = 0.25  # lockstep through the fault bridge: a lost frame costs this much wall time
 
 
@@ -542,19 +542,10 @@ def _run_on_bus(
         # start file, keeping what it hears meanwhile), the frames due before tick 0 go out and
         # the plant sends tick 0: in real time too, the ECU is armed only when the engine's
         # frames are coming
-        deadline = time.monotonic() + START_TIMEOUT_S
-        for node in ("ecu", "plant"):
-            path = _ready_file(opts.out_dir, node)
-            while not path.exists():
-                if state.children[node].poll() is not None or time.monotonic() > deadline:
-                    state.status = "aborted"
-                    said = _last_line(opts.out_dir / f"{node}.log")
-                    state.abort_reason = (
-                        f"{node} process did not come up{f': {said}' if said else ''} "
-                        f"(see {node}.log)"
-                    )
-                    return
-                time.sleep(0.02)
+        failed = _wait_until_ready(opts.out_dir, state.children)
+        if failed is not None:
+            state.status, state.abort_reason = "aborted", failed
+            return
         _drain(bus)
         send = bus_sender(bus, DriverStats())
         command.start(send)
@@ -568,6 +559,26 @@ def _run_on_bus(
             realtime=opts.mode == "realtime",
             period=1.0 / s.ecu_rate_hz,
         )
+
+
+def _wait_until_ready(out_dir: Path, children: dict[str, subprocess.Popen]) -> str | None:
+    """Wait until every node process has said it is ready; else why the run cannot begin, naming
+    the node (:class:`sil.watchdog.StartWatch`: it exited, is stopped, makes no progress or is
+    not ready within the overall limit)."""
+    watch = StartWatch(time.monotonic())
+    while True:
+        ready = {name: _ready_file(out_dir, name).exists() for name in children}
+        if all(ready.values()):
+            return None
+        nodes = {n: Starting(p.pid, p.poll(), ready[n]) for n, p in children.items()}
+        failed = watch.check(nodes, time.monotonic())
+        if failed is not None:
+            name, why = failed
+            said = "" if why.startswith("stopped") else _last_line(out_dir / f"{name}.log")
+            return f"{name} process did not come up: {why}{f': {said}' if said else ''} " + (
+                f"(see {name}.log)"
+            )
+        time.sleep(READY_POLL_S)
 
 
 def _last_line(log: Path) -> str:

@@ -1,13 +1,23 @@
-"""Liveness of a run on a bus: every node owes frames, and SIGTERM ends a run as Ctrl-C does.
+"""Liveness of a run on a bus: every node owes frames, a node process starting up owes progress,
+and SIGTERM ends a run as Ctrl-C does.
 
 A node process that stops answering without dying (SIGSTOP, a deadlock) would otherwise leave
 ``sil run`` waiting: its peer runs on its own clock after the guard time and the run never ends.
 The command node hears every frame on the bus, so the run keeps, per frame ID, when it last heard
 it (wall clock) and, every check, which node has sent nothing of what the DBC says it sends for
 :data:`SILENCE_S`.
+
+Before tick 0 a node owes no frames but its start-up: :class:`StartWatch` tells a node process
+that is slow to start (its CPU time, or its children's, advances) from one that exited, is
+stopped (SIGSTOP) or sleeps without doing anything, from /proc (elsewhere: exits and the overall
+limit only).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Collection
+from dataclasses import dataclass
+from pathlib import Path
 
 SILENCE_S = 4.0  # checked every 0.2 s: a stuck node is found within 4.2 s of its last frame
 NODES = {"Plant": "plant", "ECU": "ECU"}  # DBC sender -> the name the abort reason gives
@@ -40,4 +50,130 @@ class Watchdog:
         for node, at in self.heard_at.items():
             if now - at > self.silence_s:
                 return f"the {node} sent no frame for {now - at:.1f} s (stopped or stuck)"
+        return None
+
+
+START_TIMEOUT_S = 300.0  # a node process at work all along must be ready by then (numba in a VM)
+STOPPED_S = 1.0  # a node process stopped (SIGSTOP, state T) this long ends the start-up
+IDLE_S = 5.0  # ... or one asleep this long with no CPU time, nor any of its children's
+SAMPLE_S = 0.25  # how often the processes are looked at in /proc
+WORKING = frozenset("RD")  # /proc states of a process at work: running, or waiting on the disk
+
+
+@dataclass(frozen=True)
+class ProcSample:
+    """A process as /proc shows it: its state letter, and the CPU time it and its descendants
+    used (clock ticks), with whether one of them is at work (running or in disk I/O)."""
+
+    state: str
+    cpu_ticks: int
+    working: bool
+
+
+def _stat_fields(pid: int) -> list[str] | None:
+    """The fields of /proc/PID/stat after the command name (state first), or None."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return text.rsplit(")", 1)[1].split()
+
+
+def sample(pids: Collection[int]) -> dict[int, ProcSample]:
+    """The processes ``pids``, each with its descendants, as /proc shows them (a PID without an
+    entry, or every PID where there is no /proc, is left out)."""
+    try:
+        entries = [int(e.name) for e in Path("/proc").iterdir() if e.name.isdigit()]
+    except OSError:
+        return {}
+    table = {pid: f for pid in entries if (f := _stat_fields(pid)) is not None}
+    children: dict[int, list[int]] = {}
+    for child, fields in table.items():
+        children.setdefault(int(fields[1]), []).append(child)
+    out = {}
+    for pid in pids:
+        if pid not in table:
+            continue
+        tree, todo = [], [pid]
+        while todo:
+            current = todo.pop()
+            tree.append(table[current])
+            todo += children.get(current, [])
+        # utime and stime: fields 14 and 15 of stat, 12 and 13 after the command name
+        cpu = sum(int(f[11]) + int(f[12]) for f in tree)
+        out[pid] = ProcSample(table[pid][0], cpu, any(f[0] in WORKING for f in tree))
+    return out
+
+
+@dataclass
+class _Progress:
+    cpu_ticks: int
+    since: float  # when it last did some work
+    stopped_since: float | None = None
+
+
+@dataclass(frozen=True)
+class Starting:
+    """A node process during the start-up: its PID, exit code (None while it runs) and
+    whether it has said it is ready."""
+
+    pid: int
+    exit_code: int | None
+    ready: bool
+
+
+class StartWatch:
+    """Why a node process should end the run's start-up, if one should: it exited; it is
+    stopped (SIGSTOP) for ``stopped_s``; not yet ready, it has slept for ``idle_s`` without
+    using CPU time (nor its children: a compiler, QEMU) or being at work; or it is not ready
+    after ``timeout_s`` however busy. A slow start that keeps working (numba compiling in a
+    slow VM) is left alone up to that limit; a ready one waits for the others."""
+
+    def __init__(
+        self,
+        now: float,
+        *,
+        timeout_s: float = START_TIMEOUT_S,
+        stopped_s: float = STOPPED_S,
+        idle_s: float = IDLE_S,
+        sample_s: float = SAMPLE_S,
+        sampler: Callable[[Collection[int]], dict[int, ProcSample]] = sample,
+    ) -> None:
+        self.started = now
+        self.timeout_s, self.stopped_s, self.idle_s = timeout_s, stopped_s, idle_s
+        self.sample_s, self.sampler = sample_s, sampler
+        self._next_sample = now
+        self._seen: dict[int, _Progress] = {}
+
+    def check(self, nodes: dict[str, Starting], now: float) -> tuple[str, str] | None:
+        """The first node that must end the start-up and why, or None."""
+        for name, node in nodes.items():
+            if node.exit_code is not None:
+                return name, f"exited with code {node.exit_code}"
+            if not node.ready and now - self.started > self.timeout_s:
+                return name, f"not ready within {self.timeout_s:g} s"
+        if now < self._next_sample:
+            return None
+        self._next_sample = now + self.sample_s
+        samples = self.sampler([n.pid for n in nodes.values()])
+        for name, node in nodes.items():
+            got = samples.get(node.pid)
+            why = None if got is None else self._judge(node, got, now)
+            if why is not None:
+                return name, why
+        return None
+
+    def _judge(self, node: Starting, got: ProcSample, now: float) -> str | None:
+        seen = self._seen.setdefault(node.pid, _Progress(got.cpu_ticks, now))
+        if got.state in "Tt":
+            if seen.stopped_since is None:
+                seen.stopped_since = now
+            if now - seen.stopped_since >= self.stopped_s:
+                return f"stopped (process state {got.state}) for {now - seen.stopped_since:.1f} s"
+            return None
+        seen.stopped_since = None
+        if node.ready or got.cpu_ticks != seen.cpu_ticks or got.working:
+            seen.cpu_ticks, seen.since = got.cpu_ticks, now
+        elif now - seen.since >= self.idle_s:
+            return f"no progress for {now - seen.since:.1f} s (asleep, using no CPU time)"
         return None

@@ -1,6 +1,7 @@
 """Liveness of a lockstep run over the default udp_multicast bus: a node process stopped without
-dying (SIGSTOP) aborts the run, named, within 5 s of its last frame; SIGTERM to `sil run` ends it
-as Ctrl-C does, with its own reason; no child outlives the run."""
+dying (SIGSTOP) aborts the run, named, within 5 s of its last frame, and one stopped before it is
+ready ends the run within 10 s; a slow start that keeps working is told from a stuck one; SIGTERM
+to `sil run` ends it as Ctrl-C does, with its own reason; no child outlives the run."""
 
 import json
 import os
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from sil.watchdog import Watchdog
+from sil.watchdog import ProcSample, Starting, StartWatch, Watchdog, sample
 
 SCENARIO = """
 duration_s = 3000
@@ -151,3 +152,112 @@ def test_the_watchdog_names_the_node_silent_too_long():
     )
     dog = Watchdog([_Message(1, ["Plant"]), _Message(2, ["ECU"])], now=10.0, silence_s=1.0)
     assert dog.silent({2: 10.5}, now=11.2) == "the plant sent no frame for 1.2 s (stopped or stuck)"
+
+
+def _stopped_before_ready(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, float]:
+    """A lockstep run whose plant process is stopped (SIGSTOP) as soon as it exists, before it
+    is ready; with the time it was stopped."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sil.cli", "run", "start-nominal", "--bus", spec, "--out",
+         str(out), "--no-plots"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not (found := _pids(f"sil.cli plant --bus {spec}")):
+        if time.monotonic() > deadline or proc.poll() is not None:
+            proc.kill()
+            raise AssertionError("no plant process within 60 s")
+        time.sleep(0.01)
+    os.kill(found[0], signal.SIGSTOP)
+    return proc, out, time.monotonic()
+
+
+@pytest.mark.slow
+def test_a_node_stopped_before_it_is_ready_ends_the_run_naming_it(tmp_path):
+    spec = _udp_spec()
+    proc, out, stopped = _stopped_before_ready(tmp_path, spec)
+    assert not (out / ".plant-ready").exists()  # stopped while it was starting
+    try:
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    took = time.monotonic() - stopped
+    assert proc.returncode == 1 and took < 10.0, (took, stderr)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "aborted"
+    assert re.fullmatch(
+        r"plant process did not come up: stopped \(process state T\) for 1\.\d s "
+        r"\(see plant\.log\)",
+        summary["abort_reason"],
+    ), summary["abort_reason"]
+    assert summary["abort_reason"] in stderr
+    assert not _pids(f"--bus {spec}")  # the stopped plant was continued and ended
+
+
+class _Sampler:
+    """/proc as a test sets it: PID -> sample."""
+
+    def __init__(self) -> None:
+        self.now: dict[int, ProcSample] = {}
+
+    def __call__(self, pids):
+        return {pid: self.now[pid] for pid in pids if pid in self.now}
+
+
+def _watch(sampler: _Sampler) -> StartWatch:
+    return StartWatch(0.0, timeout_s=300.0, stopped_s=1.0, idle_s=5.0, sample_s=0.0,
+                      sampler=sampler)  # fmt: skip
+
+
+def test_a_slow_start_that_keeps_working_is_left_alone_up_to_the_limit():
+    sampler = _Sampler()
+    watch = _watch(sampler)
+    for t in range(0, 300, 2):  # numba compiling for minutes: its CPU time advances
+        sampler.now[1] = ProcSample("S", t, working=False)
+        assert watch.check({"plant": Starting(1, None, False)}, float(t)) is None
+    sampler.now[1] = ProcSample("R", 400, working=True)
+    assert watch.check({"plant": Starting(1, None, False)}, 301.0) == (
+        "plant",
+        "not ready within 300 s",
+    )
+
+
+def test_a_start_that_sleeps_is_stuck_and_a_stopped_one_stopped():
+    sampler = _Sampler()
+    watch = _watch(sampler)
+    nodes = {"ecu": Starting(2, None, True), "plant": Starting(1, None, False)}
+    sampler.now = {1: ProcSample("S", 50, False), 2: ProcSample("S", 9, False)}
+    for t in (0.0, 2.0, 4.9):  # the ready ECU sleeps waiting for the plant: that is its job
+        assert watch.check(nodes, t) is None
+    sampler.now[1] = ProcSample("S", 50, True)  # a child compiling, or reading the disk
+    assert watch.check(nodes, 5.5) is None
+    sampler.now[1] = ProcSample("S", 50, False)
+    assert watch.check(nodes, 10.0) is None
+    assert watch.check(nodes, 10.6) == (
+        "plant",
+        "no progress for 5.1 s (asleep, using no CPU time)",
+    )
+    watch = _watch(sampler)
+    sampler.now[2] = ProcSample("T", 9, False)  # stopped: ready or not, it ends the start-up
+    assert watch.check(nodes, 0.0) is None
+    assert watch.check(nodes, 1.2) == ("ecu", "stopped (process state T) for 1.2 s")
+    exited = {"ecu": Starting(2, None, True), "plant": Starting(1, 2, False)}
+    assert _watch(sampler).check(exited, 0.0) == ("plant", "exited with code 2")
+
+
+def test_proc_shows_a_sleeping_and_a_stopped_process():
+    child = subprocess.Popen(["sleep", "30"])
+    try:
+        time.sleep(0.2)
+        got = sample([child.pid, 2**22 + 1])
+        assert set(got) == {child.pid}  # no such PID: left out
+        assert got[child.pid].state == "S" and not got[child.pid].working
+        os.kill(child.pid, signal.SIGSTOP)
+        time.sleep(0.2)
+        assert sample([child.pid])[child.pid].state == "T"
+        # a process's own figures include its children's: this test's includes the sleep's
+        assert sample([os.getpid()])[os.getpid()].cpu_ticks >= 0
+    finally:
+        child.kill()
+        child.wait()
