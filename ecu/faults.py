@@ -95,6 +95,15 @@ def egt_open_check(s: EcuState, p: FirmwareParams, egt_dk: int) -> int:
     return EGT_OPEN if s.egt_open_cnt >= p.egt_fault_ticks else 0
 
 
+def valid_readings(p: FirmwareParams, rpm: int, egt_dk: int) -> int:
+    """The sensors whose fresh reading is plausible (ecu.firmware SEEN_* bits: 1 speed, 2 EGT):
+    speed within its valid range, EGT not railed as an open thermocouple reads."""
+    seen = 1 if 0 <= rpm <= p.speed_valid_max_rpm else 0
+    if p.egt_open_low_dk <= egt_dk <= p.egt_open_high_dk:
+        seen |= 2
+    return seen
+
+
 def pump_health_pm(lambda_q24: int, lambda_comm_q24: int) -> int:
     """Pump health in 0.1 % of the commissioning Lambda (eq. 4.3: fuel flow per volt)."""
     return div_trunc(lambda_q24 * 1000, lambda_comm_q24)

@@ -53,6 +53,10 @@ E2E_NONEWDATA = 4
 
 RPM_PER_PCT = 1125  # 112,500 rpm = 100 %N
 AGE_MAX = 1 << 30
+# EcuState.inputs_seen: the sensors that gave a valid reading since power-up
+SEEN_SPEED = 1
+SEEN_EGT = 2
+SEEN_ALL = SEEN_SPEED | SEEN_EGT
 TRIP_FAULT = F.OVERSPEED | F.EGT_OVERTEMP | F.PUMP_STALL | F.PUMP_DRY
 
 
@@ -105,6 +109,7 @@ class EcuOutputs:
         "igniter",  # igniter power bit
         "seq_state",  # start/stop sequencer state (ecu.start_sequencer)
         "seq_reason",  # the last start's abort reason (ecu.start_sequencer, 0: none)
+        "inputs_valid",  # 1 once valid speed and EGT readings came since power-up
     )  # fmt: skip
 
     def __init__(self) -> None:
@@ -184,14 +189,18 @@ class Ecu:
             egt_lead_step(s, p, i.egt_dk)
             s.egt_dk = i.egt_dk
             faults |= F.egt_open_check(s, p, i.egt_dk)
+            s.inputs_seen |= F.valid_readings(p, i.speed_rpm, i.egt_dk)
         else:
             s.sensor_age = s.sensor_age + 1 if s.sensor_age < AGE_MAX else AGE_MAX
             faults |= F.SENSOR_FRAME_LOST
         if faults & (F.SPEED_RANGE | F.SPEED_RATE | F.SPEED_STUCK):
             s.speed_failed = 1
         speed_ok = 1 if (s.speed_failed == 0 and s.sensor_age == 0) else 0
+        inputs_valid = 1 if s.inputs_seen == SEEN_ALL else 0
         if speed_ok:
             n_rpm = s.speed_rpm
+        elif not s.inputs_seen & SEEN_SPEED:
+            n_rpm = 0  # no reading since power-up: nothing to substitute (not the trim speed)
         else:
             n_rpm = ((s.obs_n_q24 + p.trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24
             if s.speed_failed:
@@ -296,19 +305,25 @@ class Ecu:
             running = 1 if s.seq_state == Q.RUN else 0
             if (s.stop or not s.arm or trip_shutdown) and not start_abort:
                 s.seq_reason = Q.STOPPED
+        demand_fresh = 1 if s.demand_age <= p.demand_hold_ticks else 0
+        if not s.arm:
+            s.rearm_wait = 0
         new_mode = M.next_mode(
             mode,
             s.arm,
             s.stop,
             running,
-            1 if s.demand_age <= p.demand_hold_ticks else 0,
+            demand_fresh,
             trip_fault,
             1 if (trip_shutdown or start_abort) else 0,
             1 if n_rpm < p.shutdown_done_rpm else 0,
             1 if (start_abort or s.seq_state >= Q.IGNITION) else 0,
             relight,
             1 if (Q.cooled(s, p) or not p.start_on) else 0,
+            1 if (inputs_valid and demand_fresh and not s.rearm_wait) else 0,
         )
+        if (mode == M.ARMED or mode == M.RUN) and new_mode != M.ARMED and new_mode != M.RUN:
+            s.rearm_wait = s.arm  # a start is never retried by itself: the arm must drop first
         if new_mode == M.ARMED and mode != M.ARMED and p.start_on:  # a start or a relight
             if mode == M.RUN:
                 s.relights += 1
@@ -453,4 +468,5 @@ class Ecu:
         o.igniter = seq.igniter
         o.seq_state = s.seq_state
         o.seq_reason = s.seq_reason
+        o.inputs_valid = inputs_valid
         return o

@@ -2,7 +2,10 @@
 
 - OFF: pump off. Arm request (and no stop request) -> ARMED; or straight to RUN when the engine
   is already running with a valid demand (warm start: the ECU was reset, or a SIL run starts
-  at a trim point, and resumes control without cutting the fuel).
+  at a trim point, and resumes control without cutting the fuel). Neither before the ECU is
+  ready: valid speed and EGT readings since power-up, a fresh demand, and, after a start or a
+  run that ended with the arm request held, that request released once (no start is retried
+  by itself). So RUN always follows real readings: a flameout needs a real running history.
 - ARMED: the start sequencer (ecu.start_sequencer, with ``start_on``) starts the engine from
   rest; at idle with a valid demand (not older than the hold time) -> RUN. Without the
   sequencer, pump off, waiting for an external starter to bring the engine to ``run_entry_pct``.
@@ -39,17 +42,19 @@ def next_mode(
     fuelled: int = 0,
     relight: int = 0,
     cooled: int = 1,
+    ready: int = 1,
 ) -> int:
     """The mode for this tick from the last mode and this tick's conditions. With the start
     sequencer: fuelled, the start has put fuel in (leaving ARMED then goes through SHUTDOWN and
     its cool-down); relight, a flameout in RUN goes back to ARMED to relight; cooled, the
-    cool-down is done (SHUTDOWN -> OFF waits for it)."""
+    cool-down is done (SHUTDOWN -> OFF waits for it); ready, the ECU may leave OFF (valid
+    readings, a fresh demand, no arm request left over from the last start)."""
     if mode == FAULT:
         return FAULT
     if trip_fault and (mode == ARMED or mode == RUN):
         return FAULT
     if mode == OFF:
-        if not arm or stop:
+        if not arm or stop or not ready:
             return OFF
         return RUN if running and demand_fresh else ARMED
     if mode == ARMED:

@@ -262,6 +262,7 @@ class EcuNode:
             raw[2] = _clamp(o.pump_health_pm, 0, 4095)
             raw[3] = o.owner
             raw[4] = _clamp(o.nref_cpct, 0, 15000)
+            raw[5] = o.inputs_valid
             self.status.pack_raw(raw)
             send(self.status.frame_id, self.status.data)
         if k % self.every_telemetry == 0:

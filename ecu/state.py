@@ -59,6 +59,9 @@ class EcuState:
         "pump_stall_cnt", "pump_dry_cnt",
         # speed sensor failed (latched) and how many speed samples the history holds
         "speed_failed", "speed_seen",
+        # which sensors gave a valid reading since power-up (SEEN_* bits); a start or run that
+        # ended with the arm request held waits for its release before the next (1)
+        "inputs_seen", "rearm_wait",
         # start/stop sequencer (ecu.start_sequencer): state, abort reason, ticks in the state,
         # pump voltage, the light-off detector's reference EGT (0.1 K in Q8), relights since the
         # last start, commands of this tick, the start's EGT target on the day (0.1 K)

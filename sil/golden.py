@@ -241,14 +241,32 @@ def _start_stop_script(o: EcuOutputs, engine: StartEngine, cmd: dict[str, int]) 
     def aborted(reason: int) -> Callable[[], bool]:
         return lambda: o.seq_reason == reason
 
-    yield from hold(10, arm=0, stop=0)
+    def still_off(why: str) -> None:
+        if o.mode != modes.OFF:
+            raise RuntimeError(f"scripted start/stop: {why}, yet mode {modes.NAMES[o.mode]}")
+
+    # power-up with no sensor frame yet, the arm held: no readings, no speed, the arm refused
+    yield from hold(20, arm=1, stop=0, sensors=0)
+    still_off("armed before any sensor reading")
+    yield from hold(10, arm=0, sensors=1)
     # the starter turns nothing: STARTER_FAILURE, SHUTDOWN (DONE at once: cold), OFF
     engine.starter_ok = False
     yield from until(aborted(seq.STARTER_FAILURE), arm=1)
     yield from until(is_mode(modes.OFF), arm=0)
     engine.starter_ok = True
+    # stopped in the spin-up with the arm held (STOPPED, OFF at once); the stop released with the
+    # arm still held: no new start until the arm is released
+    yield from until(is_state(seq.SPIN_UP), arm=1)
+    yield from hold(5)
+    yield from until(is_mode(modes.OFF), stop=1)
+    yield from hold(20, stop=0)
+    still_off("a stopped start retried by itself")
+    # no demand frames: the arm refused
+    yield from hold(30, arm=0)
+    yield from hold(30, arm=1, demand=0)
+    still_off("armed without a demand")
     # from rest: SPIN_UP, IGNITION, RAMP, STABILISE, RUN at 45 %N
-    yield from until(is_mode(modes.RUN), arm=1)
+    yield from until(is_mode(modes.RUN), arm=1, demand=1)
     yield from hold(40)
     # a flameout in RUN: relight (ARMED, IGNITION with the rotor still turning), RUN again
     engine.flame_out()
@@ -318,7 +336,9 @@ def record_start_stop(ticks: int) -> Golden:
     """Scripted starts and stops through the start/stop sequencer, on :class:`StartEngine`
     (the sequencer's timeouts cut short: START_STOP_PARAMS).
 
-    The starter fails (STARTER_FAILURE); a start from rest through SPIN_UP, IGNITION, RAMP,
+    Power-up with no sensor frames (the arm refused); the starter fails (STARTER_FAILURE); a
+    start stopped with the arm held, not retried; the arm refused without demand frames; a start
+    from rest through SPIN_UP, IGNITION, RAMP,
     STABILISE to RUN; a flameout in RUN and its relight; a stop through SPOOL_DOWN, COOL_DOWN,
     DONE, a heat soak-back (COOL_DOWN again) and OFF; no light-off (IGNITION_TIMEOUT); released
     in the spin-up and stopped in the ignition (STOPPED); a hot start (HOT_START) whose
@@ -329,7 +349,7 @@ def record_start_stop(ticks: int) -> Golden:
     ecu = RecordingEcu(p)
     o = ecu.out
     engine = StartEngine()
-    cmd = {"arm": 0, "stop": 0}
+    cmd = {"arm": 0, "stop": 0, "sensors": 1, "demand": 1}
     script = _start_stop_script(o, engine, cmd)
     i = EcuInputs()
     dt = 1.0 / p.rate_hz
@@ -344,9 +364,9 @@ def record_start_stop(ticks: int) -> Golden:
         i.demand_cpct = 4500
         i.open_loop_mv = 0
         i.arm, i.stop = cmd["arm"], cmd["stop"]
-        i.sensor_status = E2E_OK
+        i.sensor_status = E2E_OK if cmd["sensors"] else E2E_NONEWDATA
         i.analog_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
-        i.demand_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        i.demand_status = E2E_OK if k % 5 == 0 and cmd["demand"] else E2E_NONEWDATA
         ecu.tick(i)
         engine.step(o, dt)
     return Golden("start-stop", compile_params(p), ecu.rows)

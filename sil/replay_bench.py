@@ -18,7 +18,7 @@ def _write_log(path: Path, frames: int, rate_hz: float) -> None:
     values = {
         "PlantSensors": [0, 100_000, 1000.0],
         "EcuActuator": [1, 2, 0, 40.0, 5.0],
-        "EcuStatus": [2, 0, 100.0, 0, 90.0],
+        "EcuStatus": [2, 0, 100.0, 0, 90.0, 1],
         "PlantTruthA": [0, 0, 0, 0, 3e5, 1.6e5, 1159],
     }
     writer = CandumpWriter(path)

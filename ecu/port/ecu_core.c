@@ -104,6 +104,11 @@ static int32_t mul_q24(ecu_t *e, int32_t a, int32_t b)
                      F_ANALOG_FRAME_LOST | F_PUMP_HEALTH)
 #define F_TRIP (F_OVERSPEED | F_EGT_OVERTEMP | F_PUMP_STALL | F_PUMP_DRY)
 
+/* ecu_state_t.inputs_seen: the sensors that gave a valid reading since power-up */
+#define SEEN_SPEED 1
+#define SEEN_EGT 2
+#define SEEN_ALL (SEEN_SPEED | SEEN_EGT)
+
 static int32_t persist(int32_t count, int bad, int32_t limit)
 {
     if (bad) {
@@ -149,6 +154,17 @@ static int32_t egt_open_check(ecu_t *e, int32_t egt_dk)
     int bad = egt_dk > p->egt_open_high_dk || egt_dk < p->egt_open_low_dk;
     e->s.egt_open_cnt = persist(e->s.egt_open_cnt, bad, p->egt_fault_ticks);
     return e->s.egt_open_cnt >= p->egt_fault_ticks ? F_EGT_OPEN : 0;
+}
+
+/* the sensors whose fresh reading is plausible (SEEN_*): speed in its valid range, EGT not
+   railed as an open thermocouple reads */
+static int32_t valid_readings(const ecu_params_t *p, int32_t rpm, int32_t egt_dk)
+{
+    int32_t seen = rpm >= 0 && rpm <= p->speed_valid_max_rpm ? SEEN_SPEED : 0;
+    if (egt_dk >= p->egt_open_low_dk && egt_dk <= p->egt_open_high_dk) {
+        seen |= SEEN_EGT;
+    }
+    return seen;
 }
 
 /* ---- ecu/pump_driver.py -------------------------------------------------------------------- */
@@ -682,7 +698,7 @@ static void rate_filter_step(ecu_t *e, int32_t dn, int32_t u, int valid)
 
 static int32_t next_mode(int32_t mode, int arm, int stop, int running, int demand_fresh,
                          int trip_fault, int trip_shutdown, int spooled_down, int fuelled,
-                         int relight, int cooled)
+                         int relight, int cooled, int ready)
 {
     if (mode == ECU_FAULT) {
         return ECU_FAULT;
@@ -691,7 +707,7 @@ static int32_t next_mode(int32_t mode, int arm, int stop, int running, int deman
         return ECU_FAULT;
     }
     if (mode == ECU_OFF) {
-        if (!arm || stop) {
+        if (!arm || stop || !ready) {
             return ECU_OFF;
         }
         return running && demand_fresh ? ECU_RUN : ECU_ARMED;
@@ -988,6 +1004,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     int32_t n_rpm, n_q24, dn, rate, ctrl_rate, demand, new_mode, pump_mv, duty, enable, health;
     int32_t seq_v, start_abort;
     int speed_ok, egt_ok, analog_fresh, running, trip_fault, trip_shutdown, flameout, relight;
+    int inputs_valid, demand_fresh;
     int64_t pending;
 
     s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
@@ -1002,6 +1019,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         egt_lead_step(e, in->egt_dk);
         s->egt_dk = in->egt_dk;
         faults |= egt_open_check(e, in->egt_dk);
+        s->inputs_seen |= valid_readings(p, in->speed_rpm, in->egt_dk);
     } else {
         s->sensor_age = age(s->sensor_age);
         faults |= F_SENSOR_FRAME_LOST;
@@ -1010,8 +1028,11 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         s->speed_failed = 1;
     }
     speed_ok = s->speed_failed == 0 && s->sensor_age == 0;
+    inputs_valid = s->inputs_seen == SEEN_ALL;
     if (speed_ok) {
         n_rpm = s->speed_rpm;
+    } else if (!(s->inputs_seen & SEEN_SPEED)) {
+        n_rpm = 0; /* no reading since power-up: nothing to substitute (not the trim speed) */
     } else {
         n_rpm = (int32_t)((((int64_t)s->obs_n_q24 + p->trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24);
         if (s->speed_failed) {
@@ -1127,10 +1148,18 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
             s->seq_reason = ECU_ABORT_STOPPED;
         }
     }
-    new_mode = next_mode(mode, s->arm, s->stop, running, s->demand_age <= p->demand_hold_ticks,
-                         trip_fault, trip_shutdown || start_abort, n_rpm < p->shutdown_done_rpm,
+    demand_fresh = s->demand_age <= p->demand_hold_ticks;
+    if (!s->arm) {
+        s->rearm_wait = 0;
+    }
+    new_mode = next_mode(mode, s->arm, s->stop, running, demand_fresh, trip_fault,
+                         trip_shutdown || start_abort, n_rpm < p->shutdown_done_rpm,
                          start_abort || s->seq_state >= ECU_SEQ_IGNITION, relight,
-                         cooled(e) || !p->start_on);
+                         cooled(e) || !p->start_on,
+                         inputs_valid && demand_fresh && !s->rearm_wait);
+    if ((mode == ECU_ARMED || mode == ECU_RUN) && new_mode != ECU_ARMED && new_mode != ECU_RUN) {
+        s->rearm_wait = s->arm; /* a start is never retried by itself: the arm must drop first */
+    }
     if (new_mode == ECU_ARMED && mode != ECU_ARMED && p->start_on) { /* a start or a relight */
         if (mode == ECU_RUN) {
             s->relights++;
@@ -1290,6 +1319,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     o->igniter = s->igniter;
     o->seq_state = s->seq_state;
     o->seq_reason = s->seq_reason;
+    o->inputs_valid = inputs_valid;
     return o;
 }
 

@@ -143,7 +143,7 @@ enum {
     X(arm) X(stop) X(sensor_age) X(analog_age) X(demand_age) \
     X(speed_range_cnt) X(speed_rate_cnt) X(speed_stuck_cnt) X(speed_stuck_v_q24) \
     X(egt_open_cnt) X(egt_over_cnt) X(overspeed_cnt) X(flameout_cnt) X(flame_egt_cnt) \
-    X(pump_stall_cnt) X(pump_dry_cnt) X(speed_failed) X(speed_seen) \
+    X(pump_stall_cnt) X(pump_dry_cnt) X(speed_failed) X(speed_seen) X(inputs_seen) X(rearm_wait) \
     X(seq_state) X(seq_reason) X(seq_timer) X(seq_v_q24) X(seq_egt_ref_q8) X(relights) \
     X(starter_cpct) X(igniter) X(seq_target_dk) X(ncor_k_q24) \
     X(mode) X(faults) X(sat_events) X(ticks)
@@ -181,7 +181,8 @@ enum {
     X(starter_cpct)   /* starter PWM duty, 0.01 % (0..10000) */ \
     X(igniter)        /* igniter power bit */ \
     X(seq_state)      /* start/stop sequencer state (ECU_SEQ_*) */ \
-    X(seq_reason)     /* the last start's abort reason (ECU_ABORT_*, 0: none) */
+    X(seq_reason)     /* the last start's abort reason (ECU_ABORT_*, 0: none) */ \
+    X(inputs_valid)   /* 1 once valid speed and EGT readings came since power-up */
 
 #define ECU_X_FIELD(name) int32_t name;
 #define ECU_A_FIELD(name, n) int32_t name[n];

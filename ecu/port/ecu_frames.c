@@ -169,6 +169,7 @@ void ecu_frames_status(ecu_frames_t *f, const ecu_outputs_t *o, uint8_t data[8])
     m.pump_health = (uint16_t)sat_raw(o->pump_health_pm, 0, 4095);
     m.loop_owner = (uint8_t)sat_raw(o->owner, 0, 4);
     m.reference_speed = (uint16_t)sat_raw(o->nref_cpct, 0, 15000);
+    m.sensors_valid = (uint8_t)sat_raw(o->inputs_valid, 0, 1);
     (void)turbojet_ecu_status_pack(data, &m, 8u);
     protect(f, TX_STATUS, data);
 }

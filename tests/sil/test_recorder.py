@@ -23,7 +23,7 @@ def _tick(
     for name, values in (
         ("PlantTruthB", [0.008, 170.0, rpm + 50]),
         ("PlantSensors", [k, rpm, 1030.0]),
-        ("EcuStatus", [2, fault, 100.0, owner, ref]),
+        ("EcuStatus", [2, fault, 100.0, owner, ref, 1]),
         ("EcuTelemetry", [2, 4.8 + k * 0.001]),
         ("EcuActuator", [1, 2, k, 50.0, 6.0]),
     ):
@@ -108,7 +108,7 @@ def test_frames_arriving_out_of_order_are_logged_in_canonical_order(tmp_path):
     for k in range(3):
         for name, values in (
             ("PlantSensors", [k, 100_000, 1000.0]),
-            ("EcuStatus", [2, 0, 100.0, 0, 90.0]),
+            ("EcuStatus", [2, 0, 100.0, 0, 90.0, 1]),
             ("EcuActuator", [1, 2, k, 50.0, 6.0]),
         ):
             m = codec[name]
@@ -166,7 +166,7 @@ def _messy_stream(seed: int) -> list[tuple[int, bytes]]:
             ("PlantAnalog", [k, 22.0 + rng.random(), 2.1], plant),
             ("PlantSensors", [k, 100_000 + rng.randint(0, 999), 1000 + rng.random() * 50], plant),
             ("Demand", [1, 0, rng.uniform(70, 100), 0.0, (k + 5) % 65536], command),
-            ("EcuStatus", [2, rng.choice([0, 1 << 14]), 100.0, rng.randint(0, 2), 89.0], ecu),
+            ("EcuStatus", [2, rng.choice([0, 1 << 14]), 100.0, rng.randint(0, 2), 89.0, 1], ecu),
             ("EcuTelemetry", [rng.randint(0, 12), rng.uniform(-10, 10)], ecu),
             ("EcuActuator", [1, 2, k, rng.uniform(0, 100), 6.0], ecu),
         ):
@@ -236,7 +236,7 @@ def test_a_corrupted_frame_is_logged_but_never_decoded(tmp_path):
     rec = Recorder(tmp_path, rx, period_s=0.01)
     _tick(codec, rec, 0, rpm=100_000, ref=90.0)
     status = codec["EcuStatus"]
-    status.pack([2, 0, 100.0, 0, 80.0])
+    status.pack([2, 0, 100.0, 0, 80.0, 1])
     bad = bytearray(status.data)
     bad[7] ^= 0x10  # ReferenceSpeed changed, CRC not: WRONGCRC
     sensors, actuator = codec["PlantSensors"], codec["EcuActuator"]

@@ -627,7 +627,8 @@ int turbojet_ecu_status_pack(
     dst_p[5] |= pack_right_shift_u16(src_p->pump_health, 8u, 0x0fu);
     dst_p[5] |= pack_left_shift_u8(src_p->loop_owner, 4u, 0xf0u);
     dst_p[6] |= pack_left_shift_u16(src_p->reference_speed, 0u, 0xffu);
-    dst_p[7] |= pack_right_shift_u16(src_p->reference_speed, 8u, 0xffu);
+    dst_p[7] |= pack_right_shift_u16(src_p->reference_speed, 8u, 0x7fu);
+    dst_p[7] |= pack_left_shift_u8(src_p->sensors_valid, 7u, 0x80u);
 
     return (8);
 }
@@ -713,6 +714,16 @@ bool turbojet_ecu_status_reference_speed_is_in_range(uint16_t value)
 bool turbojet_ecu_status_reference_speed_is_in_phys_range(double value)
 {
     return ((value >= 0.0) && (value <= 150.0));
+}
+
+bool turbojet_ecu_status_sensors_valid_is_in_range(uint8_t value)
+{
+    return (value <= 1u);
+}
+
+bool turbojet_ecu_status_sensors_valid_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 1.0));
 }
 
 int turbojet_ecu_telemetry_pack(

@@ -170,6 +170,7 @@ extern "C" {
 #define TURBOJET_ECU_STATUS_PUMP_HEALTH_NAME "PumpHealth"
 #define TURBOJET_ECU_STATUS_LOOP_OWNER_NAME "LoopOwner"
 #define TURBOJET_ECU_STATUS_REFERENCE_SPEED_NAME "ReferenceSpeed"
+#define TURBOJET_ECU_STATUS_SENSORS_VALID_NAME "SensorsValid"
 #define TURBOJET_ECU_TELEMETRY_TELEMETRY_CRC_NAME "Telemetry_CRC"
 #define TURBOJET_ECU_TELEMETRY_TELEMETRY_COUNTER_NAME "Telemetry_Counter"
 #define TURBOJET_ECU_TELEMETRY_TELEMETRY_INDEX_NAME "TelemetryIndex"
@@ -507,6 +508,15 @@ struct turbojet_ecu_status_t {
      * Offset: 0
      */
     uint16_t reference_speed;
+
+    /**
+     * 1 once the ECU has had valid speed and EGT readings since power-up; until then it reports no speed, stays OFF and refuses to arm.
+     *
+     * Range: 0..1 (0..1 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint8_t sensors_valid;
 };
 
 /**
@@ -1626,6 +1636,28 @@ bool turbojet_ecu_status_reference_speed_is_in_range(uint16_t value);
  * @return true if in range, false otherwise.
  */
 bool turbojet_ecu_status_reference_speed_is_in_phys_range(double value);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_status_sensors_valid_is_in_range(uint8_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_ecu_status_sensors_valid_is_in_phys_range(double value);
 
 /**
  * Pack message EcuTelemetry.
