@@ -250,9 +250,8 @@ class EcuNode:
         if self.demand_pending:
             self._apply_demand()
         i.tick = self.tick
-        if self.service is not None:
-            self.service.poll(i)
-        o = self.ecu.tick(i)
+        # the service port may be the demand source (a bench): it gives the inputs to take
+        o = self.ecu.tick(i if self.service is None else self.service.poll(i))
         i.sensor_status = i.analog_status = i.demand_status = E2E_NONEWDATA
         k = self.ticks
         if k % self.every_status == 0:

@@ -36,19 +36,34 @@ FIELDS: tuple[tuple[str, str, float], ...] = (
     ("kf1", "", Q24),
     ("kf2", "", Q24),
     ("sat_events", "", 1.0),
+    ("inputs_valid", "", 1.0),  # 1 once valid speed and EGT readings came since power-up
+    ("seq_state", "", 1.0),  # start/stop sequencer step (ecu.start_sequencer.NAMES)
+    ("seq_reason", "", 1.0),  # the last start's abort reason (ecu.start_sequencer.REASONS)
+    ("seq_time", "s", 0.001),  # time in the step
+    ("starter", "%", 0.01),
+    ("igniter", "", 1.0),
+    ("egt_start_limit", "K", 0.1),  # a start over it aborts (HOT_START)
+    ("egt_start_target", "K", 0.1),  # the start's EGT target on the day
+    ("demand", "%N", 0.01),  # the speed demand in force
+    ("demand_source", "", 1.0),  # ecu.service.bench_demand: CAN, BENCH or NONE
 )
 NAMES = tuple(name for name, _, _ in FIELDS)
 
 
-def sample(ecu) -> list[int]:
-    """The record of the ECU's last tick (``ecu.out`` and ``ecu.s``), in :data:`FIELDS` order."""
+def sample(ecu, demand_source: int) -> list[int]:
+    """The record of the ECU's last tick (``ecu.out``, ``ecu.s``, ``ecu.p``), in :data:`FIELDS`
+    order, with the demand source the service port knows."""
     o = ecu.out
     s = ecu.s
+    p = ecu.p
     return [
         s.ticks, o.mode, o.fault_word, o.n_cpct, s.speed_rpm, o.nref_cpct, s.egt_dk, o.pump_mv,
         o.duty_cpct, o.pump_enable, s.supply_mv, s.pump_ma, o.pump_health_pm, o.owner,
         o.ap21_q24, o.ap22_q24, o.lambda_q24, o.theta21_q24, o.theta22_q24,
         o.kx1_q24, o.kx2_q24, o.kr_q24, o.kf1_q24, o.kf2_q24, o.sat_events,
+        o.inputs_valid, o.seq_state, o.seq_reason, s.seq_timer * 1000 // p.rate_hz,
+        o.starter_cpct, o.igniter, p.seq_hot_dk, s.seq_target_dk,
+        (s.demand_q24 * 100 + (1 << 23)) >> 24, demand_source,
     ]  # fmt: skip
 
 

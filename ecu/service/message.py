@@ -42,6 +42,7 @@ class Service(IntEnum):
     UNLOCK_KEY = 0x31  # {"key": k} -> {"unlocked": true, "timeout_s"}
     ARM = 0x40  # arm request (needs the unlock)
     STOP = 0x41  # stop request, latched until ARM; always allowed
+    THROTTLE = 0x42  # {"pct": x} -> the bench's speed demand, %N (needs the unlock)
 
 
 class Status(IntEnum):
@@ -57,6 +58,7 @@ class Status(IntEnum):
     BAD_KEY = 9
     BUSY = 10  # a flash write is in progress
     STORAGE = 11  # no flash image, or it cannot be read or written
+    REFUSED = 12  # the ECU's state does not allow it now (the answer says why)
 
 
 UNLOCK_SECRET = b"turbojet-sil service"

@@ -10,11 +10,15 @@ transmit buffer are dropped and counted (stream samples first: they are never qu
 the buffer). The time each poll takes is measured: ``worst_s`` is the longest in wall time (it
 includes any preemption by the operating system), ``worst_cpu_s`` the most CPU time.
 
-Writes, saves, clearing the log and arming need an unlocked session: the tool asks for a seed
-and answers with :func:`ecu.service.message.unlock_key`; the session lasts ``SESSION_S`` of ECU
-time after the last request. A stop request is always accepted and holds the stop input until an
-arm request (or a power cycle). A request repeated with the same sequence number and service
-(the client's retry after a lost answer) is answered again without being run twice.
+Writes, saves, clearing the log, arming and the throttle need an unlocked session: the tool asks
+for a seed and answers with :func:`ecu.service.message.unlock_key`; the session lasts
+``SESSION_S`` of ECU time after the last request. A stop request is always accepted and holds
+the stop input until an arm request (or a power cycle). Arm and throttle make the port the demand
+source while no CAN Demand is present (:mod:`ecu.service.bench_demand`); while one is, an arm
+only releases a held stop and the throttle is refused. An arm the firmware would not take (no
+valid readings yet, a latched FAULT, a cool-down under way) is refused with the reason. A
+request repeated with the same sequence number and service (the client's retry after a lost
+answer) is answered again without being run twice.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from typing import Any
 from ecu import modes as M
 from ecu.firmware import Ecu, EcuInputs
 from ecu.params import EcuParams
+from ecu.service import bench_demand as BD
 from ecu.service import fault_log as FL
 from ecu.service import live
 from ecu.service.framing import FrameDecoder, encode_frame
@@ -57,7 +62,7 @@ PENDING_MAX = 16  # decoded requests waiting for a later tick
 TX_BUFFER = 4096  # bytes of frames waiting for the line
 MAX_TX_BYTES = 1024  # handed to the line per tick
 SESSION_S = 10.0
-FAULT_PAGE = 4  # fault-log entries per response
+FAULT_PAGE = 3  # fault-log entries per response (with extreme values, one fits a frame)
 ERROR_MAX_BYTES = 200  # of an error text: with the header and map it fits a frame
 MIN_STREAM_HZ = 0.1
 REPEAT_S = 2.0  # a request repeated (same sequence and service) within this is not run again
@@ -185,7 +190,9 @@ class ServicePort:
             Service.UNLOCK_KEY: self._unlock_key,
             Service.ARM: self._arm,
             Service.STOP: self._stop,
+            Service.THROTTLE: self._throttle,
         }
+        self.bench = BD.BenchDemand(ecu.p)
         snapshot = self._snapshot()
         if boot_state.state == "defaults":
             self.fault_log.record(0, FL.PARAMS_DEFAULTS, snapshot)
@@ -193,10 +200,11 @@ class ServicePort:
             self.fault_log.record(0, FL.PARAMS_REJECTED, snapshot)
 
     # -- the per-tick task -------------------------------------------------------------------
-    def poll(self, inputs: EcuInputs, ticking: bool = True) -> None:
-        """Service the port once, before the firmware tick that takes ``inputs``; with
-        ``ticking`` False between no ticks (the engine stopped: a lockstep ECU with no plant
-        yet), when requests are answered but no live sample is due and the poll is not
+    def poll(self, inputs: EcuInputs, ticking: bool = True) -> EcuInputs:
+        """Service the port once, before the firmware tick that takes ``inputs``; returns the
+        inputs the tick takes (with the bench's demand while the port is the demand source).
+        With ``ticking`` False between no ticks (the engine stopped: a lockstep ECU with no
+        plant yet), requests are answered but no live sample is due and the poll is not
         counted."""
         t0 = self._clock()
         cpu0 = self._cpu_clock()
@@ -212,10 +220,15 @@ class ServicePort:
         for _ in range(min(MAX_REQUESTS, len(self._pending))):
             if self._handle(self._pending.popleft()) == Service.PARAM_WRITE:
                 break  # a write recompiles the parameters: the only one this tick
-        if self._stop_held:
-            inputs.stop = 1
-            self.ecu.s.stop = 1
         ecu = self.ecu
+        ticked = inputs
+        if ticking:
+            ticked, switched = self.bench.step(inputs, ecu.out.mode, ecu.s.rearm_wait)
+            if switched is not None:
+                self._log_source(switched)
+        if self._stop_held and not self.bench.engaged:
+            inputs.stop = 1
+            ecu.s.stop = 1
         self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot(), ecu.out.seq_reason)
         if ticking and self._stream_every and c.polls % self._stream_every == 0:
             self._send_stream()
@@ -226,7 +239,7 @@ class ServicePort:
             del self._tx[:n]
             c.tx_bytes += n
         if not ticking:
-            return
+            return inputs
         c.polls += 1
         dt = self._clock() - t0
         cpu = self._cpu_clock() - cpu0
@@ -236,6 +249,11 @@ class ServicePort:
             c.worst_s = dt
         if cpu > c.worst_cpu_s:
             c.worst_cpu_s = cpu
+        return ticked
+
+    def _log_source(self, source: int) -> None:
+        code = FL.DEMAND_SOURCE_CAN if source == BD.CAN else FL.DEMAND_SOURCE_BENCH
+        self.fault_log.record(self.ecu.s.ticks, code, self._snapshot())
 
     def _snapshot(self) -> tuple[int, ...]:
         o = self.ecu.out
@@ -268,7 +286,11 @@ class ServicePort:
     def _send_stream(self) -> None:
         self._stream_seq = (self._stream_seq + 1) & 0xFFFF
         msg = Message(
-            Kind.STREAM, self._stream_seq, Service.STREAM, Status.OK, live.sample(self.ecu)
+            Kind.STREAM,
+            self._stream_seq,
+            Service.STREAM,
+            Status.OK,
+            live.sample(self.ecu, self.bench.source),
         )
         self._queue(encode_frame(pack(msg)), TX_BUFFER // 2)
         self.counters.stream_samples += 1
@@ -464,13 +486,51 @@ class ServicePort:
         self._session_until = self.counters.polls + round(SESSION_S * self.rate_hz)
         return {"unlocked": True, "timeout_s": SESSION_S}
 
+    def _take_demand(self, what: str) -> None:
+        """Make the bench the demand source for ``what`` (refused while a CAN Demand is)."""
+        bench = self.bench
+        if bench.can_present:
+            raise ServiceError(
+                Status.REFUSED,
+                f"{what}: CAN Demand frames are the demand source (they win while present)",
+            )
+        if bench.engage(self.ecu.out.mode, (self.ecu.s.demand_q24 * 100 + (1 << 23)) >> 24):
+            self._log_source(BD.BENCH)
+
     def _arm(self, msg: Message) -> dict:
         self._need_session("arming")
+        o = self.ecu.out
+        if o.mode == M.FAULT:
+            raise ServiceError(Status.REFUSED, "arm: latched FAULT (power-cycle the ECU)")
+        if o.mode == M.SHUTDOWN:
+            raise ServiceError(Status.REFUSED, "arm: the engine is stopping and cooling down")
+        if not o.inputs_valid:
+            raise ServiceError(
+                Status.REFUSED,
+                "arm: no valid speed and EGT readings yet (is the engine's node on the bus?)",
+            )
         self._stop_held = False
-        self.ecu.s.arm = 1
-        self.ecu.s.stop = 0
-        return {"mode": self.ecu.out.mode}
+        if not self.bench.can_present:  # else the CAN Demand's arm applies, the stop released
+            self._take_demand("arm")
+            self.bench.arm = 1
+            self.bench.stop = 0
+        return {"mode": o.mode, "source": BD.SOURCE_NAMES[self.bench.source]}
 
     def _stop(self, msg: Message) -> dict:
         self._stop_held = True
+        self.bench.arm = 0
+        self.bench.stop = 1
         return {"mode": self.ecu.out.mode}
+
+    def _throttle(self, msg: Message) -> dict:
+        pct = _arg(msg.body, "pct", (int, float))
+        self._need_session("the throttle")
+        top = self.bench.max_cpct / 100
+        if not 0 <= pct <= top:
+            raise ServiceError(Status.OUT_OF_RANGE, f"pct={pct}: 0 (idle) .. {top:g} %N")
+        self._take_demand("throttle")
+        self.bench.set_throttle(round(pct * 100))
+        return {
+            "demand_pct": self.bench.throttle_cpct / 100,
+            "source": BD.SOURCE_NAMES[self.bench.source],
+        }

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from sil.console.client import ServiceClient
 
 NAME = "console"
-HELP = "talk to the ECU service port: live values, parameters, fault log, arm/stop"
+HELP = "talk to the ECU service port: live values, parameters, fault log, arm/throttle/stop"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,10 +40,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         ("save", "store the parameter set in flash"),
         ("faults", "the fault log"),
         ("clear-faults", "clear the fault log"),
-        ("arm", "arm request"),
-        ("stop", "stop request (held until arm)"),
+        ("arm", "start the engine: arm request (the port becomes the demand source, at idle)"),
+        ("stop", "stop request: shut down and cool (held until arm)"),
     ):
         actions.add_parser(name, help=text, parents=[common])
+    throttle = actions.add_parser(
+        "throttle",
+        help="the bench's speed demand, %%N (0: idle); CAN Demand frames win while present",
+        parents=[common],
+    )
+    throttle.add_argument("pct", type=float, metavar="PCT")
     get = actions.add_parser("get", help="read parameters", parents=[common])
     get.add_argument("names", nargs="+", metavar="NAME")
     put = actions.add_parser("set", help="write parameters (unlocks first)", parents=[common])
@@ -81,6 +87,8 @@ def _do(client: ServiceClient, args: argparse.Namespace) -> Any:
         return {"mode_before": client.arm()}
     if action == "stop":
         return {"mode_before": client.stop()}
+    if action == "throttle":
+        return client.throttle(args.pct)
     if action == "get":
         return [client.get(name) for name in args.names]
     if action == "set":

@@ -136,7 +136,7 @@ def _link(seconds: float) -> dict:
     i = _running_inputs()
     for _ in range(20):  # a running engine: realistic values, realistic frame lengths
         ecu.tick(i)
-    sample = Message(Kind.STREAM, 1, Service.STREAM, Status.OK, live.sample(ecu))
+    sample = Message(Kind.STREAM, 1, Service.STREAM, Status.OK, live.sample(ecu, 0))
     block = encode_frame(pack(sample)) * 64
     client = subprocess.Popen(
         [sys.executable, "-c", CLIENT, transport.name, "link", str(seconds)],

@@ -181,8 +181,10 @@ class ServiceClient:
                 "code": code,
                 "name": fault_log.code_name(code),
                 "snapshot": dict(zip(fault_log.SNAPSHOT_FIELDS, snap, strict=True)),
+                "count": count,
+                "last_s": last / rate,
             }
-            for tick, code, snap in entries
+            for tick, code, snap, count, last in entries
         ]
 
     def clear_faults(self) -> int:
@@ -190,8 +192,14 @@ class ServiceClient:
         return self.request(Service.FAULT_LOG_CLEAR)["cleared"]
 
     def arm(self) -> str:
+        """Arm (the mode before it); the port becomes the demand source, at idle."""
         self.unlock()
         return MODE_NAMES[self.request(Service.ARM)["mode"]]
+
+    def throttle(self, pct: float) -> dict:
+        """The bench's speed demand, %N (0: idle): {"demand_pct", "source"}."""
+        self.unlock()
+        return self.request(Service.THROTTLE, {"pct": pct})
 
     def stop(self) -> str:
         return MODE_NAMES[self.request(Service.STOP)["mode"]]

@@ -11,11 +11,13 @@ import curses
 import shlex
 
 from ecu import faults as F
+from ecu import start_sequencer as Q
 from ecu.modes import NAMES as MODE_NAMES
+from ecu.service.bench_demand import SOURCE_NAMES
 from sil.console.client import ServiceClient, ServiceRequestError, ServiceTimeout
 
 HELP = (
-    "get NAME | set NAME VALUE | params | save | faults | clear | arm | stop | "
+    "arm | throttle PCT | stop | get NAME | set NAME VALUE | params | save | faults | clear | "
     "rate HZ | counters | help | quit"
 )
 
@@ -29,14 +31,20 @@ def render(ident: dict, sample: dict[str, int | float] | None, stream_gaps: int)
         return [head, "", "waiting for live data..."]
     v = sample
     faults = ", ".join(F.names(int(v["fault_word"]))) or "none"
+    if v["inputs_valid"]:
+        speed = f"speed {v['speed']:7.2f} %N  ({v['speed_rpm']:.0f} rpm)"
+        egt = f"EGT {v['egt']:7.1f} K"
+    else:
+        speed, egt = "speed  (no valid reading yet)", "EGT (no valid reading yet)"
     return [
         head,
         "",
         f"mode {MODE_NAMES[int(v['mode'])]:<9} tick {int(v['tick']):>9}   "
         f"lost samples {stream_gaps}",
-        f"speed {v['speed']:7.2f} %N  ({v['speed_rpm']:.0f} rpm)   "
-        f"reference {v['speed_ref']:7.2f} %N",
-        f"EGT {v['egt']:7.1f} K   pump {v['pump_voltage']:6.3f} V  duty {v['pump_duty']:6.2f} %  "
+        f"demand {v['demand']:6.2f} %N from {SOURCE_NAMES[int(v['demand_source'])]:<5}   "
+        f"{speed}   reference {v['speed_ref']:7.2f} %N",
+        start_line(v),
+        f"{egt}   pump {v['pump_voltage']:6.3f} V  duty {v['pump_duty']:6.2f} %  "
         f"enable {int(v['pump_enable'])}",
         f"supply {v['supply']:6.3f} V   pump current {v['pump_current']:6.3f} A   "
         f"pump health {v['pump_health']:6.1f} %",
@@ -46,6 +54,17 @@ def render(ident: dict, sample: dict[str, int | float] | None, stream_gaps: int)
         f"K_f {v['kf1']:9.5f} {v['kf2']:9.5f}",
         f"faults: {faults}",
     ]
+
+
+def start_line(v: dict[str, int | float]) -> str:
+    """The sequencer's step and time in it, starter, igniter, EGT against the start's target
+    and limit, and the last start's abort reason."""
+    return (
+        f"start step {Q.NAMES[int(v['seq_state'])]:<10} {v['seq_time']:6.1f} s   "
+        f"starter {v['starter']:5.1f} %  igniter {'on ' if v['igniter'] else 'off'}   "
+        f"EGT target {v['egt_start_target']:.0f} K, limit {v['egt_start_limit']:.0f} K   "
+        f"last abort {Q.REASONS[int(v['seq_reason'])]}"
+    )
 
 
 def execute(client: ServiceClient, line: str) -> list[str]:
@@ -91,6 +110,7 @@ def _command(client: ServiceClient, cmd: str, args: list[str]) -> list[str]:
         return [
             f"{e['time_s']:10.2f} s  {e['name']:<18} "
             + " ".join(f"{k}={v}" for k, v in e["snapshot"].items())
+            + (f"  (x{e['count']}, last {e['last_s']:.2f} s)" if e["count"] > 1 else "")
             for e in entries
         ] or ["fault log empty"]
     if cmd == "clear" and not args:
@@ -99,6 +119,13 @@ def _command(client: ServiceClient, cmd: str, args: list[str]) -> list[str]:
         return [f"arm requested (mode was {client.arm()})"]
     if cmd == "stop" and not args:
         return [f"stop requested (mode was {client.stop()})"]
+    if cmd == "throttle" and len(args) == 1:
+        try:
+            pct = float(args[0])
+        except ValueError:
+            return [f"error: throttle {args[0]!r} is not a number"]
+        r = client.throttle(pct)
+        return [f"demand {r['demand_pct']:g} %N from {r['source']}"]
     if cmd == "rate" and len(args) == 1:
         try:
             rate = float(args[0])

@@ -35,8 +35,7 @@ class LoopRig:
         self.i.sensor_status = self.i.analog_status = self.i.demand_status = E2E_NONEWDATA
 
     def tick(self) -> None:
-        self.port.poll(self.i)
-        self.ecu.tick(self.i)
+        self.ecu.tick(self.port.poll(self.i))
 
     def ticks(self, n: int) -> None:
         for _ in range(n):

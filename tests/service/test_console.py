@@ -26,7 +26,7 @@ def test_commands(rig):
     assert execute(c, "faults") == ["fault log empty"]
     assert execute(c, "stop") == ["stop requested (mode was OFF)"]
     assert execute(c, "rate 25") == ["streaming at 25 Hz"]
-    assert execute(c, "nonsense")[0].startswith("commands: get NAME")
+    assert execute(c, "nonsense")[0].startswith("commands: arm | throttle PCT")
     assert execute(c, 'get "unclosed') == ["error: No closing quotation"]
     assert execute(c, "") == []
 

@@ -335,10 +335,26 @@ def test_an_error_quoting_a_long_request_still_fits_a_frame(rig):
 
 def test_a_full_fault_log_page_of_extreme_values_fits_a_frame(rig):
     big = 2**31 - 1
-    for _ in range(6):
-        rig.port.fault_log.record(big, 15, (-big,) * len(fault_log.SNAPSHOT_FIELDS))
+    for code in range(10, 16):
+        rig.port.fault_log.record(big, code, (-big,) * len(fault_log.SNAPSHOT_FIELDS))
+    for entry in rig.port.fault_log.entries:
+        entry.count = entry.last_tick = big
     entries = rig.client.faults()
     assert len(entries) == 6 and entries[-1]["snapshot"]["pump_ma"] == -big
+    assert entries[-1]["count"] == big
+
+
+def test_a_burst_of_repeats_is_counted_and_keeps_the_older_entries():
+    log = fault_log.FaultLog()
+    snap = (0,) * len(fault_log.SNAPSHOT_FIELDS)
+    log.record(1, 7, snap)  # FLAMEOUT, the event worth keeping
+    for k in range(500):  # a burst of alternating repeats, 20 ms apart
+        log.record(10 + 2 * k, fault_log.START_ABORT + 6, snap)
+        log.record(11 + 2 * k, 11, snap)
+    assert [e.code for e in log.entries] == [7, fault_log.START_ABORT + 6, 11]
+    assert [e.count for e in log.entries] == [1, 500, 500]
+    assert log.entries[1].tick == 10 and log.entries[1].last_tick == 1008
+    assert log.total == 1001
 
 
 @settings(max_examples=100, deadline=None, derandomize=True)
