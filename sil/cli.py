@@ -45,6 +45,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
+    args.command_line = ("sil", *argv)  # as typed (a run records it in its folder)
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:

@@ -222,6 +222,8 @@ class EcuComparison:
     missing: int = 0  # recorded frames the emulator did not produce
     extra: int = 0  # frames the emulator produced beyond the recording
     first_divergent_tick: int | None = None
+    # the first recorded ECU frame that differs: tick, time, message and its differing signals
+    first_difference: dict | None = None
     max_difference: dict[str, float] = field(default_factory=dict)
     series: dict[str, tuple[list[float], list[float], list[float]]] = field(default_factory=dict)
 
@@ -233,7 +235,49 @@ class EcuComparison:
             "frames_missing": self.missing,
             "frames_extra": self.extra,
             "first_divergent_tick": self.first_divergent_tick,
+            "first_difference": self.first_difference,
             "max_difference": {k: v for k, v in self.max_difference.items() if v},
+        }
+
+    @property
+    def differences(self) -> int:
+        """Recorded ECU frames the emulator did not give alike: differing, missing or extra."""
+        return self.differing + self.missing + self.extra
+
+    def verdict(self) -> str | None:
+        """One line on where the emulator first differs from the recording (None: nowhere)."""
+        if not self.differences:
+            return None
+        counts = (
+            f"{self.differing:,} of {self.compared:,} frames differing, {self.missing:,} "
+            f"missing, {self.extra:,} extra"
+        )
+        first = self.first_difference
+        if first is None:  # only frames beyond the recording
+            return f"the ECU emulator sends frames the recording does not have ({counts})"
+        if first["signals"]:
+            name, (rec, emu) = next(iter(first["signals"].items()))
+            what = f"{first['message']} {name}: recorded {rec:.9g}, replayed {emu:.9g}"
+        else:
+            what = f"{first['message']} {first.get('problem', 'differs')}"
+        return (
+            f"the ECU emulator differs from the recording from tick {first['tick']} "
+            f"(t = {first['time_s']:.3f} s): {what} ({counts})"
+        )
+
+    def note_first(
+        self, msg: can.Message, message, signals: dict, problem: str | None = None
+    ) -> None:
+        """Keep the first difference (``signals``: name -> (recorded, replayed))."""
+        if self.first_difference is not None:
+            return
+        self.first_divergent_tick = self.ticks
+        self.first_difference = {
+            "tick": self.ticks,
+            "time_s": msg.timestamp,
+            "message": message.name,
+            "signals": signals,
+            **({"problem": problem} if problem else {}),
         }
 
 
@@ -276,6 +320,7 @@ def into_ecu(
         queue = produced[frame_id]
         if not queue:
             report.missing += 1
+            report.note_first(msg, message, {}, "missing: the emulator did not send it")
             continue
         mine = queue.popleft()
         report.compared += 1
@@ -286,12 +331,12 @@ def into_ecu(
             names = (names[0], message.mux_signals[int(a[0])].name)
         if bytes(msg.data[1:]) != mine[1:]:  # byte 0 is the CRC, which follows the rest
             report.differing += 1
-            if report.first_divergent_tick is None:
-                report.first_divergent_tick = report.ticks
             for i, name in enumerate(names):
                 report.max_difference[name] = max(
                     report.max_difference.get(name, 0.0), abs(a[i] - b[i])
                 )
+            differing = {n: (a[i], b[i]) for i, n in enumerate(names) if a[i] != b[i]}
+            report.note_first(msg, message, differing)
         for i, name in enumerate(names):
             if name in trace_signals:
                 t, rec, emu = report.series.setdefault(name, ([], [], []))

@@ -23,6 +23,7 @@ RUN_FILES = (
     "can.blf",
     "trace.csv",
     "scenario.toml",
+    *("run.json", "commissioning.json"),  # what shaped the run (sil.run_record)
     "plant.log",
     "ecu.log",
     *PLOTS,

@@ -55,7 +55,7 @@ from protocol.codec import Codec
 from protocol.node import DriverStats, InProcessBus, bus_batch_receiver, bus_sender, unusable
 from protocol.run_bus import RunBus
 from protocol.run_tag import TagClaim, claim_tag
-from sil import metrics, profiles, results
+from sil import metrics, profiles, results, run_record
 from sil.busfault.bridge import Bridge, SensorTicks, WallTicks
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
@@ -65,6 +65,7 @@ from sil.compiled_loop import CompiledLoop, compile_loop
 from sil.parent_death import child_env, die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
+from sil.run_record import Overrides
 from sil.scenario import HEALTH, Scenario
 from sil.watchdog import Starting, StartWatch, Watchdog, interrupt_reason
 
@@ -101,6 +102,8 @@ class RunOptions:
     ecu_extra_args: tuple[str, ...] = ()  # appended to `sil ecu` (e.g. --serial pty)
     ecu_bus: str | None = None  # the ECU's side of the fault bridge (default: a second udp bus)
     compiled_loop: bool = True  # inproc with the C ECU: one compiled loop (sil/compiled_loop.py)
+    overrides: Overrides = field(default_factory=Overrides)  # --controller, --param, ...
+    command_line: tuple[str, ...] = ()  # the command that asked for the run, for run.json
 
 
 @dataclass
@@ -121,6 +124,7 @@ class RunState:
     claims: list[TagClaim] = field(default_factory=list)  # the run's tags: run bus, ECU bus
     run_bus: RunBus | None = None  # the command node's bus: its foreign-frame counts
     warnings: list[str] = field(default_factory=list)  # said on stderr and in the summary
+    record: dict = field(default_factory=dict)  # what shaped the run (run.json)
 
     def release(self) -> None:
         """Give back the run's tags (once the node processes are stopped)."""
@@ -244,15 +248,15 @@ class _Progress:
 
 def run(opts: RunOptions) -> dict:
     """Run the scenario, write can.log, trace.csv, summary.json and plots; return the summary."""
-    s = opts.scenario
+    s = opts.overrides.apply(opts.scenario)
     seed = s.seed if opts.seed is None else opts.seed
+    record = run_record.prepare(s, seed, _shaped_by(opts), opts.commission)
     results.clear(opts.out_dir)  # an earlier run's files never pass for this one's
     opts.out_dir.mkdir(parents=True, exist_ok=True)
     results.mark(opts.out_dir, "running", s.name)
     state = RunState()
     try:
-        if s.path is not None:
-            (opts.out_dir / "scenario.toml").write_text(s.path.read_text())
+        state.record = record.write(opts.out_dir)
         if opts.mode == "inproc" and opts.ecu_impl == "pil":
             raise ValueError("--ecu-impl pil runs the image on a bus: use --mode lockstep or "
                              "realtime")  # fmt: skip
@@ -270,6 +274,21 @@ def run(opts: RunOptions) -> dict:
             if log.exists() and log.stat().st_size == 0:
                 log.unlink()
         raise
+
+
+def _shaped_by(opts: RunOptions) -> dict:
+    """The options that shaped a run, for its record (run.json): with the seed and the scenario
+    as run, what it takes to repeat or replay it."""
+    return {
+        **({"command_line": list(opts.command_line)} if opts.command_line else {}),
+        "mode": opts.mode,
+        "bus": opts.bus,
+        **({"ecu_bus": opts.ecu_bus} if opts.ecu_bus else {}),
+        "ecu_impl": opts.ecu_impl,
+        **({"pil_link": opts.pil_link} if opts.ecu_impl == "pil" else {}),
+        **({"compiled_loop": False} if not opts.compiled_loop else {}),
+        "overrides": opts.overrides.as_dict(),
+    }
 
 
 def _failure(exc: BaseException, state: RunState) -> str:
@@ -768,6 +787,7 @@ def _finish(
         **({"inproc_loop": state.loop} if state.loop else {}),
         **({"ecu_bus": state.ecu_bus} if state.ecu_bus else {}),
         "seed": seed,
+        "run": {k: v for k, v in state.record.items() if k != "format"},
         **({"warnings": state.warnings} if state.warnings else {}),
         "sim_time_s": sim_time,
         "wall_time_s": wall,

@@ -105,35 +105,74 @@ def _dry_run(args: argparse.Namespace, keep) -> int:
 
 
 def _into_ecu(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-    from ecu.firmware_params import compile_params
-    from ecu.node import EcuNode
+    """The log into the ECU emulator, set up as the run that wrote it (its folder's record:
+    scenario as run, commissioning, ECU implementation); exit 1 when the ECU's frames differ."""
     from ecu.params import ParamError
+    from ecu.port.build import PortBuildError
+    from ecu.port.core import PortError
     from sil import scenario as scenarios
-    from sil.commands.ecu import _param
-    from sil.runner import build_plant, ecu_params
+    from sil.run_record import load as load_record
 
-    path = args.scenario or args.log.parent / "scenario.toml"
     try:
+        record = load_record(args.log.parent)
+        path = args.scenario or (record.scenario if record else args.log.parent / "scenario.toml")
+        if record is not None and record.mode == "realtime":
+            raise ValueError(
+                f"{args.log}: a real-time run (run.json): its ECU ran on its own clock, from "
+                "before the recording began, so its log cannot be replayed tick for tick"
+            )
         s = scenarios.load(path)
-        params = ecu_params(s, build_plant(s, s.seed))
-        changes = dict(_param(p) for p in args.param)
-        params = compile_params(replace(params, **changes))
-        report = replay.into_ecu(args.log, EcuNode(params))
+        node, setup = _ecu_for(s, record, args.param)
+        report = replay.into_ecu(args.log, node)
     except (scenarios.ScenarioError, ParamError, ValueError, TypeError) as exc:
         print(f"sil replay: {exc}", file=sys.stderr)
+        return 2
+    except (PortBuildError, PortError) as exc:
+        print(f"sil replay: the run's C ECU: {exc}", file=sys.stderr)
         return 2
     except LogReadError as exc:
         print(f"sil replay: {exc}", file=sys.stderr)
         return 1
-    result = {"log": str(args.log), "scenario": str(path), "changed": changes, **report.as_dict()}
+    result = {"log": str(args.log), "scenario": str(path), **setup, **report.as_dict()}
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "report.json").write_text(json.dumps(result, indent=2) + "\n")
         _plot_comparison(report, args.out / "into_ecu.png", args.log.name)
     _print_report(result, args.json)
+    verdict = report.verdict()
+    if verdict is not None:
+        print(f"sil replay: {args.log}: {verdict}", file=sys.stderr)
+        return 1
     return 0
+
+
+def _ecu_for(s, record, param_texts: list[str]):  # noqa: ANN001, ANN202 (Scenario, RunRecord)
+    """The ECU node for a replay of a run of ``s`` (``record``: its folder's, or None) with
+    ``--param`` changes, and what set it up (for the report)."""
+    from dataclasses import replace
+
+    from ecu import commissioning
+    from ecu.firmware_params import compile_params
+    from ecu.node import EcuNode
+    from ecu.port.core import make_ecu
+    from sil.commands.ecu import _param
+    from sil.runner import build_plant, ecu_params
+
+    params = ecu_params(s, build_plant(s, s.seed))
+    commissioned = record.commissioning if record is not None else None
+    if commissioned is not None:
+        params = commissioning.apply(params, commissioning.load(commissioned))
+    changes = dict(_param(p) for p in param_texts)
+    params = compile_params(replace(params, **changes))
+    impl = "python" if record is None else record.ecu_impl
+    impl = "c" if impl == "pil" else impl  # the image is the C firmware, bit for bit
+    setup = {
+        "run_record": None if record is None else str(record.folder / "run.json"),
+        "commissioning": None if commissioned is None else str(commissioned),
+        "ecu_impl": impl,
+        "changed": changes,
+    }
+    return EcuNode(ecu=make_ecu(impl, params)), setup
 
 
 def _plot_comparison(report: replay.EcuComparison, path: Path, title: str) -> None:

@@ -14,6 +14,7 @@ from sil import results, validation
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
 from sil.node_options import add_pil_link
+from sil.run_record import Overrides
 from sil.watchdog import Terminated, interrupt_reason
 
 NAME = "run"
@@ -23,6 +24,40 @@ HELP = "run a scenario: plant and ECU nodes over a bus (or in one process), with
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", help="a shipped scenario's name (sil scenarios) or a file")
     add_run_options(parser)
+    add_controller_options(parser)
+
+
+def add_controller_options(parser: argparse.ArgumentParser) -> None:
+    """Changes to the scenario's controller, recorded in the run folder (run.json and the
+    scenario.toml written there)."""
+    from ecu.params import CONTROLLERS, PRESETS, READINGS
+
+    parser.add_argument("--controller", choices=CONTROLLERS, help="the scenario's controller kind")
+    parser.add_argument(
+        "--preset", choices=sorted(PRESETS), help="the ECU parameter preset (ecu.params)"
+    )
+    parser.add_argument(
+        "--reading", choices=READINGS, help="how the document's gains are read (ecu.params)"
+    )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="override one ECU parameter (an ecu.params.EcuParams field), repeatable",
+    )
+
+
+def overrides(args: argparse.Namespace) -> Overrides:
+    """The controller changes on the command line; ValueError names a bad --param."""
+    from sil.commands.ecu import _param
+
+    return Overrides(
+        controller=getattr(args, "controller", None),
+        preset=getattr(args, "preset", None),
+        reading=getattr(args, "reading", None),
+        params=dict(_param(text) for text in getattr(args, "param", [])),
+    )
 
 
 def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCENARIO") -> None:
@@ -150,8 +185,12 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
     out = out or args.out or Path("out") / scenario.name
     try:
         validation.output_folder("sil run", "--out", out)
+        changes = overrides(args)
     except validation.InputError as exc:
         print(exc, file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"sil run: {exc}", file=sys.stderr)
         return 2
     options = RunOptions(
         scenario,
@@ -166,6 +205,8 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         pil_link=getattr(args, "pil_link", "eth"),
         ecu_bus=getattr(args, "ecu_bus", None),
         compiled_loop=not getattr(args, "python_loop", False),
+        overrides=changes,
+        command_line=tuple(getattr(args, "command_line", ())),
     )
     _interrupt_on_signals()
     try:

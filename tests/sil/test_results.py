@@ -76,7 +76,7 @@ def test_a_run_failing_at_set_up_leaves_no_stale_results(tmp_path):
     )  # fmt: skip
     assert bad.returncode == 2
     assert "rate_window_s=1000.0: must span at least two ticks" in bad.stderr
-    _only_users_files_and(out, "scenario.toml", "summary.json")
+    _only_users_files_and(out, "scenario.toml", "run.json", "summary.json")
     summary = _summary(out)
     assert list(summary)[:2] == ["status", "abort_reason"]
     assert summary["status"] == "failed"
@@ -136,7 +136,7 @@ def test_an_interrupted_run_is_marked_aborted_and_compare_refuses_it(tmp_path):
     assert next(iter(summary)) == "status" and summary["status"] == "aborted"
     assert summary["abort_reason"] == "interrupted (Ctrl-C)"
     # its own records kept, the earlier run's plots and other formats gone
-    _only_users_files_and(out, "scenario.toml", "summary.json", "can.log", "trace.csv")
+    _only_users_files_and(out, "scenario.toml", "run.json", "summary.json", "can.log", "trace.csv")
     frames = list(can.CanutilsLogReader(str(out / "can.log")))
     assert len(frames) == summary["frames"] > 1000
     refused = _sil("compare", str(good), str(out))
@@ -162,7 +162,7 @@ def test_a_run_killed_outright_still_says_running(tmp_path):
     proc.kill()
     proc.communicate(timeout=60)
     assert _summary(out)["status"] == "running"
-    _only_users_files_and(out, "scenario.toml", "summary.json", "can.log", "trace.csv")
+    _only_users_files_and(out, "scenario.toml", "run.json", "summary.json", "can.log", "trace.csv")
     refused = _sil("compare", str(out), str(out))
     assert refused.returncode == 2
     assert "status running: the run is still going or was killed" in refused.stderr

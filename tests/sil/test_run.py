@@ -263,7 +263,11 @@ def test_a_bad_parameter_stops_the_plant_process_started_before_it_was_checked(t
     assert result.returncode == 2
     assert "rate_window_s=1000.0: must span at least two ticks" in result.stderr
     assert _no_nodes_left(spec)
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["scenario.toml", "summary.json"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "run.json",
+        "scenario.toml",
+        "summary.json",
+    ]
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["status"] == "failed" and "rate_window_s=1000.0" in summary["abort_reason"]
 
