@@ -208,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil replay: {exc}", file=sys.stderr)
         return 2
     try:
-        validation.number("sil replay", "--speed", args.speed, positive=True, hi=1000)
+        validation.number("sil replay", "--speed", args.speed, lo=0.001, hi=1000)
         if args.skip_gaps is not None:
             validation.number("sil replay", "--skip-gaps", args.skip_gaps, lo=0)
     except validation.InputError as exc:
