@@ -101,6 +101,22 @@ def _number(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)
 
 
+def _non_finite(data: Any, field: str = "") -> tuple[str, float] | None:
+    """The first NaN or infinite number in a TOML value, with its field, or None."""
+    if isinstance(data, float) and not math.isfinite(data):
+        return field, data
+    items: Any = ()
+    if isinstance(data, dict):
+        items = ((f"{field}.{k}" if field else str(k), v) for k, v in data.items())
+    elif isinstance(data, list):
+        items = ((f"{field}[{i}]", v) for i, v in enumerate(data))
+    for where, value in items:
+        found = _non_finite(value, where)
+        if found is not None:
+            return found
+    return None
+
+
 def _distribution(source: str, key: str, spec: Any) -> tuple[str, list]:
     field = f"sample.{key}"
     if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in DISTRIBUTIONS:
@@ -114,6 +130,8 @@ def _distribution(source: str, key: str, spec: Any) -> tuple[str, list]:
             raise _fail(source, f"{field}.{kind}", "two numbers", args)
         if kind == "uniform" and args[1] < args[0]:
             raise _fail(source, f"{field}.{kind}", "[lo, hi] with lo <= hi", args)
+        if kind == "uniform" and not math.isfinite(args[1] - args[0]):
+            raise _fail(source, f"{field}.{kind}", "[lo, hi] with a finite width hi - lo", args)
         if kind == "normal" and args[1] < 0:
             raise _fail(source, f"{field}.{kind}", "[mean, sd] with sd >= 0", args)
     return kind, args
@@ -172,6 +190,9 @@ def load(path: Path) -> Campaign:
         raise CampaignError(f"{source}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise CampaignError(f"{source}: not valid TOML: {exc}") from None
+    found = _non_finite(data)
+    if found is not None:
+        raise _fail(source, found[0], "a finite number (NaN and inf are refused)", found[1])
     known = {"name", "description", "base", "duration_s", "seed", "samples", "nominal", "sample",
              "sweep", "variant", "invariants"}  # fmt: skip
     for key in data:
@@ -219,6 +240,9 @@ def load(path: Path) -> Campaign:
 
     rng = np.random.Generator(np.random.PCG64(seed))
     draws = {k: _draw(rng, kind, args, n) for k, (kind, args) in dists.items()}
+    for k, values in draws.items():
+        if not all(math.isfinite(v) for v in values if isinstance(v, float)):
+            raise _fail(source, f"sample.{k}", "a distribution whose draws are finite", sample[k])
     base_seed = base.get("seed", 0)
     samples = ([-1] if nominal else []) + list(range(n))
     combos = list(itertools.product(*sweep.values())) or [()]

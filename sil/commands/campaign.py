@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -16,6 +17,13 @@ from sil.commands.run import _interrupt_on_signals
 
 NAME = "campaign"
 HELP = "run a campaign (engine variation, bus faults, seeds) on a local pool or Dask"
+WORKERS_PER_CORE = 4  # --workers at most this many per core: more only thrash
+DASK_INSTALL = "pip install 'turbojet-sil[campaign]'"
+
+
+def max_workers() -> int:
+    """The most worker processes --workers may ask for on this machine."""
+    return WORKERS_PER_CORE * (os.cpu_count() or 1)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,7 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="ECU tick: the Python firmware (default) or its C port (ecu/port)",
     )
     parser.add_argument(
-        "--workers", type=int, metavar="N", help="worker processes (default: all cores)"
+        "--workers",
+        type=int,
+        metavar="N",
+        help=f"worker processes (default: all cores; at most {WORKERS_PER_CORE} per core, "
+        f"{max_workers()} here)",
     )
     parser.add_argument("--out", type=Path, help="output folder (default: out/campaign-NAME)")
     parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
@@ -51,6 +63,30 @@ def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _workers_refusal(workers: int | None) -> str | None:
+    """Why ``--workers`` cannot be used, or None."""
+    if workers is None or 1 <= workers <= max_workers():
+        return None
+    return (
+        f"--workers: expected a number in 1..{max_workers()} ({WORKERS_PER_CORE} per core on "
+        f"{os.cpu_count() or 1} cores), got {workers}"
+    )
+
+
+def _executor_refusal(executor: str) -> str | None:
+    """Why ``--executor`` cannot be used here (Dask not importable), or None."""
+    if executor != "dask":
+        return None
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError as exc:
+        return (
+            f"--executor dask needs Dask, which cannot be imported here ({exc}); "
+            f"install it with: {DASK_INSTALL}"
+        )
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     from sil.campaign import report
     from sil.campaign.executors import execute
@@ -59,9 +95,9 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler and args.executor != "dask":
         print("sil campaign: --scheduler needs --executor dask", file=sys.stderr)
         return 2
-    if args.workers is not None and args.workers < 1:
-        print(f"sil campaign: --workers: expected a positive number, got {args.workers}",
-              file=sys.stderr)  # fmt: skip
+    refusal = _workers_refusal(args.workers) or _executor_refusal(args.executor)
+    if refusal:
+        print(f"sil campaign: {refusal}", file=sys.stderr)
         return 2
     try:
         campaign = load(args.file)

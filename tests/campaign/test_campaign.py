@@ -135,3 +135,22 @@ def test_an_interrupted_campaign_stops_its_workers_and_resumes(write, tmp_path):
     outcome = execute(load(path), out, workers=2, progress=False)
     assert outcome.skipped == done and outcome.completed == 12 - done
     assert len(rows(out)) == 12
+
+
+def test_workers_beyond_four_per_core_are_refused(write, capsys):
+    import os
+
+    path = write(SMALL)
+    too_many = 4 * (os.cpu_count() or 1) + 1
+    assert main(["campaign", str(path), "--workers", str(too_many)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--workers: expected a number in 1.." in err
+    assert main(["campaign", str(path), "--workers", "0"]) == 2
+
+
+def test_dask_executor_without_dask_says_how_to_install_it(write, monkeypatch, capsys):
+    monkeypatch.setitem(__import__("sys").modules, "dask", None)  # import dask: ImportError
+    monkeypatch.setitem(__import__("sys").modules, "dask.distributed", None)
+    assert main(["campaign", str(write(SMALL)), "--executor", "dask"]) == 2
+    err = capsys.readouterr().err
+    assert "--executor dask needs Dask" in err and "pip install 'turbojet-sil[campaign]'" in err

@@ -85,3 +85,43 @@ def test_toml_writer_round_trips_every_shipped_scenario():
     for path in sorted(scenarios.SCENARIO_DIR.glob("*.toml")):
         data = tomllib.loads(path.read_text())
         assert tomllib.loads(dumps(data)) == data, path.name
+
+
+@pytest.mark.parametrize(
+    "old, new, field",
+    [
+        ("duration_s = 3", "duration_s = nan", "duration_s"),
+        ("uniform = [0.8, 1.2]", "uniform = [nan, 1.2]", r"sample.plant.pump_gain.uniform\[0\]"),
+        ("uniform = [0.8, 1.2]", "uniform = [0.8, inf]", r"sample.plant.pump_gain.uniform\[1\]"),
+        (
+            '["mrac", "pid"]',
+            '["mrac", "pid"]\n"plant.pump_gain" = [-inf]',
+            r"sweep.plant.pump_gain",
+        ),
+        (
+            "[sweep]",
+            "[invariants]\nmax_thrust_rise_s = inf\n[sweep]",
+            "invariants.max_thrust_rise_s",
+        ),
+        (
+            "[sweep]",
+            "[[variant]]\nname='v'\n[[variant.fault]]\nvalue = nan\n[sweep]",
+            r"variant\[0\].fault\[0\].value",
+        ),
+    ],
+)
+def test_nan_and_inf_are_refused_naming_the_file_and_field(write, old, new, field):
+    assert old in SMALL
+    with pytest.raises(
+        CampaignError, match=rf"campaign.toml: field '{field}.*': expected a finite"
+    ):
+        load(write(SMALL.replace(old, new, 1)))
+
+
+def test_distributions_too_wide_for_floats_are_refused(write):
+    wide = SMALL.replace("uniform = [0.8, 1.2]", "uniform = [-1e308, 1e308]")
+    with pytest.raises(CampaignError, match=r"'sample.plant.pump_gain.uniform'.*finite width"):
+        load(write(wide))
+    huge = SMALL.replace("uniform = [0.8, 1.2]", "normal = [1.7e308, 1e308]")
+    with pytest.raises(CampaignError, match=r"'sample.plant.pump_gain'.*draws are finite"):
+        load(write(huge))
