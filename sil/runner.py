@@ -66,7 +66,7 @@ from sil.parent_death import child_env, die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.run_record import Overrides
-from sil.scenario import HEALTH, Scenario
+from sil.scenario import HEALTH, PlantSettings, Scenario
 from sil.watchdog import Starting, StartWatch, Watchdog, interrupt_reason
 
 # fault bits listed in the summary: all but the two that only describe the present tick
@@ -260,8 +260,6 @@ def run(opts: RunOptions) -> dict:
         if opts.mode == "inproc" and opts.ecu_impl == "pil":
             raise ValueError("--ecu-impl pil runs the image on a bus: use --mode lockstep or "
                              "realtime")  # fmt: skip
-        if opts.mode != "inproc" and s.plant.varied:
-            raise ValueError(f"{s.name}: engine variation needs --mode inproc")
         return _run(opts, s, seed, state)
     except BaseException as exc:
         results.mark(opts.out_dir, "failed", s.name, _failure(exc, state))
@@ -491,8 +489,31 @@ def _plant_args(
             args += ["--initial-egt-max", repr(p.initial_egt_max_K)]
     if p.standstill:
         args.append("--standstill")
+    if p.varied:
+        args += _variation_args(p)
     if opts.mode == "realtime":
         args.append("--realtime")
+    return args
+
+
+def _variation_args(p: PlantSettings) -> list[str]:
+    """``sil plant``'s options for the engine's variation from the nominal one (as
+    :func:`plant_config` builds it in process)."""
+    nominal = PlantSettings()
+    args = []
+    for name, option in (
+        *((k, k) for k in HEALTH),
+        ("pump_gain", "pump_gain"),
+        ("speed_noise_rpm", "speed_noise_rpm"),
+        ("speed_bias_rpm", "speed_bias_rpm"),
+        ("egt_noise_K", "egt_noise_k"),
+        ("egt_bias_K", "egt_bias_k"),
+    ):
+        value = getattr(p, name)
+        if value != getattr(nominal, name):
+            args += [f"--{option.replace('_', '-')}", repr(value)]
+    if p.pump_wear_per_s:
+        args += ["--fault", f"0:{FaultKind.PUMP_WEAR.value}:{p.pump_wear_per_s!r}"]
     return args
 
 

@@ -19,6 +19,18 @@ from sil.validation import option
 NAME = "plant"
 HELP = "run the simulated engine (aero-thermal or fast model) as a CAN node"
 START_POLL_S = 0.002  # --start-file: how often to look for it
+# the engine as built and its sensors (sil.scenario's [plant] variation): option, range, default
+VARIATION = (
+    ("compressor_efficiency", 0.1, 1.5, 1.0),
+    ("compressor_flow", 0.1, 1.5, 1.0),
+    ("turbine_efficiency", 0.1, 1.5, 1.0),
+    ("turbine_flow", 0.1, 1.5, 1.0),
+    ("pump_gain", 0.1, 2.0, 1.0),
+    ("speed_noise_rpm", 0.0, 10_000.0, 20.0),
+    ("speed_bias_rpm", -10_000.0, 10_000.0, 0.0),
+    ("egt_noise_k", 0.0, 100.0, 1.0),
+    ("egt_bias_k", -200.0, 200.0, 0.0),
+)
 
 
 def _fault(text: str):  # noqa: ANN202 - argparse type
@@ -117,6 +129,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(frames heard meanwhile are kept; a launcher starts the plant and the ECU at once and "
         "creates it when both are ready)",
     )
+    for name, lo, hi, default in VARIATION:
+        parser.add_argument(
+            f"--{name.replace('_', '-')}",
+            type=option(lo=lo, hi=hi),
+            default=default,
+            metavar="X",
+            help=f"engine variation: {name} ({lo:g}..{hi:g}, default {default:g})",
+        )
     add_launcher_options(parser)
     parser.add_argument(
         "--fault",
@@ -155,6 +175,7 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
     from plant.fast_plant import FastPlant
     from plant.interface import Ambient, Battery, PlantConfig
     from plant.node import PlantNode
+    from plant.sensors import SpeedPickupConfig, ThermocoupleConfig
 
     config = PlantConfig(
         ecu_period_s=1.0 / args.rate_hz,
@@ -166,6 +187,15 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
         standstill=args.standstill,
         faults=tuple(args.fault),
         seed=args.seed,
+        compressor_efficiency=args.compressor_efficiency,
+        compressor_flow=args.compressor_flow,
+        turbine_efficiency=args.turbine_efficiency,
+        turbine_flow=args.turbine_flow,
+        pump_gain=args.pump_gain,
+        speed_pickup=SpeedPickupConfig(
+            noise_rpm=args.speed_noise_rpm, bias_rpm=args.speed_bias_rpm
+        ),
+        thermocouple=ThermocoupleConfig(noise_k=args.egt_noise_k, bias_k=args.egt_bias_k),
     )
     plant = AeroThermalPlant(config) if args.model == "aero" else FastPlant(config)
     return PlantNode(

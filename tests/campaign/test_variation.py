@@ -1,7 +1,6 @@
-"""Engine variation as built, inproc only; bus faults in `sil run --mode inproc`: repeatable."""
+"""Engine variation as built; bus faults in `sil run --mode inproc`: repeatable."""
 
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 
@@ -67,7 +66,7 @@ jitter_ticks = 2
 """
 
 
-def test_inproc_run_with_bus_faults_repeats_byte_for_byte_and_variation_needs_inproc(tmp_path):
+def test_inproc_run_with_bus_faults_repeats_byte_for_byte(tmp_path):
     path = tmp_path / "faulted.toml"
     path.write_text(BUS_FAULTED)
     s = scenarios.load(path)
@@ -77,5 +76,3 @@ def test_inproc_run_with_bus_faults_repeats_byte_for_byte_and_variation_needs_in
     kinds = {e["kind"] for e in a["bus_faults_injected"]}
     assert kinds == {"drop", "delay"}
     assert (tmp_path / "a" / "can.log").read_bytes() == (tmp_path / "b" / "can.log").read_bytes()
-    with pytest.raises(ValueError, match="engine variation needs --mode inproc"):
-        run(RunOptions(s, Path(tmp_path / "c"), mode="lockstep", plots=False, progress=False))
