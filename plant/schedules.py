@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import csv
 import itertools
-import json
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
@@ -49,6 +48,7 @@ from plant.intake import intake
 from plant.linearise import pump_voltage_for
 from plant.steady_line import running_line
 from plant.trim import SCALE, SteadyState
+from protocol import strict_json
 
 SPEEDS_PCT = tuple(float(n) for n in range(45, 101, 5))
 EGT_LIMIT_K = 1280.0  # the ECU's EGT limit (ecu.params.EcuParams.egt_limit_k)
@@ -425,7 +425,8 @@ def write_csv(points: list[SchedulePoint], path: Path) -> None:
 
 def write_json(points: list[SchedulePoint], settings: dict, path: Path) -> None:
     path.write_text(
-        json.dumps({"settings": settings, "points": [asdict(p) for p in points]}, indent=2) + "\n"
+        strict_json.dumps({"settings": settings, "points": [asdict(p) for p in points]}, indent=2)
+        + "\n"
     )
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import datetime
 import importlib
-import json
 import os
 import platform
 import sys
@@ -19,6 +18,8 @@ import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import ModuleType
+
+from protocol import strict_json
 
 
 def machine() -> dict:
@@ -97,7 +98,7 @@ def _cell(value: object) -> str:
     if isinstance(value, float):
         return f"{value:g}"
     if isinstance(value, dict | list):
-        return json.dumps(value).replace("|", "\\|")
+        return strict_json.dumps(value).replace("|", "\\|")
     return str(value).replace("|", "\\|")
 
 

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import savgol_filter
 
+from protocol import strict_json
+
 # eq. 3.5; eq. 3.1 (linear second order); eq. B.4; appendix B linear; B.4 + dN^2 dV
 ORDERS = ("second", "second-linear", "first", "first-linear", "first-quadratic")
 SECOND_ORDERS = ("second", "second-linear")
@@ -301,9 +303,7 @@ def ecu_commissioning(ident: Identification) -> dict:
 
 
 def write_json(path: Path, data: dict) -> None:
-    import json
-
-    path.write_text(json.dumps(data, indent=2) + "\n")
+    path.write_text(strict_json.dumps(data, indent=2) + "\n")
 
 
 N_MAX_RPM = 112_500.0

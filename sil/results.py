@@ -13,6 +13,8 @@ import json
 import os
 from pathlib import Path
 
+from protocol import strict_json
+
 SUMMARY = "summary.json"
 COMPLETED = "completed"
 PLOTS = ("speed.png", "egt.png", "estimates.png", "gains.png")  # sil.plots.plot_run
@@ -59,7 +61,7 @@ def write_summary(out_dir: Path, summary: dict) -> Path:
     """Write ``summary.json`` (status first) atomically: a reader sees the old or the new one."""
     path = out_dir / SUMMARY
     tmp = out_dir / f".{SUMMARY}.tmp"
-    tmp.write_text(json.dumps(status_first(summary), indent=2, default=float) + "\n")
+    tmp.write_text(strict_json.dumps(status_first(summary), indent=2, default=float) + "\n")
     os.replace(tmp, path)
     return path
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from protocol import strict_json
 from sil.scenario import Scenario
 
 RECORD = "run.json"
@@ -114,7 +115,7 @@ class Pending:
             (out_dir / SCENARIO).write_text(self.scenario_text)
         if self.commissioning is not None:
             (out_dir / COMMISSIONING).write_bytes(self.commissioning)
-        (out_dir / RECORD).write_text(json.dumps(self.record, indent=2) + "\n")
+        (out_dir / RECORD).write_text(strict_json.dumps(self.record, indent=2) + "\n")
         return self.record
 
 

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import can
 
+from protocol import strict_json
 from protocol.e2e import E2EChecker
 
 CHANNEL = "vcan0"
@@ -148,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ProbeError, OSError, can.CanError) as error:
         print(f"vcan_probe: {error}", file=sys.stderr)
         return 1
-    (folder / "result.json").write_text(json.dumps(result, indent=1) + "\n")
+    (folder / "result.json").write_text(strict_json.dumps(result, indent=1) + "\n")
     return 0
 
 

@@ -36,7 +36,6 @@ the compressor's low-speed efficiency gives back (without it the engine hangs be
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 import numpy as np
@@ -48,6 +47,7 @@ from plant.maps import MAPS_DIR, MAPS_FILE, EngineMaps, load_maps, maps_from_arr
 from plant.nozzle import nozzle
 from plant.pump import PumpTable
 from plant.thermo import cp_air, gamma_mean
+from protocol import strict_json
 
 TRIM_FUEL = 0.008  # kg/s, eq. 2.33
 TRIM_X = np.array([294845.0, 162676.0, 1159.0, 89.68])  # eq. 2.32
@@ -354,8 +354,8 @@ def main(argv: list[str] | None = None) -> int:
     st = stations(x, TRIM_FUEL, model)
     req["trim_thrust_N"] = float(st[9])
     req["trim_EGT_K"] = float(st[6])
-    (MAPS_DIR / "calibration.json").write_text(json.dumps(req, indent=2) + "\n")
-    print(json.dumps(req, indent=2))
+    (MAPS_DIR / "calibration.json").write_text(strict_json.dumps(req, indent=2) + "\n")
+    print(strict_json.dumps(req, indent=2))
     if not args.no_plots:
         plot(maps)
     return 0

@@ -11,7 +11,6 @@ the last row of each run).
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 import signal
@@ -23,6 +22,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+from protocol import strict_json
 from sil.campaign.spec import Campaign, Case, Invariants
 from sil.parent_death import die_with_parent
 
@@ -55,7 +55,7 @@ def run_task(task: Task) -> dict:
     try:
         s = scenarios.parse(task.scenario_toml, task.run_id, Path(task.base_dir))
         fig, detections, violations = check(run_case(s, ecu_impl=task.ecu_impl), task.invariants)
-        row.update(fig, status="completed", error="", detections=json.dumps(detections))
+        row.update(fig, status="completed", error="", detections=strict_json.dumps(detections))
         row.update(violations="; ".join(violations), n_violations=len(violations))
     except Exception as exc:  # a crashing run is recorded, the campaign goes on
         where = traceback.extract_tb(exc.__traceback__)[-1]

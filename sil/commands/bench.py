@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from pathlib import Path
+
+from protocol import strict_json
 
 NAME = "bench"
 HELP = "measure speed and memory figures (codec, plant, ecu, ...)"
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil bench {args.target}: error: {exc}", file=sys.stderr)
         return 1
     if args.json:
-        print(json.dumps(figures, indent=2))
+        print(strict_json.dumps(figures, indent=2))
     else:
         width = max(len(k) for k in figures)
         for key, value in figures.items():
@@ -92,7 +93,7 @@ def _run_all(args: argparse.Namespace) -> int:
         args.markdown.write_text(markdown(result))
         print(f"sil bench all: wrote {args.markdown}", file=sys.stderr)
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(strict_json.dumps(result, indent=2))
     else:
         for name, entry in result["benches"].items():
             if "error" in entry:

@@ -11,13 +11,13 @@ on Ctrl-C.
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import time
 from contextlib import ExitStack
 from pathlib import Path
 
+from protocol import strict_json
 from protocol.bus import BusSpecError, open_bus, parse_spec
 from protocol.codec import Codec
 from sil import scenario
@@ -94,9 +94,9 @@ def run(args: argparse.Namespace) -> int:
         "events": len(injector.events),
     }
     if args.events is not None:
-        args.events.write_text(json.dumps(injector.events, indent=1) + "\n")
+        args.events.write_text(strict_json.dumps(injector.events, indent=1) + "\n")
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print(strict_json.dumps(summary, indent=2))
     else:
         for key, value in summary.items():
             print(f"{key:<24} {value}")

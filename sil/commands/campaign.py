@@ -4,7 +4,6 @@ seeds, on a local process pool or a Dask cluster; a results table and a report."
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import shutil
@@ -12,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ecu.port.core import IMPLEMENTATIONS
+from protocol import strict_json
 from sil import validation
 from sil.commands.run import _interrupt_on_signals
 
@@ -138,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_report:
         summary["report"] = str(report.write(out, campaign.name, speed))
     if args.json:
-        print(json.dumps(summary, indent=2, default=float))
+        print(strict_json.dumps(summary, indent=2, default=float))
     else:
         for key, value in summary.items():
             print(f"{key:<12} {value:.4g}" if isinstance(value, float) else f"{key:<12} {value}")

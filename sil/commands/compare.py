@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -12,6 +11,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from protocol import strict_json
 from sil import results, validation  # noqa: E402
 from sil.metrics import load_trace  # noqa: E402
 
@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     plt.close(fig)
     if args.json:
         print(
-            json.dumps(
+            strict_json.dumps(
                 {
                     "a": names[0],
                     "b": names[1],

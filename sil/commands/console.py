@@ -8,12 +8,12 @@ typed at the bottom); each action runs once and prints its result, as JSON with 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from typing import TYPE_CHECKING, Any
 
 from ecu.service import live
+from protocol import strict_json
 
 if TYPE_CHECKING:
     from sil.console.client import ServiceClient
@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         transport.close()
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(strict_json.dumps(result, indent=2))
     else:
         _print(result)
     return 0

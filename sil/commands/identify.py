@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -13,6 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from protocol import strict_json
 from sil import identify as ident  # noqa: E402
 from sil import validation  # noqa: E402
 from sil.canlog import LogReadError  # noqa: E402
@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"sil identify: {exc}", file=sys.stderr)
             return 2
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(strict_json.dumps(report, indent=2))
         return 0
     for key, value in report.items():
         print(f"{key}: {value}")

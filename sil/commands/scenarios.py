@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
+from protocol import strict_json
 from sil import scenario
 
 NAME = "scenarios"
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     rows = [_row(s) for s in loaded]
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(strict_json.dumps(rows, indent=2))
         return 0
     for r in rows:
         print(

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
+from protocol import strict_json
 from protocol.bus import BusSpecError, default_spec, parse_spec
 from protocol.dbc import ContractError
 from protocol.selfcheck import run_selfcheck
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil selfcheck: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(report.as_dict(), indent=2))
+        print(strict_json.dumps(report.as_dict(), indent=2))
         return 0 if report.ok else 1
     print(f"{'message':<14} {'id':>5}  {'e2e':<6} {'codec=cantools=sent':<20} values")
     for row in report.rows:

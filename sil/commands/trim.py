@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 
+from protocol import strict_json
 from sil import validation
 
 NAME = "trim"
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 2
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print(strict_json.dumps(summary, indent=2))
     else:
         for key, value in summary.items():
             print(f"{key:<10} {value:>14.6g} {_UNITS[key]}")

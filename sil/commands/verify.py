@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
+
+from protocol import strict_json
 
 NAME = "verify"
 HELP = "check every published number of the document against the ECU and plant, one row each"
@@ -44,5 +45,5 @@ def run(args: argparse.Namespace) -> int:
         return 2
     sections = tuple(s for s in SECTIONS if s in args.section) if args.section else SECTIONS
     rows = verification_rows(args.seconds, sections)
-    print(json.dumps(as_dicts(rows), indent=2) if args.json else format_table(rows))
+    print(strict_json.dumps(as_dicts(rows), indent=2) if args.json else format_table(rows))
     return 0 if all(r.ok for r in rows) else 1

@@ -2,6 +2,7 @@
 only that), its summary states its status first, and `sil compare` refuses incomplete runs."""
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -180,3 +181,23 @@ def test_compare_refuses_a_folder_without_a_run(tmp_path):
         result = _sil("compare", str(tmp_path / folder), str(tmp_path / folder))
         assert result.returncode == 2 and why in result.stderr, result.stderr
         assert str(tmp_path / folder) in result.stderr
+
+
+def test_a_summary_with_nan_metrics_is_strict_json(tmp_path, monkeypatch):
+    from protocol import strict_json
+    from sil import metrics
+    from sil.cli import main
+
+    summarize = metrics.summarize
+
+    def with_non_finite(*args, **kwargs):
+        return {**summarize(*args, **kwargs), "tracking_rms_pct": math.nan, "extra": -math.inf}
+
+    monkeypatch.setattr(metrics, "summarize", with_non_finite)
+    out = tmp_path / "run"
+    argv = ["run", str(_scenario(tmp_path, "nan", 1.0)), "--mode", "inproc", "--no-plots"]
+    assert main([*argv, "--out", str(out)]) == 0
+    summary = strict_json.loads((out / "summary.json").read_text())  # NaN would raise
+    assert summary["tracking_rms_pct"] is None and summary["extra"] is None
+    results.write_summary(tmp_path, {"status": "completed", "x": math.nan})
+    assert strict_json.loads((tmp_path / "summary.json").read_text())["x"] is None
