@@ -50,6 +50,63 @@ _VALUE_RANGE: dict[FaultKind, tuple[float, float]] = {
 }
 
 
+def value_range(kind: FaultKind) -> tuple[float, float] | None:
+    """The values a fault of this kind takes (None: it takes no value)."""
+    return _VALUE_RANGE.get(FaultKind(kind))
+
+
+# DBC VAL_ FaultTarget -> what it does (0 = CLEAR_ALL is handled apart)
+FAULT_TARGETS: dict[int, FaultKind] = {
+    1: FaultKind.PUMP_EFFECTIVENESS,
+    2: FaultKind.PUMP_WEAR,
+    3: FaultKind.COMPRESSOR_EFFICIENCY,
+    4: FaultKind.COMPRESSOR_FLOW,
+    5: FaultKind.TURBINE_EFFICIENCY,
+    6: FaultKind.TURBINE_FLOW,
+    7: FaultKind.SPEED_DROPOUT,
+    8: FaultKind.SPEED_STUCK,
+    9: FaultKind.SPEED_NOISE_BURST,
+    10: FaultKind.EGT_OPEN_CIRCUIT,
+    11: FaultKind.BATTERY_VOLTAGE,
+    12: FaultKind.AMBIENT_TEMPERATURE,
+    13: FaultKind.IGNITER_FAILURE,
+    14: FaultKind.STARTER_FAILURE,
+    15: FaultKind.FUEL_STARVATION,
+}
+SWITCHED = (
+    FaultKind.SPEED_DROPOUT,
+    FaultKind.SPEED_STUCK,
+    FaultKind.EGT_OPEN_CIRCUIT,
+    FaultKind.IGNITER_FAILURE,
+)  # 1 on, 0 off
+ENDED_BY_ZERO = (FaultKind.SPEED_NOISE_BURST, FaultKind.PUMP_WEAR)
+CLEAR_ALL = 0
+
+# the faults the engine side handles (PlantBase._apply_engine); the fast model
+# (plant.fast_plant), which has no compressor, turbine, starter, igniter or fuel supply, has none
+ENGINE_FAULTS = (
+    FaultKind.COMPRESSOR_EFFICIENCY,
+    FaultKind.COMPRESSOR_FLOW,
+    FaultKind.TURBINE_EFFICIENCY,
+    FaultKind.TURBINE_FLOW,
+    FaultKind.AMBIENT_TEMPERATURE,
+    FaultKind.STARTER_FAILURE,
+    FaultKind.IGNITER_FAILURE,
+    FaultKind.FUEL_STARVATION,
+)
+
+
+def target_value_range(target: int) -> tuple[float, float] | None:
+    """The values a FaultInject frame's FaultValue may carry for this FaultTarget for the plant
+    node to apply it (PlantNode refuses others and counts them): the fault's own range, or None
+    when any value does (CLEAR_ALL ignores it, a switched fault is off at 0 and on otherwise).
+    KeyError for a target the plant does not know."""
+    if target == CLEAR_ALL:
+        return None
+    kind = FAULT_TARGETS[target]
+    return None if kind in SWITCHED else value_range(kind)
+
+
 @dataclass(frozen=True, order=True)
 class Fault:
     """``kind`` starts at ``at_s`` (simulated s); with ``duration_s`` it ends after that long."""

@@ -31,7 +31,7 @@ import copy
 import numpy as np
 
 from plant import flags as fl
-from plant.faults import Fault, FaultKind
+from plant.faults import CLEAR_ALL, ENDED_BY_ZERO, FAULT_TARGETS, SWITCHED, Fault, FaultKind
 from plant.frames import DUE_ANALOG, DUE_TRUTH, FRAMES, frame_layout, pack_plant_frames
 from plant.interface import Plant
 from plant.node_compiled import (
@@ -71,32 +71,6 @@ from protocol.e2e import E2EStatus
 from protocol.lockstep import TICK_MODULO, every_ticks
 from protocol.node import SendFn
 
-# DBC VAL_ FaultTarget -> what it does (0 = CLEAR_ALL is handled apart)
-FAULT_TARGETS: dict[int, FaultKind] = {
-    1: FaultKind.PUMP_EFFECTIVENESS,
-    2: FaultKind.PUMP_WEAR,
-    3: FaultKind.COMPRESSOR_EFFICIENCY,
-    4: FaultKind.COMPRESSOR_FLOW,
-    5: FaultKind.TURBINE_EFFICIENCY,
-    6: FaultKind.TURBINE_FLOW,
-    7: FaultKind.SPEED_DROPOUT,
-    8: FaultKind.SPEED_STUCK,
-    9: FaultKind.SPEED_NOISE_BURST,
-    10: FaultKind.EGT_OPEN_CIRCUIT,
-    11: FaultKind.BATTERY_VOLTAGE,
-    12: FaultKind.AMBIENT_TEMPERATURE,
-    13: FaultKind.IGNITER_FAILURE,
-    14: FaultKind.STARTER_FAILURE,
-    15: FaultKind.FUEL_STARVATION,
-}
-SWITCHED = (
-    FaultKind.SPEED_DROPOUT,
-    FaultKind.SPEED_STUCK,
-    FaultKind.EGT_OPEN_CIRCUIT,
-    FaultKind.IGNITER_FAILURE,
-)  # 1 on, 0 off
-ENDED_BY_ZERO = (FaultKind.SPEED_NOISE_BURST, FaultKind.PUMP_WEAR)
-CLEAR_ALL = 0
 DEFAULT_WATCHDOG_TICKS = 10
 
 

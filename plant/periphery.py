@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from plant import flags as fl
-from plant.faults import Fault, FaultKind, FaultSchedule
+from plant.faults import ENGINE_FAULTS, Fault, FaultKind, FaultSchedule
 from plant.interface import PlantConfig, PlantOutputs, check_finite
 from plant.jit import EXACT
 from plant.noise import BLOCK, NoiseSource
@@ -28,17 +28,6 @@ from plant.sensors import (
     Thermocouple,
     speed_reading,
     thermocouple_reading,
-)
-
-ENGINE_FAULTS = (  # handled by the engine side (_apply_engine)
-    FaultKind.COMPRESSOR_EFFICIENCY,
-    FaultKind.COMPRESSOR_FLOW,
-    FaultKind.TURBINE_EFFICIENCY,
-    FaultKind.TURBINE_FLOW,
-    FaultKind.AMBIENT_TEMPERATURE,
-    FaultKind.STARTER_FAILURE,
-    FaultKind.IGNITER_FAILURE,
-    FaultKind.FUEL_STARVATION,
 )
 
 # ---- the state array --------------------------------------------------------------------------

@@ -83,6 +83,7 @@ from typing import Any
 from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
 from ecu.params import CONTROLLERS, PRESETS, READINGS, EcuParams
+from plant.faults import CLEAR_ALL, ENGINE_FAULTS, FAULT_TARGETS, target_value_range
 from protocol.dbc import load_database
 from sil import profiles, validation
 from sil.busfault.spec import KINDS, RATED, BusFault, Expectation
@@ -184,9 +185,54 @@ class Scenario:
 @lru_cache(maxsize=1)
 def fault_targets() -> tuple[str, ...]:
     """Fault names, from the FaultTarget value table of the DBC."""
+    return tuple(_fault_codes())
+
+
+@lru_cache(maxsize=1)
+def _fault_codes() -> dict[str, int]:
+    """Fault name -> its FaultTarget value, from the DBC."""
     message = load_database().get_message_by_name("FaultInject")
     choices = message.get_signal_by_name("FaultTarget").choices or {}
-    return tuple(str(choices[k]) for k in sorted(choices))
+    return {str(choices[k]): int(k) for k in sorted(choices)}
+
+
+@lru_cache(maxsize=1)
+def fault_value_field() -> tuple[float, float]:
+    """The range of the FaultInject frame's FaultValue signal (DBC)."""
+    signal = load_database().get_message_by_name("FaultInject").get_signal_by_name("FaultValue")
+    return float(signal.minimum), float(signal.maximum)
+
+
+def fault_value_range(target: str) -> tuple[float, float, str]:
+    """The values a fault of ``target`` may take: what the FaultInject frame carries (the DBC)
+    within what the plant applies for it (plant.faults); and a phrase saying whose limit."""
+    lo, hi = fault_value_field()
+    plant = target_value_range(_fault_codes()[target])
+    if plant is None:
+        return lo, hi, "the range of the FaultInject frame's FaultValue"
+    return max(lo, plant[0]), min(hi, plant[1]), "the values the plant applies"
+
+
+def _fault(r: _Reader, duration: float, model: str) -> Fault:
+    """A ``[[fault]]`` table, its value checked against the frame and the plant."""
+    time_s = r.number("time_s", lo=0)
+    if time_s > duration:
+        raise r.fail("time_s", f"a time within the run (0..{duration:g} s)", time_s)
+    target = r.text("target", choices=fault_targets())
+    code = _fault_codes()[target]
+    if model == "fast" and code != CLEAR_ALL and FAULT_TARGETS[code] in ENGINE_FAULTS:
+        raise r.fail(
+            "target",
+            "a fault the fast plant has (it has no compressor, turbine, ambient, starter, "
+            "igniter or fuel supply model)",
+            target,
+        )
+    lo, hi, why = fault_value_range(target)
+    value = r.number("value", 0.0 if lo <= 0.0 <= hi else ...)
+    if not lo <= value <= hi:
+        raise r.fail("value", f"a number in {lo:.10g}..{hi:.10g} for {target} ({why})", value)
+    r.done()
+    return Fault(time_s, target, value)
 
 
 class _Reader:
@@ -492,14 +538,7 @@ def parse(text: str, source: str, base_dir: Path, path: Path | None = None) -> S
     stop_s = cmd.number("stop_s", lo=0, hi=duration) if "stop_s" in cmd.table else None
     cmd.done()
 
-    targets = fault_targets()
-    faults = []
-    for r in top.tables("fault"):
-        time_s = r.number("time_s", lo=0)
-        if time_s > duration:
-            raise r.fail("time_s", f"a time within the run (0..{duration:g} s)", time_s)
-        faults.append(Fault(time_s, r.text("target", choices=targets), r.number("value", 0.0)))
-        r.done()
+    faults = [_fault(r, duration, plant.model) for r in top.tables("fault")]
     bus_faults = tuple(_bus_fault(r, duration) for r in top.tables("bus_fault"))
     top.done()
     return Scenario(

@@ -182,3 +182,48 @@ def test_table_and_pair_parameters_are_lists_of_numbers(tmp_path):
     params = preset("default", **scenario.load(path).controller.params)  # validated
     assert params.accel_line_v == tuple(float(v) for v in line) and params.init_kx == (-1.0, -0.5)
     assert params.v_slew_v_s == 20.0
+
+
+def _with_fault(target: str, value: float | None, model: str = "aero") -> str:
+    fault = f"[[fault]]\ntime_s = 1\ntarget = '{target}'\n"
+    fault += "" if value is None else f"value = {value!r}\n"
+    return f"duration_s = 10\n[plant]\nmodel = '{model}'\n[command]\n{fault}"
+
+
+@pytest.mark.parametrize("target", scenario.fault_targets())
+def test_fault_values_are_checked_against_the_plant_and_the_frame(tmp_path, target):
+    from plant.faults import target_value_range
+
+    frame_lo, frame_hi = scenario.fault_value_field()
+    code = scenario.fault_targets().index(target)  # the DBC's FaultTarget values are 0..15
+    plant_lo, plant_hi = target_value_range(code) or (frame_lo, frame_hi)
+    lo, hi = max(plant_lo, frame_lo), min(plant_hi, frame_hi)  # SPEED_NOISE: the frame's
+    path = tmp_path / "f.toml"
+    for edge in (lo, hi):
+        path.write_text(_with_fault(target, edge))
+        assert scenario.load(path).faults[0].value == edge
+    for outside in (lo - max(1.0, abs(lo)), hi + max(1.0, abs(hi)), 1e39):
+        path.write_text(_with_fault(target, outside))
+        with pytest.raises(scenario.ScenarioError, match=rf"field 'fault\[0\].value'.*{target}"):
+            scenario.load(path)
+
+
+def test_a_fault_the_fast_plant_lacks_is_refused(tmp_path):
+    path = tmp_path / "f.toml"
+    path.write_text(_with_fault("TURBINE_FLOW", 0.9, model="fast"))
+    with pytest.raises(scenario.ScenarioError, match=r"field 'fault\[0\].target'.*fast plant"):
+        scenario.load(path)
+    path.write_text(_with_fault("PUMP_EFFECTIVENESS", 0.5, model="fast"))
+    assert scenario.load(path).faults[0].target == "PUMP_EFFECTIVENESS"
+
+
+def test_run_and_check_refuse_a_fault_value_the_plant_would_drop(tmp_path):
+    path, out = tmp_path / "f.toml", tmp_path / "o"
+    path.write_text(_with_fault("PUMP_EFFECTIVENESS", 5))
+    for args in (("scenarios", "--check", str(path)), ("run", str(path), "--out", str(out))):
+        result = subprocess.run(
+            [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True
+        )
+        assert result.returncode == 2, result.stderr
+        assert f"{path}: field 'fault[0].value': expected a number in 0..1" in result.stderr
+    assert not out.exists()
