@@ -208,7 +208,8 @@ def start_stop(trace: dict[str, np.ndarray]) -> dict[str, float | int | str | No
     delivered while no flame burnt, the time from the fuel cut (the first SHUTDOWN) until the
     EGT is under COOL_K for good (None without a cut, NaN if it never is), the final EGT."""
     t, mode, egt = trace["time"], trace["ActuatorMode"], trace["EGT"]
-    if not len(t) or not trace["speed_true"][0] < REST_PCT:
+    speed = trace["speed_true"][np.isfinite(trace["speed_true"])]  # (in real time the first
+    if not len(speed) or not speed[0] < REST_PCT:  # rows may come before the plant's first frame)
         return {}
     armed = np.flatnonzero(mode == modes.ARMED)
     if not len(armed):

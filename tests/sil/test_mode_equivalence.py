@@ -14,16 +14,21 @@ it starts, runs and stops."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from dataclasses import replace
 
 import pytest
 
 from sil import scenario as scenarios
+from sil.run_record import scenario_text
 from sil.runner import RunOptions, run
 from sil.scenario import Scenario
 
 CUT_S = 25.0  # every scenario is cut to this, or to 3 s past its last fault
 FROM_REST_S = 32.0  # a start takes about 21 s: then the stop, 6 s before the end
+STARTS = ("start_time_s", "start_egt_peak_K", "start_abort", "start_abort_s", "relights")
 
 
 def cut(s: Scenario) -> Scenario:
@@ -76,3 +81,47 @@ def test_a_varied_engine_flies_alike_on_the_bus(tmp_path, udp_spec, first_differ
     nominal = _fly(replace(s, plant=scenarios.load("thesis-5.4-staircase").plant),
                    tmp_path / "nominal", "inproc")  # fmt: skip
     assert nominal["tracking_rms_pct"] != inproc["tracking_rms_pct"]  # another engine indeed
+
+
+START_SCENARIOS = {  # a start from rest, cut (s) past its start, or its relight, or its abort
+    "start-nominal": 24.0,
+    "start-no-light": 22.0,
+    "start-hot-day": 24.0,
+    "start-cold-day": 24.0,
+    "start-flameout-relight": 36.0,
+}
+
+
+@pytest.mark.slow
+def test_the_starts_in_real_time_are_the_lockstep_starts(tmp_path, udp_spec):
+    """The start scenarios in real time (each node on its own clock; all five at once, as they
+    take their simulated time in wall time) against lockstep: the start time within 1 s, the
+    EGT peak within 30 K, the same abort and relights."""
+    runs = {}
+    for name, seconds in START_SCENARIOS.items():
+        s = scenarios.load(name)
+        s = replace(s, duration_s=seconds, stop_s=None)
+        path = tmp_path / f"{name}.toml"
+        path.write_text(scenario_text(s, s.seed))
+        out = tmp_path / name / "realtime"
+        runs[name] = (s, out, subprocess.Popen(
+            [sys.executable, "-m", "sil.cli", "run", str(path), "--mode", "realtime",
+             "--bus", udp_spec(), "--out", str(out), "--no-plots"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        ))  # fmt: skip
+    for name, (_, _, proc) in runs.items():
+        _, stderr = proc.communicate(timeout=180)
+        assert proc.returncode == 0, f"{name}: {stderr}"
+    for name, (s, out, _) in runs.items():
+        realtime = json.loads((out / "summary.json").read_text())
+        lockstep = _fly(s, tmp_path / name / "lockstep", "lockstep", bus=udp_spec())
+        figures = {k: (lockstep.get(k), realtime.get(k)) for k in STARTS}
+        assert realtime["start_abort"] == lockstep["start_abort"], (name, figures)
+        assert realtime["relights"] == lockstep["relights"], (name, figures)
+        if lockstep["start_time_s"] is None:
+            assert realtime["start_time_s"] is None, (name, figures)
+        else:
+            assert abs(realtime["start_time_s"] - lockstep["start_time_s"]) <= 1.0, (name, figures)
+        assert abs(realtime["start_egt_peak_K"] - lockstep["start_egt_peak_K"]) <= 30.0, (
+            name, figures
+        )  # fmt: skip
