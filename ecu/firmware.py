@@ -2,20 +2,24 @@
 and parameters around one step, as Embedded Coder and PX4 lay it out).
 
 Inputs and outputs are raw integers in the CAN contract's units. The tick allocates nothing that
-survives it: the output record is reused, state lives in preallocated slots and int32 arrays,
-and the firmware path uses integers only. Order of computation, top to bottom:
+survives it: the output record and the record of what the stages hand each other
+(:class:`TickVars`) are reused, state lives in preallocated slots and int32 arrays, and the
+firmware path uses integers only. One tick runs these stages, in this order, with the same names
+as the C port's ``ecu_tick`` (``ecu/port/ecu_core.c``):
 
-1. frame freshness (E2E status per frame kind): latch fresh values, age the others;
-2. sensor checks (speed range / rate / stuck, EGT open circuit), substitution of speed by the
-   fast-model observer when the sensor or its frame is lost;
-3. speed history, central-difference rate and the filtered rate (ecu.rate_filter); demand
-   hold / idle / shutdown on demand loss;
-4. protection trips (overspeed, flameout, EGT over maximum, pump current) and mode transition;
-5. in RUN: estimator (eq. 4.7/4.31), speed controller (MRAC eq. 5.4/5.16, PID, scheduled PI
-   or open loop),
-   reference model (eq. 5.18-5.19), min/max selection with limit loops, voltage limits and slew,
-   observer (eq. 3.5), pump driver (PWM duty from the measured supply);
-6. telemetry and fault word.
+1. sensors: frame freshness (E2E status per frame kind), the speed checks (range, rate, stuck)
+   and the EGT open-circuit check, speed substituted by the fast-model observer once failed;
+   supply and pump current; demand hold, idle and shutdown on demand loss;
+2. history: speed history, central-difference rate and the filtered rate (ecu.rate_filter);
+3. trips: overspeed, flameout, EGT over its maximum, pump current, sensor frames lost;
+4. start sequencer: in ARMED, the start's starter, igniter and pump, or an abort;
+5. mode: the mode transition (ecu.modes) and what it starts (a start, a relight, RUN's entry);
+6. control law (RUN): estimator (eq. 4.7/4.31), MRAC (eq. 5.4/5.16), PID, scheduled PI or open
+   loop, reference model (eq. 5.18-5.19);
+7. limit selection (RUN): min/max selection with the limit loops and fuel schedules, voltage
+   limits and slew, integrator tracking, observer (eq. 3.5);
+8. pump driver: PWM duty from the measured supply; the stop's cool-down outside RUN;
+9. health: pump health, fault word, saturation count and outputs.
 """
 
 from __future__ import annotations
@@ -117,6 +121,21 @@ class EcuOutputs:
             setattr(self, name, 0)
 
 
+class TickVars:
+    """What one tick's stages hand each other (preallocated: nothing survives the tick)."""
+
+    __slots__ = (
+        "mode", "new_mode", "faults", "speed_ok", "egt_ok", "analog_fresh", "inputs_valid",
+        "n_rpm", "n_q24", "dn", "rate", "ctrl_rate", "demand",
+        "running", "trip_fault", "trip_shutdown", "relight", "start_abort",
+        "u", "v", "pump_mv", "duty", "enable",
+    )  # fmt: skip
+
+    def __init__(self) -> None:
+        for name in self.__slots__:
+            setattr(self, name, 0)
+
+
 def _q24_to_cpct(x_q24: int) -> int:
     """Q7.24 %N -> 0.01 %N per count, rounded."""
     return (x_q24 * 100 + (1 << 23)) >> 24
@@ -132,6 +151,7 @@ class Ecu:
         self.s = EcuState()
         self.out = EcuOutputs()
         self.seq = Q.SeqOut()
+        self.t = TickVars()
         self.reset()
 
     def reset(self) -> None:
@@ -172,15 +192,31 @@ class Ecu:
         return sat32(((rpm * self.p.rpm_to_q24_k) >> 16) - self.p.trim_n_q24)
 
     def tick(self, i: EcuInputs) -> EcuOutputs:
-        p = self.p
+        """One control step, in the stages the C port's ``ecu_tick`` runs in the same order."""
         s = self.s
-        o = self.out
-        th = s.theta_q24
+        t = self.t
         s.ticks = s.ticks + 1 if s.ticks < INT32_MAX else INT32_MAX
-        faults = s.faults & ~F.TRANSIENT
-        mode = s.mode
+        t.faults = s.faults & ~F.TRANSIENT
+        t.mode = s.mode
+        self._stage_sensors(i)
+        self._stage_history()
+        self._stage_trips()
+        self._stage_start_sequencer()
+        self._stage_mode()
+        if t.new_mode == M.RUN:
+            self._stage_control_law()
+            self._stage_limit_selection()
+        self._stage_pump_driver()
+        self._stage_health(i)
+        return self.out
 
-        # 1-2. sensor frame: speed and EGT
+    def _stage_sensors(self, i: EcuInputs) -> None:
+        """The frames since the last tick: speed and EGT (checked; speed substituted by the
+        observer once failed), supply and pump current, demand (held, then idle)."""
+        s = self.s
+        p = self.p
+        t = self.t
+        faults = t.faults
         if i.sensor_status == E2E_OK:
             s.sensor_age = 0
             if s.speed_seen:
@@ -195,21 +231,21 @@ class Ecu:
             faults |= F.SENSOR_FRAME_LOST
         if faults & (F.SPEED_RANGE | F.SPEED_RATE | F.SPEED_STUCK):
             s.speed_failed = 1
-        speed_ok = 1 if (s.speed_failed == 0 and s.sensor_age == 0) else 0
-        inputs_valid = 1 if s.inputs_seen == SEEN_ALL else 0
-        if speed_ok:
-            n_rpm = s.speed_rpm
+        t.speed_ok = 1 if (s.speed_failed == 0 and s.sensor_age == 0) else 0
+        t.inputs_valid = 1 if s.inputs_seen == SEEN_ALL else 0
+        if t.speed_ok:
+            t.n_rpm = s.speed_rpm
         elif not s.inputs_seen & SEEN_SPEED:
-            n_rpm = 0  # no reading since power-up: nothing to substitute (not the trim speed)
+            t.n_rpm = 0  # no reading since power-up: nothing to substitute (not the trim speed)
         else:
-            n_rpm = ((s.obs_n_q24 + p.trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24
+            t.n_rpm = ((s.obs_n_q24 + p.trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24
             if s.speed_failed:
                 faults |= F.SPEED_SUBSTITUTED
-        egt_ok = 1 if (faults & F.EGT_OPEN) == 0 else 0
+        t.egt_ok = 1 if (faults & F.EGT_OPEN) == 0 else 0
 
         # analog frame: supply voltage and pump current
-        analog_fresh = 1 if i.analog_status == E2E_OK else 0
-        if analog_fresh:
+        t.analog_fresh = 1 if i.analog_status == E2E_OK else 0
+        if t.analog_fresh:
             s.analog_age = 0
             s.supply_mv = i.supply_mv
             s.pump_ma = i.pump_ma
@@ -233,33 +269,48 @@ class Ecu:
         if s.demand_age > p.demand_hold_ticks:
             demand = p.idle_q24
             faults |= F.DEMAND_LOST
-        if not egt_ok and demand > p.egt_fail_demand_q24:
+        if not t.egt_ok and demand > p.egt_fail_demand_q24:
             demand = p.egt_fail_demand_q24
+        t.demand = demand
+        t.faults = faults
 
-        # 3. speed history (raw rpm) and derived signals
+    def _stage_history(self) -> None:
+        """The speed history (raw rpm) and what it gives: speed deviation, the central-difference
+        rate (the observer's while the sensor is out) and the filtered rate."""
+        s = self.s
+        p = self.p
+        t = self.t
         s.hist_idx = (s.hist_idx + 1) % RATE_BUF_LEN
-        s.n_hist_rpm[s.hist_idx] = n_rpm
+        s.n_hist_rpm[s.hist_idx] = t.n_rpm
         s.u_hist_q24[s.hist_idx] = 0
         if s.speed_seen < RATE_BUF_LEN:
             s.speed_seen += 1
         m = p.rate_half_window
-        n_q24 = sat32((n_rpm * p.rpm_to_q24_k) >> 16)
-        dn = sub_sat(n_q24, p.trim_n_q24)
-        if not speed_ok:
-            rate = s.obs_v_q24
+        t.n_q24 = sat32((t.n_rpm * p.rpm_to_q24_k) >> 16)
+        t.dn = sub_sat(t.n_q24, p.trim_n_q24)
+        if not t.speed_ok:
+            t.rate = s.obs_v_q24
         elif s.speed_seen > 2 * m:
-            rate = self._rate_q24(m)
+            t.rate = self._rate_q24(m)
         else:
-            rate = 0
+            t.rate = 0
         if s.speed_seen == 1:
-            rate_filter_start(s, dn)
+            rate_filter_start(s, t.dn)
         else:  # with the voltage applied over the last tick (0 outside RUN)
             u_last = s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - 1) % RATE_BUF_LEN]
-            rate_filter_step(s, p, dn, u_last, speed_ok)
+            rate_filter_step(s, p, t.dn, u_last, t.speed_ok)
         # the control laws' and limit loops' rate: filtered while the sensor is valid
-        ctrl_rate = s.rf_v_q24 if (p.rate_filter_on and speed_ok) else rate
+        t.ctrl_rate = s.rf_v_q24 if (p.rate_filter_on and t.speed_ok) else t.rate
 
-        # 4. protection trips and mode
+    def _stage_trips(self) -> None:
+        """Protection trips: overspeed, flameout, EGT over its maximum, pump current, sensor
+        frames lost; which of them end in FAULT, which in SHUTDOWN (or a relight)."""
+        s = self.s
+        p = self.p
+        t = self.t
+        mode = t.mode
+        n_rpm = t.n_rpm
+        faults = t.faults
         running = 1 if (mode == M.ARMED or mode == M.RUN) else 0
         bad = running and n_rpm > p.overspeed_rpm
         s.overspeed_cnt = F.persist(s.overspeed_cnt, bad, p.overspeed_ticks)
@@ -267,44 +318,58 @@ class Ecu:
             faults |= F.OVERSPEED
         bad = mode == M.RUN and n_rpm < p.flameout_rpm
         s.flameout_cnt = F.persist(s.flameout_cnt, bad, p.flameout_ticks)
-        bad = mode == M.RUN and egt_ok and s.egt_dk < p.flameout_egt_dk
+        bad = mode == M.RUN and t.egt_ok and s.egt_dk < p.flameout_egt_dk
         s.flame_egt_cnt = F.persist(s.flame_egt_cnt, bad, p.flameout_egt_ticks)
         flameout = 0
         if s.flameout_cnt >= p.flameout_ticks or s.flame_egt_cnt >= p.flameout_egt_ticks:
             faults |= F.FLAMEOUT
             flameout = 1
-        bad = running and egt_ok and s.egt_dk > p.egt_max_dk
+        bad = running and t.egt_ok and s.egt_dk > p.egt_max_dk
         s.egt_over_cnt = F.persist(s.egt_over_cnt, bad, p.egt_max_ticks)
         if s.egt_over_cnt >= p.egt_max_ticks:
             faults |= F.EGT_OVERTEMP
-        if mode == M.RUN and analog_fresh:
+        if mode == M.RUN and t.analog_fresh:
             faults |= pump_current_checks(s, p, s.pump_ma, s.v_applied_q24)
-        trip_fault = 1 if (faults & TRIP_FAULT) else 0
+        t.trip_fault = 1 if (faults & TRIP_FAULT) else 0
         if running and s.sensor_age > p.sensor_loss_ticks:
-            trip_fault = 1
-        trip_shutdown = flameout
+            t.trip_fault = 1
+        t.trip_shutdown = flameout
         if s.demand_age >= p.demand_shutdown_ticks:
-            trip_shutdown = 1
-        relight = 1 if (flameout and p.start_on and s.relights < p.seq_relight_max) else 0
+            t.trip_shutdown = 1
+        t.relight = 1 if (flameout and p.start_on and s.relights < p.seq_relight_max) else 0
+        t.faults = faults
 
-        # 4b. the start sequencer (ARMED): this tick's starter, igniter and pump, or an abort
+    def _stage_start_sequencer(self) -> None:
+        """In ARMED, the start sequencer's step: this tick's starter, igniter and pump, or an
+        abort; whether the engine runs (by the sequencer, else by the speed alone)."""
+        s = self.s
+        p = self.p
+        t = self.t
         seq = self.seq
         seq.v_q24 = 0
         seq.starter_cpct = 0
         seq.igniter = 0
-        start_abort = 0
-        running = 1 if n_rpm >= p.run_entry_rpm else 0
-        if mode == M.ARMED and p.start_on:
+        t.start_abort = 0
+        t.running = 1 if t.n_rpm >= p.run_entry_rpm else 0
+        if t.mode == M.ARMED and p.start_on:
             v_cap = p.v_max_q24
             if p.fuel_schedules_on:  # the start's fuel stays under the acceleration line of
                 # the weakest pump the schedules accept (no pump estimate yet in a start)
                 v_cap = schedule_v(
-                    s, p, p.accel_line_q24, n_q24, p.sched_lam_lo_q24, p.sched_lam_lo_q24
+                    s, p, p.accel_line_q24, t.n_q24, p.sched_lam_lo_q24, p.sched_lam_lo_q24
                 )
-            start_abort = Q.start_step(s, p, n_rpm, s.egt_dk, ctrl_rate, v_cap, seq)
-            running = 1 if s.seq_state == Q.RUN else 0
-            if (s.stop or not s.arm or trip_shutdown) and not start_abort:
+            t.start_abort = Q.start_step(s, p, t.n_rpm, s.egt_dk, t.ctrl_rate, v_cap, seq)
+            t.running = 1 if s.seq_state == Q.RUN else 0
+            if (s.stop or not s.arm or t.trip_shutdown) and not t.start_abort:
                 s.seq_reason = Q.STOPPED
+
+    def _stage_mode(self) -> None:
+        """The mode for this tick (ecu.modes) and what its transitions start: a start or a
+        relight, the entry into RUN (bumpless at the entry voltage), the wait for a re-arm."""
+        s = self.s
+        p = self.p
+        t = self.t
+        mode = t.mode
         demand_fresh = 1 if s.demand_age <= p.demand_hold_ticks else 0
         if not s.arm:
             s.rearm_wait = 0
@@ -312,15 +377,15 @@ class Ecu:
             mode,
             s.arm,
             s.stop,
-            running,
+            t.running,
             demand_fresh,
-            trip_fault,
-            1 if (trip_shutdown or start_abort) else 0,
-            1 if n_rpm < p.shutdown_done_rpm else 0,
-            1 if (start_abort or s.seq_state >= Q.IGNITION) else 0,
-            relight,
+            t.trip_fault,
+            1 if (t.trip_shutdown or t.start_abort) else 0,
+            1 if t.n_rpm < p.shutdown_done_rpm else 0,
+            1 if (t.start_abort or s.seq_state >= Q.IGNITION) else 0,
+            t.relight,
             1 if (Q.cooled(s, p) or not p.start_on) else 0,
-            1 if (inputs_valid and demand_fresh and not s.rearm_wait) else 0,
+            1 if (t.inputs_valid and demand_fresh and not s.rearm_wait) else 0,
         )
         if (mode == M.ARMED or mode == M.RUN) and new_mode != M.ARMED and new_mode != M.RUN:
             s.rearm_wait = s.arm  # a start is never retried by itself: the arm must drop first
@@ -336,118 +401,168 @@ class Ecu:
                 take_egt_at_rest(s, p)
         if new_mode == M.OFF:
             s.seq_state = Q.OFF
-        if new_mode == M.RUN and mode != M.RUN:  # entry into RUN: bumpless at the entry voltage
-            v_entry = p.entry_v_q24
-            if mode == M.ARMED and p.start_on:
-                v_entry = s.seq_v_q24  # where the start left the pump
-                if p.fuel_schedules_on and p.pump_scaling_on:
-                    pump_from_start(s, p, n_q24, v_entry)
-            s.seq_state = Q.RUN
-            reset_loops(s, v_entry)
-            s.hist_fill = 0
-            s.theta_q24[PID_I] = sub_sat(v_entry, p.trim_v_q24)
-            s.theta_ext[PID_I] = 0
-            s.u_lag_q24 = s.theta_q24[PID_I]
-            s.xm1_q24 = dn
-            s.xm2_q24 = 0
-            s.obs_n_q24 = dn
-            s.obs_v_q24 = rate
-            s.xh1_q24 = dn  # the identification model starts where the engine is
-            s.xh2_q24 = rate
+        if new_mode == M.RUN and mode != M.RUN:
+            self._enter_run(mode)
         s.mode = new_mode
+        t.new_mode = new_mode
 
-        # 5. control
-        if new_mode == M.RUN:
-            if s.hist_fill < RATE_BUF_LEN:
-                s.hist_fill += 1
-            adapt = speed_ok
-            # under the acceleration line the estimator learns the pump the line needs, from a
-            # reading that answers the pump (not one that stays put while the pump moves: a
-            # stuck sensor, before its fault trips, would teach a weak pump and raise the line)
-            line_learns = s.line_owns and s.speed_stuck_cnt == 0
-            if p.freeze_on and (s.v_saturated or (s.owner != OWNER_SPEED and not line_learns)):
-                adapt = 0
-            if p.adapt_band_q24 and (dn > p.adapt_band_q24 or dn < -p.adapt_band_q24):
-                adapt = 0  # off the trim speed the fast model no longer holds
-            if speed_ok and s.hist_fill > m + 1 and s.speed_seen > 2 * m + 1:
-                estimator_step(
-                    s,
-                    p,
-                    self._dn_q24(m + 1),
-                    self._rate_q24(m + 1),
-                    self._dn_q24(m),
-                    self._rate_q24(m),
-                    s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - m - 1) % RATE_BUF_LEN],
-                    adapt,
-                )
-            r = sub_sat(demand, p.trim_n_q24)
-            if p.controller == CTRL_MRAC:
-                u = command_lag(s, p, mrac_control(s, p, dn, ctrl_rate, r))
-                mrac_gain_update(s, p)
-            elif p.controller == CTRL_PID:
-                u = pid_control(s, p, sat32(demand - n_q24), ctrl_rate)
-            elif p.controller == CTRL_PI:
-                u = pi_control(s, p, sat32(demand - n_q24), n_q24)
-            else:
-                u = sat32(s.open_loop_q24 - p.trim_v_q24)
-            reference_model_step(s, p, r)
-            # the hotter of the probe and the gas (the lead) against the limit; the gas may pass
-            # it by what the probe still reads under it, up to the transient allowance
-            probe_dk = p.egt_limit_dk - s.egt_dk
-            room_dk = clamp(probe_dk, 0, p.egt_gas_margin_dk)
-            gas_dk = p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12)
-            e_dk = clamp(min(probe_dk, gas_dk), -EGT_ERROR_MAX_DK, EGT_ERROR_MAX_DK)
-            v = select_voltage(
-                s, p, sat32(p.trim_v_q24 + u), div_trunc(e_dk << 24, 10), egt_ok, n_q24, ctrl_rate
+    def _enter_run(self, mode: int) -> None:
+        """Entry into RUN: bumpless at the entry voltage (where the start left the pump), the
+        loops, integrators and models started where the engine is."""
+        s = self.s
+        p = self.p
+        t = self.t
+        v_entry = p.entry_v_q24
+        if mode == M.ARMED and p.start_on:
+            v_entry = s.seq_v_q24  # where the start left the pump
+            if p.fuel_schedules_on and p.pump_scaling_on:
+                pump_from_start(s, p, t.n_q24, v_entry)
+        s.seq_state = Q.RUN
+        reset_loops(s, v_entry)
+        s.hist_fill = 0
+        s.theta_q24[PID_I] = sub_sat(v_entry, p.trim_v_q24)
+        s.theta_ext[PID_I] = 0
+        s.u_lag_q24 = s.theta_q24[PID_I]
+        s.xm1_q24 = t.dn
+        s.xm2_q24 = 0
+        s.obs_n_q24 = t.dn
+        s.obs_v_q24 = t.rate
+        s.xh1_q24 = t.dn  # the identification model starts where the engine is
+        s.xh2_q24 = t.rate
+
+    def _stage_control_law(self) -> None:
+        """In RUN: the estimator (eq. 4.7/4.31), the speed controller (MRAC eq. 5.4/5.16, PID,
+        scheduled PI or open loop) and the reference model (eq. 5.18-5.19)."""
+        s = self.s
+        p = self.p
+        t = self.t
+        dn = t.dn
+        if s.hist_fill < RATE_BUF_LEN:
+            s.hist_fill += 1
+        m = p.rate_half_window
+        adapt = t.speed_ok
+        # under the acceleration line the estimator learns the pump the line needs, from a
+        # reading that answers the pump (not one that stays put while the pump moves: a
+        # stuck sensor, before its fault trips, would teach a weak pump and raise the line)
+        line_learns = s.line_owns and s.speed_stuck_cnt == 0
+        if p.freeze_on and (s.v_saturated or (s.owner != OWNER_SPEED and not line_learns)):
+            adapt = 0
+        if p.adapt_band_q24 and (dn > p.adapt_band_q24 or dn < -p.adapt_band_q24):
+            adapt = 0  # off the trim speed the fast model no longer holds
+        if t.speed_ok and s.hist_fill > m + 1 and s.speed_seen > 2 * m + 1:
+            estimator_step(
+                s,
+                p,
+                self._dn_q24(m + 1),
+                self._rate_q24(m + 1),
+                self._dn_q24(m),
+                self._rate_q24(m),
+                s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - m - 1) % RATE_BUF_LEN],
+                adapt,
             )
-            u_applied = sub_sat(v, p.trim_v_q24)
-            if p.controller == CTRL_PID:
-                pid_track(s, p, sat32(demand - n_q24), ctrl_rate, u_applied)
-            elif p.controller == CTRL_PI:
-                pi_track(s, p, sat32(demand - n_q24), n_q24, u_applied)
-            if s.owner != OWNER_SPEED:  # the lag tracks what a limit applies (anti-windup)
-                s.u_lag_q24 = u_applied
-            observer_step(s, p, u_applied, dn, speed_ok)
-            s.u_hist_q24[s.hist_idx] = u_applied
-            pump_mv = volts_q24_to_mv(v)
-            duty = pump_duty(s, p, pump_mv, s.supply_mv)
-            enable = 1
+        demand = t.demand
+        r = sub_sat(demand, p.trim_n_q24)
+        if p.controller == CTRL_MRAC:
+            t.u = command_lag(s, p, mrac_control(s, p, dn, t.ctrl_rate, r))
+            mrac_gain_update(s, p)
+        elif p.controller == CTRL_PID:
+            t.u = pid_control(s, p, sat32(demand - t.n_q24), t.ctrl_rate)
+        elif p.controller == CTRL_PI:
+            t.u = pi_control(s, p, sat32(demand - t.n_q24), t.n_q24)
+        else:
+            t.u = sat32(s.open_loop_q24 - p.trim_v_q24)
+        reference_model_step(s, p, r)
+
+    def _stage_limit_selection(self) -> None:
+        """In RUN: the EGT error (the hotter of the probe and the gas), the min/max selection of
+        the speed command with the limit loops and fuel schedules, integrator tracking of the
+        loops that did not win, and the observer (eq. 3.5) on the applied voltage."""
+        s = self.s
+        p = self.p
+        t = self.t
+        # the hotter of the probe and the gas (the lead) against the limit; the gas may pass
+        # it by what the probe still reads under it, up to the transient allowance
+        probe_dk = p.egt_limit_dk - s.egt_dk
+        room_dk = clamp(probe_dk, 0, p.egt_gas_margin_dk)
+        gas_dk = p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12)
+        e_dk = clamp(min(probe_dk, gas_dk), -EGT_ERROR_MAX_DK, EGT_ERROR_MAX_DK)
+        t.v = select_voltage(
+            s,
+            p,
+            sat32(p.trim_v_q24 + t.u),
+            div_trunc(e_dk << 24, 10),
+            t.egt_ok,
+            t.n_q24,
+            t.ctrl_rate,
+        )
+        u_applied = sub_sat(t.v, p.trim_v_q24)
+        if p.controller == CTRL_PID:
+            pid_track(s, p, sat32(t.demand - t.n_q24), t.ctrl_rate, u_applied)
+        elif p.controller == CTRL_PI:
+            pi_track(s, p, sat32(t.demand - t.n_q24), t.n_q24, u_applied)
+        if s.owner != OWNER_SPEED:  # the lag tracks what a limit applies (anti-windup)
+            s.u_lag_q24 = u_applied
+        observer_step(s, p, u_applied, t.dn, t.speed_ok)
+        s.u_hist_q24[s.hist_idx] = u_applied
+
+    def _stage_pump_driver(self) -> None:
+        """The pump's duty from the measured supply (ecu.pump_driver), the starter and igniter:
+        in RUN at the selected voltage; otherwise the sequencer's (a stop's cool-down, a start)
+        with the models held where the engine is."""
+        s = self.s
+        p = self.p
+        t = self.t
+        seq = self.seq
+        new_mode = t.new_mode
+        faults = t.faults
+        if new_mode == M.RUN:
+            t.pump_mv = volts_q24_to_mv(t.v)
+            t.duty = pump_duty(s, p, t.pump_mv, s.supply_mv)
+            t.enable = 1
             if s.owner != OWNER_SPEED:
                 faults |= F.LIMITER_ACTIVE
             if s.v_saturated:
                 faults |= F.PUMP_SATURATED
         else:
             if new_mode == M.SHUTDOWN and p.start_on:
-                Q.stop_step(s, p, n_rpm, s.egt_dk, seq)
+                Q.stop_step(s, p, t.n_rpm, s.egt_dk, seq)
             elif new_mode != M.ARMED:
                 seq.v_q24 = 0  # a start that just ended: no fuel
             s.v_applied_q24 = seq.v_q24
-            s.xm1_q24 = dn
+            s.xm1_q24 = t.dn
             s.xm2_q24 = 0
-            s.obs_n_q24 = dn
-            s.obs_v_q24 = rate
-            s.xh1_q24 = dn
-            s.xh2_q24 = rate
-            pump_mv = volts_q24_to_mv(seq.v_q24)
-            duty = pump_duty(s, p, pump_mv, s.supply_mv) if pump_mv > 0 else 0
-            enable = 1 if duty > 0 else 0
+            s.obs_n_q24 = t.dn
+            s.obs_v_q24 = t.rate
+            s.xh1_q24 = t.dn
+            s.xh2_q24 = t.rate
+            t.pump_mv = volts_q24_to_mv(seq.v_q24)
+            t.duty = pump_duty(s, p, t.pump_mv, s.supply_mv) if t.pump_mv > 0 else 0
+            t.enable = 1 if t.duty > 0 else 0
         if new_mode != M.ARMED and new_mode != M.SHUTDOWN:
             seq.starter_cpct = 0
             seq.igniter = 0
         s.starter_cpct = seq.starter_cpct
         s.igniter = seq.igniter
+        t.faults = faults
 
-        # 6. health, telemetry, fault word
+    def _stage_health(self, i: EcuInputs) -> None:
+        """Pump health, the fault word, the saturation count and the output record."""
+        s = self.s
+        p = self.p
+        t = self.t
+        o = self.out
+        th = s.theta_q24
+        faults = t.faults
         health = F.pump_health_pm(th[LAM], p.lambda_comm_q24)
         if health < p.health_alarm_pm:
             faults |= F.PUMP_HEALTH
         s.faults = faults
         s.sat_events = sat32(s.sat_events + take_sat_events())
         o.tick = i.tick
-        o.duty_cpct = duty
-        o.pump_mv = pump_mv
-        o.pump_enable = enable
-        o.mode = new_mode
+        o.duty_cpct = t.duty
+        o.pump_mv = t.pump_mv
+        o.pump_enable = t.enable
+        o.mode = t.new_mode
         o.fault_word = faults & 0xFFFF
         o.sat_events = s.sat_events
         o.ap21_q24 = th[AP21]
@@ -462,11 +577,10 @@ class Ecu:
         o.kf2_q24 = th[KF2]
         o.pump_health_pm = health
         o.nref_cpct = _q24_to_cpct(s.xm1_q24 + p.trim_n_q24)
-        o.n_cpct = _q24_to_cpct(n_q24)
+        o.n_cpct = _q24_to_cpct(t.n_q24)
         o.owner = s.owner
-        o.starter_cpct = seq.starter_cpct
-        o.igniter = seq.igniter
+        o.starter_cpct = self.seq.starter_cpct
+        o.igniter = self.seq.igniter
         o.seq_state = s.seq_state
         o.seq_reason = s.seq_reason
-        o.inputs_valid = inputs_valid
-        return o
+        o.inputs_valid = t.inputs_valid

@@ -992,58 +992,59 @@ void ecu_init(ecu_t *e, const ecu_params_t *p)
     e->sat_pending = 0;
 }
 
-const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
+/* ---- one tick, in stages (ecu/firmware.py Ecu.tick: the same stages in the same order) ------ */
+
+/* What one tick's stages hand each other (ecu/firmware.py TickVars), on the tick's stack. */
+typedef struct {
+    int32_t mode, new_mode, faults;
+    int32_t n_rpm, n_q24, dn, rate, ctrl_rate, demand;
+    int32_t start_abort, seq_v, u, v, pump_mv, duty, enable;
+    int speed_ok, egt_ok, analog_fresh, inputs_valid;
+    int running, trip_fault, trip_shutdown, relight;
+} tick_vars_t;
+
+/* the frames since the last tick: speed and EGT (checked; speed substituted by the observer
+   once failed), supply and pump current, demand (held, then idle) */
+static void stage_sensors(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
 {
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
-    ecu_outputs_t *o = &e->o;
-    int32_t *th = s->theta_q24;
-    int32_t faults = s->faults & ~F_TRANSIENT;
-    int32_t mode = s->mode;
-    int32_t m = p->rate_half_window;
-    int32_t n_rpm, n_q24, dn, rate, ctrl_rate, demand, new_mode, pump_mv, duty, enable, health;
-    int32_t seq_v, start_abort;
-    int speed_ok, egt_ok, analog_fresh, running, trip_fault, trip_shutdown, flameout, relight;
-    int inputs_valid, demand_fresh;
-    int64_t pending;
-
-    s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
-
-    /* 1-2. sensor frame: speed and EGT */
+    int32_t demand;
     if (in->sensor_status == ECU_E2E_OK) {
         s->sensor_age = 0;
         if (s->speed_seen) {
-            faults |= speed_checks(e, in->speed_rpm, s->speed_rpm, s->v_applied_q24);
+            t->faults |= speed_checks(e, in->speed_rpm, s->speed_rpm, s->v_applied_q24);
         }
         s->speed_rpm = in->speed_rpm;
         egt_lead_step(e, in->egt_dk);
         s->egt_dk = in->egt_dk;
-        faults |= egt_open_check(e, in->egt_dk);
+        t->faults |= egt_open_check(e, in->egt_dk);
         s->inputs_seen |= valid_readings(p, in->speed_rpm, in->egt_dk);
     } else {
         s->sensor_age = age(s->sensor_age);
-        faults |= F_SENSOR_FRAME_LOST;
+        t->faults |= F_SENSOR_FRAME_LOST;
     }
-    if (faults & (F_SPEED_RANGE | F_SPEED_RATE | F_SPEED_STUCK)) {
+    if (t->faults & (F_SPEED_RANGE | F_SPEED_RATE | F_SPEED_STUCK)) {
         s->speed_failed = 1;
     }
-    speed_ok = s->speed_failed == 0 && s->sensor_age == 0;
-    inputs_valid = s->inputs_seen == SEEN_ALL;
-    if (speed_ok) {
-        n_rpm = s->speed_rpm;
+    t->speed_ok = s->speed_failed == 0 && s->sensor_age == 0;
+    t->inputs_valid = s->inputs_seen == SEEN_ALL;
+    if (t->speed_ok) {
+        t->n_rpm = s->speed_rpm;
     } else if (!(s->inputs_seen & SEEN_SPEED)) {
-        n_rpm = 0; /* no reading since power-up: nothing to substitute (not the trim speed) */
+        t->n_rpm = 0; /* no reading since power-up: nothing to substitute (not the trim speed) */
     } else {
-        n_rpm = (int32_t)((((int64_t)s->obs_n_q24 + p->trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24);
+        t->n_rpm = (int32_t)((((int64_t)s->obs_n_q24 + p->trim_n_q24) * RPM_PER_PCT + (1 << 23))
+                             >> 24);
         if (s->speed_failed) {
-            faults |= F_SPEED_SUBSTITUTED;
+            t->faults |= F_SPEED_SUBSTITUTED;
         }
     }
-    egt_ok = (faults & F_EGT_OPEN) == 0;
+    t->egt_ok = (t->faults & F_EGT_OPEN) == 0;
 
     /* analog frame: supply voltage and pump current */
-    analog_fresh = in->analog_status == ECU_E2E_OK;
-    if (analog_fresh) {
+    t->analog_fresh = in->analog_status == ECU_E2E_OK;
+    if (t->analog_fresh) {
         s->analog_age = 0;
         s->supply_mv = in->supply_mv;
         s->pump_ma = in->pump_ma;
@@ -1051,7 +1052,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         s->analog_age = age(s->analog_age);
         if (s->analog_age > p->analog_loss_ticks) {
             s->supply_mv = p->supply_nominal_mv;
-            faults |= F_ANALOG_FRAME_LOST;
+            t->faults |= F_ANALOG_FRAME_LOST;
         }
     }
 
@@ -1069,94 +1070,150 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     demand = s->demand_q24;
     if (s->demand_age > p->demand_hold_ticks) {
         demand = p->idle_q24;
-        faults |= F_DEMAND_LOST;
+        t->faults |= F_DEMAND_LOST;
     }
-    if (!egt_ok && demand > p->egt_fail_demand_q24) {
+    if (!t->egt_ok && demand > p->egt_fail_demand_q24) {
         demand = p->egt_fail_demand_q24;
     }
+    t->demand = demand;
+}
 
-    /* 3. speed history (raw rpm) and derived signals */
+/* the speed history (raw rpm) and what it gives: speed deviation, the central-difference rate
+   (the observer's while the sensor is out) and the filtered rate */
+static void stage_history(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t m = p->rate_half_window;
     s->hist_idx = (s->hist_idx + 1) % ECU_RATE_BUF_LEN;
-    s->n_hist_rpm[s->hist_idx] = n_rpm;
+    s->n_hist_rpm[s->hist_idx] = t->n_rpm;
     s->u_hist_q24[s->hist_idx] = 0;
     if (s->speed_seen < ECU_RATE_BUF_LEN) {
         s->speed_seen++;
     }
-    n_q24 = sat32(e, ((int64_t)n_rpm * p->rpm_to_q24_k) >> 16);
-    dn = sat32(e, (int64_t)n_q24 - p->trim_n_q24);
-    if (!speed_ok) {
-        rate = s->obs_v_q24;
+    t->n_q24 = sat32(e, ((int64_t)t->n_rpm * p->rpm_to_q24_k) >> 16);
+    t->dn = sat32(e, (int64_t)t->n_q24 - p->trim_n_q24);
+    if (!t->speed_ok) {
+        t->rate = s->obs_v_q24;
     } else if (s->speed_seen > 2 * m) {
-        rate = rate_q24(e, m);
+        t->rate = rate_q24(e, m);
     } else {
-        rate = 0;
+        t->rate = 0;
     }
     if (s->speed_seen == 1) {
-        rate_filter_start(s, dn);
-    } else {
-        rate_filter_step(e, dn, s->u_hist_q24[ring(s->hist_idx - 1)], speed_ok);
+        rate_filter_start(s, t->dn);
+    } else { /* with the voltage applied over the last tick (0 outside RUN) */
+        rate_filter_step(e, t->dn, s->u_hist_q24[ring(s->hist_idx - 1)], t->speed_ok);
     }
     /* the control laws' and limit loops' rate: filtered while the sensor is valid */
-    ctrl_rate = p->rate_filter_on && speed_ok ? s->rf_v_q24 : rate;
+    t->ctrl_rate = p->rate_filter_on && t->speed_ok ? s->rf_v_q24 : t->rate;
+}
 
-    /* 4. protection trips and mode */
-    running = mode == ECU_ARMED || mode == ECU_RUN;
-    s->overspeed_cnt = persist(s->overspeed_cnt, running && n_rpm > p->overspeed_rpm,
+/* protection trips: overspeed, flameout, EGT over its maximum, pump current, sensor frames
+   lost; which of them end in FAULT, which in SHUTDOWN (or a relight) */
+static void stage_trips(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int running = t->mode == ECU_ARMED || t->mode == ECU_RUN;
+    int flameout = 0;
+    s->overspeed_cnt = persist(s->overspeed_cnt, running && t->n_rpm > p->overspeed_rpm,
                                p->overspeed_ticks);
     if (s->overspeed_cnt >= p->overspeed_ticks) {
-        faults |= F_OVERSPEED;
+        t->faults |= F_OVERSPEED;
     }
-    s->flameout_cnt = persist(s->flameout_cnt, mode == ECU_RUN && n_rpm < p->flameout_rpm,
+    s->flameout_cnt = persist(s->flameout_cnt, t->mode == ECU_RUN && t->n_rpm < p->flameout_rpm,
                               p->flameout_ticks);
     s->flame_egt_cnt = persist(s->flame_egt_cnt,
-                               mode == ECU_RUN && egt_ok && s->egt_dk < p->flameout_egt_dk,
+                               t->mode == ECU_RUN && t->egt_ok && s->egt_dk < p->flameout_egt_dk,
                                p->flameout_egt_ticks);
-    flameout = 0;
     if (s->flameout_cnt >= p->flameout_ticks || s->flame_egt_cnt >= p->flameout_egt_ticks) {
-        faults |= F_FLAMEOUT;
+        t->faults |= F_FLAMEOUT;
         flameout = 1;
     }
-    s->egt_over_cnt = persist(s->egt_over_cnt, running && egt_ok && s->egt_dk > p->egt_max_dk,
+    s->egt_over_cnt = persist(s->egt_over_cnt, running && t->egt_ok && s->egt_dk > p->egt_max_dk,
                               p->egt_max_ticks);
     if (s->egt_over_cnt >= p->egt_max_ticks) {
-        faults |= F_EGT_OVERTEMP;
+        t->faults |= F_EGT_OVERTEMP;
     }
-    if (mode == ECU_RUN && analog_fresh) {
-        faults |= pump_current_checks(e, s->pump_ma, s->v_applied_q24);
+    if (t->mode == ECU_RUN && t->analog_fresh) {
+        t->faults |= pump_current_checks(e, s->pump_ma, s->v_applied_q24);
     }
-    trip_fault = (faults & F_TRIP) != 0 || (running && s->sensor_age > p->sensor_loss_ticks);
-    trip_shutdown = flameout || s->demand_age >= p->demand_shutdown_ticks;
-    relight = flameout && p->start_on && s->relights < p->seq_relight_max;
+    t->trip_fault = (t->faults & F_TRIP) != 0 || (running && s->sensor_age > p->sensor_loss_ticks);
+    t->trip_shutdown = flameout || s->demand_age >= p->demand_shutdown_ticks;
+    t->relight = flameout && p->start_on && s->relights < p->seq_relight_max;
+}
 
-    /* 4b. the start sequencer (ARMED): this tick's starter, igniter and pump, or an abort */
+/* in ARMED, the start sequencer's step: this tick's starter, igniter and pump, or an abort;
+   whether the engine runs (by the sequencer, else by the speed alone) */
+static void stage_start_sequencer(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
     s->starter_cpct = 0;
     s->igniter = 0;
-    seq_v = 0;
-    start_abort = ECU_ABORT_NONE;
-    running = n_rpm >= p->run_entry_rpm;
-    if (mode == ECU_ARMED && p->start_on) {
+    t->seq_v = 0;
+    t->start_abort = ECU_ABORT_NONE;
+    t->running = t->n_rpm >= p->run_entry_rpm;
+    if (t->mode == ECU_ARMED && p->start_on) {
         int32_t v_cap = p->v_max_q24;
         if (p->fuel_schedules_on) { /* under the acceleration line of the weakest pump the
                                        schedules accept (no pump estimate yet in a start) */
-            v_cap = schedule_v(e, p->accel_line_q24, n_q24, p->sched_lam_lo_q24,
+            v_cap = schedule_v(e, p->accel_line_q24, t->n_q24, p->sched_lam_lo_q24,
                                p->sched_lam_lo_q24);
         }
-        start_abort = start_step(e, n_rpm, s->egt_dk, ctrl_rate, v_cap);
-        seq_v = s->seq_v_q24;
-        running = s->seq_state == ECU_SEQ_RUN;
-        if ((s->stop || !s->arm || trip_shutdown) && !start_abort) {
+        t->start_abort = start_step(e, t->n_rpm, s->egt_dk, t->ctrl_rate, v_cap);
+        t->seq_v = s->seq_v_q24;
+        t->running = s->seq_state == ECU_SEQ_RUN;
+        if ((s->stop || !s->arm || t->trip_shutdown) && !t->start_abort) {
             s->seq_reason = ECU_ABORT_STOPPED;
         }
     }
-    demand_fresh = s->demand_age <= p->demand_hold_ticks;
+}
+
+/* entry into RUN: bumpless at the entry voltage (where the start left the pump), the loops,
+   integrators and models started where the engine is */
+static void enter_run(ecu_t *e, const tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t v_entry = p->entry_v_q24;
+    if (t->mode == ECU_ARMED && p->start_on) {
+        v_entry = s->seq_v_q24; /* where the start left the pump */
+        if (p->fuel_schedules_on && p->pump_scaling_on) {
+            pump_from_start(e, t->n_q24, v_entry);
+        }
+    }
+    s->seq_state = ECU_SEQ_RUN;
+    reset_loops(s, v_entry);
+    s->hist_fill = 0;
+    s->theta_q24[ECU_PID_I] = sat32(e, (int64_t)v_entry - p->trim_v_q24);
+    s->theta_ext[ECU_PID_I] = 0;
+    s->u_lag_q24 = s->theta_q24[ECU_PID_I];
+    s->xm1_q24 = t->dn;
+    s->xm2_q24 = 0;
+    s->obs_n_q24 = t->dn;
+    s->obs_v_q24 = t->rate;
+    s->xh1_q24 = t->dn; /* the identification model starts where the engine is */
+    s->xh2_q24 = t->rate;
+}
+
+/* the mode for this tick (ecu/modes.py) and what its transitions start: a start or a relight,
+   the entry into RUN, the wait for a re-arm */
+static void stage_mode(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t mode = t->mode, new_mode;
+    int demand_fresh = s->demand_age <= p->demand_hold_ticks;
     if (!s->arm) {
         s->rearm_wait = 0;
     }
-    new_mode = next_mode(mode, s->arm, s->stop, running, demand_fresh, trip_fault,
-                         trip_shutdown || start_abort, n_rpm < p->shutdown_done_rpm,
-                         start_abort || s->seq_state >= ECU_SEQ_IGNITION, relight,
+    new_mode = next_mode(mode, s->arm, s->stop, t->running, demand_fresh, t->trip_fault,
+                         t->trip_shutdown || t->start_abort, t->n_rpm < p->shutdown_done_rpm,
+                         t->start_abort || s->seq_state >= ECU_SEQ_IGNITION, t->relight,
                          cooled(e) || !p->start_on,
-                         inputs_valid && demand_fresh && !s->rearm_wait);
+                         t->inputs_valid && demand_fresh && !s->rearm_wait);
     if ((mode == ECU_ARMED || mode == ECU_RUN) && new_mode != ECU_ARMED && new_mode != ECU_RUN) {
         s->rearm_wait = s->arm; /* a start is never retried by itself: the arm must drop first */
     }
@@ -1176,130 +1233,148 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     if (new_mode == ECU_OFF) {
         s->seq_state = ECU_SEQ_OFF;
     }
-    if (new_mode == ECU_RUN && mode != ECU_RUN) { /* bumpless at the entry voltage */
-        int32_t v_entry = p->entry_v_q24;
-        if (mode == ECU_ARMED && p->start_on) {
-            v_entry = s->seq_v_q24; /* where the start left the pump */
-            if (p->fuel_schedules_on && p->pump_scaling_on) {
-                pump_from_start(e, n_q24, v_entry);
-            }
-        }
-        s->seq_state = ECU_SEQ_RUN;
-        reset_loops(s, v_entry);
-        s->hist_fill = 0;
-        th[ECU_PID_I] = sat32(e, (int64_t)v_entry - p->trim_v_q24);
-        s->theta_ext[ECU_PID_I] = 0;
-        s->u_lag_q24 = th[ECU_PID_I];
-        s->xm1_q24 = dn;
-        s->xm2_q24 = 0;
-        s->obs_n_q24 = dn;
-        s->obs_v_q24 = rate;
-        s->xh1_q24 = dn; /* the identification model starts where the engine is */
-        s->xh2_q24 = rate;
+    if (new_mode == ECU_RUN && mode != ECU_RUN) {
+        enter_run(e, t);
     }
     s->mode = new_mode;
+    t->new_mode = new_mode;
+}
 
-    /* 5. control */
-    if (new_mode == ECU_RUN) {
-        int adapt = speed_ok;
-        /* under the acceleration line the estimator learns the pump the line needs, from a
-           reading that answers the pump (not one that stays put while the pump moves: a stuck
-           sensor, before its fault trips, would teach a weak pump and raise the line) */
-        int line_learns = s->line_owns && s->speed_stuck_cnt == 0;
-        int32_t r, u, e_dk, room_dk, v, u_applied;
-        int64_t probe_dk, gas_dk;
-        if (s->hist_fill < ECU_RATE_BUF_LEN) {
-            s->hist_fill++;
-        }
-        if (p->freeze_on && (s->v_saturated || (s->owner != OWNER_SPEED && !line_learns))) {
-            adapt = 0;
-        }
-        if (p->adapt_band_q24 && (dn > p->adapt_band_q24 || dn < -p->adapt_band_q24)) {
-            adapt = 0; /* off the trim speed the fast model no longer holds */
-        }
-        if (speed_ok && s->hist_fill > m + 1 && s->speed_seen > 2 * m + 1) {
-            estimator_step(e, dn_q24(e, m + 1), rate_q24(e, m + 1), dn_q24(e, m), rate_q24(e, m),
-                           s->u_hist_q24[ring(s->hist_idx - m - 1)], adapt);
-        }
-        r = sat32(e, (int64_t)demand - p->trim_n_q24);
-        if (p->controller == ECU_CTRL_MRAC) {
-            u = command_lag(e, mrac_control(e, dn, ctrl_rate, r));
-            mrac_gain_update(e);
-        } else if (p->controller == ECU_CTRL_PID) {
-            u = pid_control(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate);
-        } else if (p->controller == ECU_CTRL_PI) {
-            u = pi_control(e, sat32(e, (int64_t)demand - n_q24), n_q24);
-        } else {
-            u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
-        }
-        reference_model_step(e, r);
-        /* the hotter of the probe and the gas (the lead) against the limit; the gas may pass
-           it by what the probe still reads under it, up to the transient allowance */
-        probe_dk = p->egt_limit_dk - s->egt_dk;
-        room_dk = (int32_t)clamp(probe_dk, 0, p->egt_gas_margin_dk);
-        gas_dk = (int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12);
-        e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -EGT_ERROR_MAX_DK,
-                              EGT_ERROR_MAX_DK);
-        v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + u),
-                           div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), egt_ok, n_q24, ctrl_rate);
-        u_applied = sat32(e, (int64_t)v - p->trim_v_q24);
-        if (p->controller == ECU_CTRL_PID) {
-            pid_track(e, sat32(e, (int64_t)demand - n_q24), ctrl_rate, u_applied);
-        } else if (p->controller == ECU_CTRL_PI) {
-            pi_track(e, sat32(e, (int64_t)demand - n_q24), n_q24, u_applied);
-        }
-        if (s->owner != OWNER_SPEED) { /* the lag tracks what a limit applies (anti-windup) */
-            s->u_lag_q24 = u_applied;
-        }
-        observer_step(e, u_applied, dn, speed_ok);
-        s->u_hist_q24[s->hist_idx] = u_applied;
-        pump_mv = volts_q24_to_mv(v);
+/* in RUN: the estimator (eq. 4.7/4.31), the speed controller (MRAC eq. 5.4/5.16, PID,
+   scheduled PI or open loop) and the reference model (eq. 5.18-5.19) */
+static void stage_control_law(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t m = p->rate_half_window;
+    int32_t r;
+    int adapt = t->speed_ok;
+    /* under the acceleration line the estimator learns the pump the line needs, from a
+       reading that answers the pump (not one that stays put while the pump moves: a stuck
+       sensor, before its fault trips, would teach a weak pump and raise the line) */
+    int line_learns = s->line_owns && s->speed_stuck_cnt == 0;
+    if (s->hist_fill < ECU_RATE_BUF_LEN) {
+        s->hist_fill++;
+    }
+    if (p->freeze_on && (s->v_saturated || (s->owner != OWNER_SPEED && !line_learns))) {
+        adapt = 0;
+    }
+    if (p->adapt_band_q24 && (t->dn > p->adapt_band_q24 || t->dn < -p->adapt_band_q24)) {
+        adapt = 0; /* off the trim speed the fast model no longer holds */
+    }
+    if (t->speed_ok && s->hist_fill > m + 1 && s->speed_seen > 2 * m + 1) {
+        estimator_step(e, dn_q24(e, m + 1), rate_q24(e, m + 1), dn_q24(e, m), rate_q24(e, m),
+                       s->u_hist_q24[ring(s->hist_idx - m - 1)], adapt);
+    }
+    r = sat32(e, (int64_t)t->demand - p->trim_n_q24);
+    if (p->controller == ECU_CTRL_MRAC) {
+        t->u = command_lag(e, mrac_control(e, t->dn, t->ctrl_rate, r));
+        mrac_gain_update(e);
+    } else if (p->controller == ECU_CTRL_PID) {
+        t->u = pid_control(e, sat32(e, (int64_t)t->demand - t->n_q24), t->ctrl_rate);
+    } else if (p->controller == ECU_CTRL_PI) {
+        t->u = pi_control(e, sat32(e, (int64_t)t->demand - t->n_q24), t->n_q24);
+    } else {
+        t->u = sat32(e, (int64_t)s->open_loop_q24 - p->trim_v_q24);
+    }
+    reference_model_step(e, r);
+}
+
+/* in RUN: the EGT error (the hotter of the probe and the gas), the min/max selection of the
+   speed command with the limit loops and fuel schedules, integrator tracking of the loops
+   that did not win, and the observer (eq. 3.5) on the applied voltage */
+static void stage_limit_selection(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t e_dk, room_dk, u_applied;
+    int64_t probe_dk, gas_dk;
+    /* the hotter of the probe and the gas (the lead) against the limit; the gas may pass it by
+       what the probe still reads under it, up to the transient allowance */
+    probe_dk = p->egt_limit_dk - s->egt_dk;
+    room_dk = (int32_t)clamp(probe_dk, 0, p->egt_gas_margin_dk);
+    gas_dk = (int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12);
+    e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -EGT_ERROR_MAX_DK,
+                          EGT_ERROR_MAX_DK);
+    t->v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + t->u),
+                          div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), t->egt_ok, t->n_q24,
+                          t->ctrl_rate);
+    u_applied = sat32(e, (int64_t)t->v - p->trim_v_q24);
+    if (p->controller == ECU_CTRL_PID) {
+        pid_track(e, sat32(e, (int64_t)t->demand - t->n_q24), t->ctrl_rate, u_applied);
+    } else if (p->controller == ECU_CTRL_PI) {
+        pi_track(e, sat32(e, (int64_t)t->demand - t->n_q24), t->n_q24, u_applied);
+    }
+    if (s->owner != OWNER_SPEED) { /* the lag tracks what a limit applies (anti-windup) */
+        s->u_lag_q24 = u_applied;
+    }
+    observer_step(e, u_applied, t->dn, t->speed_ok);
+    s->u_hist_q24[s->hist_idx] = u_applied;
+}
+
+/* the pump's duty from the measured supply, the starter and igniter: in RUN at the selected
+   voltage; otherwise the sequencer's (a stop's cool-down, a start) with the models held where
+   the engine is */
+static void stage_pump_driver(ecu_t *e, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int run = t->new_mode == ECU_RUN;
+    if (run) {
+        t->pump_mv = volts_q24_to_mv(t->v);
         if (s->owner != OWNER_SPEED) {
-            faults |= F_LIMITER_ACTIVE;
+            t->faults |= F_LIMITER_ACTIVE;
         }
     } else {
-        if (new_mode == ECU_SHUTDOWN && p->start_on) {
-            stop_step(e, n_rpm, s->egt_dk);
-            seq_v = 0;
-        } else if (new_mode != ECU_ARMED) {
-            seq_v = 0; /* a start that just ended: no fuel */
+        if (t->new_mode == ECU_SHUTDOWN && p->start_on) {
+            stop_step(e, t->n_rpm, s->egt_dk);
+            t->seq_v = 0;
+        } else if (t->new_mode != ECU_ARMED) {
+            t->seq_v = 0; /* a start that just ended: no fuel */
         }
-        s->v_applied_q24 = seq_v;
-        s->xm1_q24 = dn;
+        s->v_applied_q24 = t->seq_v;
+        s->xm1_q24 = t->dn;
         s->xm2_q24 = 0;
-        s->obs_n_q24 = dn;
-        s->obs_v_q24 = rate;
-        s->xh1_q24 = dn;
-        s->xh2_q24 = rate;
-        pump_mv = volts_q24_to_mv(seq_v);
+        s->obs_n_q24 = t->dn;
+        s->obs_v_q24 = t->rate;
+        s->xh1_q24 = t->dn;
+        s->xh2_q24 = t->rate;
+        t->pump_mv = volts_q24_to_mv(t->seq_v);
     }
-    /* the pump driver, in one place for both branches above: in RUN always (enabled, its
-     * clipping reported), outside RUN for the start's fuel only */
-    duty = new_mode == ECU_RUN || pump_mv > 0 ? pump_duty(e, pump_mv, s->supply_mv) : 0;
-    enable = new_mode == ECU_RUN || duty > 0;
-    if (new_mode == ECU_RUN && s->v_saturated) {
-        faults |= F_PUMP_SATURATED;
+    /* in RUN always (enabled, its clipping reported), outside RUN for the start's fuel only */
+    t->duty = run || t->pump_mv > 0 ? pump_duty(e, t->pump_mv, s->supply_mv) : 0;
+    t->enable = run || t->duty > 0;
+    if (run && s->v_saturated) {
+        t->faults |= F_PUMP_SATURATED;
     }
-    if (new_mode != ECU_ARMED && new_mode != ECU_SHUTDOWN) {
+    if (t->new_mode != ECU_ARMED && t->new_mode != ECU_SHUTDOWN) {
         s->starter_cpct = 0;
         s->igniter = 0;
     }
+}
 
-    /* 6. health, telemetry, fault word */
-    health = div_trunc(e, (int64_t)th[ECU_LAM] * 1000, p->lambda_comm_q24);
+/* pump health, the fault word, the saturation count and the output record */
+static void stage_health(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    ecu_outputs_t *o = &e->o;
+    const int32_t *th = s->theta_q24;
+    int32_t health = div_trunc(e, (int64_t)th[ECU_LAM] * 1000, p->lambda_comm_q24);
+    int64_t pending;
     if (health < p->health_alarm_pm) {
-        faults |= F_PUMP_HEALTH;
+        t->faults |= F_PUMP_HEALTH;
     }
-    s->faults = faults;
+    s->faults = t->faults;
     pending = e->sat_pending;
     e->sat_pending = 0;
     s->sat_events = sat32(e, s->sat_events + pending);
     o->tick = in->tick;
-    o->duty_cpct = duty;
-    o->pump_mv = pump_mv;
-    o->pump_enable = enable;
-    o->mode = new_mode;
-    o->fault_word = faults & 0xFFFF;
+    o->duty_cpct = t->duty;
+    o->pump_mv = t->pump_mv;
+    o->pump_enable = t->enable;
+    o->mode = t->new_mode;
+    o->fault_word = t->faults & 0xFFFF;
     o->sat_events = s->sat_events;
     o->ap21_q24 = th[ECU_AP21];
     o->ap22_q24 = th[ECU_AP22];
@@ -1313,14 +1388,34 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     o->kf2_q24 = th[ECU_KF2];
     o->pump_health_pm = health;
     o->nref_cpct = q24_to_cpct((int64_t)s->xm1_q24 + p->trim_n_q24);
-    o->n_cpct = q24_to_cpct(n_q24);
+    o->n_cpct = q24_to_cpct(t->n_q24);
     o->owner = s->owner;
     o->starter_cpct = s->starter_cpct;
     o->igniter = s->igniter;
     o->seq_state = s->seq_state;
     o->seq_reason = s->seq_reason;
-    o->inputs_valid = inputs_valid;
-    return o;
+    o->inputs_valid = t->inputs_valid;
+}
+
+const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
+{
+    ecu_state_t *s = &e->s;
+    tick_vars_t t = {0};
+    s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
+    t.faults = s->faults & ~F_TRANSIENT;
+    t.mode = s->mode;
+    stage_sensors(e, in, &t);
+    stage_history(e, &t);
+    stage_trips(e, &t);
+    stage_start_sequencer(e, &t);
+    stage_mode(e, &t);
+    if (t.new_mode == ECU_RUN) {
+        stage_control_law(e, &t);
+        stage_limit_selection(e, &t);
+    }
+    stage_pump_driver(e, &t);
+    stage_health(e, in, &t);
+    return &e->o;
 }
 
 /* ---- state digest and parameter load ------------------------------------------------------- */
