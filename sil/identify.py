@@ -18,6 +18,8 @@ voltage and comparing its speed with the recorded one (NRMSE, in percent of the 
 from __future__ import annotations
 
 import math
+import re
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +31,19 @@ from protocol import strict_json
 # eq. 3.5; eq. 3.1 (linear second order); eq. B.4; appendix B linear; B.4 + dN^2 dV
 ORDERS = ("second", "second-linear", "first", "first-linear", "first-quadratic")
 SECOND_ORDERS = ("second", "second-linear")
+MAX_NRMSE_PCT = 10.0  # a fit further than this from the data it is judged on is not trusted
+# the ECU parameter a commissioning file sets -> the file's field
+_EXPORT_FIELDS = {
+    "trim_n_pct": "trim_N_pct",
+    "trim_v": "trim_V",
+    "init_ap_row2": "Ap_row2",
+    "init_lambda": "Lambda",
+    "lambda_commissioned": "Lambda",
+    "init_theta_row2": "Theta_row2",
+    "init_kx": "Ap_row2",  # eq. 5.9: the gains follow from the estimates
+    "init_kr": "Lambda",
+    "init_kf": "Theta_row2",
+}
 
 
 @dataclass(frozen=True)
@@ -304,6 +319,62 @@ def ecu_commissioning(ident: Identification) -> dict:
 
 def write_json(path: Path, data: dict) -> None:
     path.write_text(strict_json.dumps(data, indent=2) + "\n")
+
+
+def commissioning_refusal(data: dict) -> str | None:
+    """Why the ECU would refuse this commissioning file (None: it loads it): the file written and
+    read back, applied to the ECU's default parameters and compiled, as `sil ecu --commission`
+    does; the reason names the file's field."""
+    from ecu import commissioning
+    from ecu.firmware_params import compile_params
+    from ecu.params import ParamError, preset
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "commissioning.json"
+        write_json(path, data)
+        try:
+            compile_params(commissioning.apply(preset("default"), commissioning.load(path)))
+        except ParamError as exc:
+            reason = str(exc).replace(f"{path}: ", "")
+        else:
+            return None
+    named = re.match(r"(\w+)=", reason)
+    field = _EXPORT_FIELDS.get(named.group(1)) if named else None
+    return f"field '{field}': {reason}" if field else reason
+
+
+def running_range() -> tuple[float, float]:
+    """The speeds (%N) the fast model describes: where the ECU's speed control flies the engine,
+    from where its start hands the engine over (start_idle_pct) to its overspeed limit
+    (overspeed_pct), with the ECU's default parameters."""
+    from ecu.params import preset
+
+    params = preset("default")
+    return params.start_idle_pct, params.overspeed_pct
+
+
+def distrust(ident: Identification, recordings: list[Recording]) -> list[str]:
+    """Why the fit is not to be trusted (an empty list: it is): a fit error above
+    ``MAX_NRMSE_PCT`` on the data it is judged on, a trim point or samples outside the
+    running range (:func:`running_range`)."""
+    reasons = []
+    error = ident.nrmse_pct
+    if error is None or not error <= MAX_NRMSE_PCT:
+        shown = "diverging" if error is None or not math.isfinite(error) else f"{error:.1f} %"
+        reasons.append(f"fit error (NRMSE) {shown}, above {MAX_NRMSE_PCT:g} %")
+    lo, hi = running_range()
+    if not lo <= ident.trim.n_pct <= hi:
+        reasons.append(
+            f"trim point {ident.trim.n_pct:.1f} %N outside the running range {lo:g}..{hi:g} %N"
+        )
+    for rec in recordings:
+        outside = int(np.count_nonzero((rec.n_pct < lo) | (rec.n_pct > hi)))
+        if outside:
+            reasons.append(
+                f"{rec.source}: {outside} of {len(rec.n_pct)} samples outside the running range "
+                f"{lo:g}..{hi:g} %N (they span {np.min(rec.n_pct):.1f}..{np.max(rec.n_pct):.1f} %N)"
+            )
+    return reasons
 
 
 N_MAX_RPM = 112_500.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -30,8 +31,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="model: eq. 3.5 (second, default), eq. 3.1 (second-linear), eq. B.4 (first), "
         "appendix B's linear first order (first-linear), B.4 + dN^2 dV (first-quadratic)",
     )
-    parser.add_argument("--trim-n", type=float, metavar="PCT", help="trim speed, %%N_max")
-    parser.add_argument("--trim-v", type=float, metavar="VOLTS", help="trim pump voltage")
+    parser.add_argument(
+        "--trim-n", type=validation.option(), metavar="PCT", help="trim speed, %%N_max"
+    )
+    parser.add_argument(
+        "--trim-v", type=validation.option(), metavar="VOLTS", help="trim pump voltage"
+    )
     parser.add_argument(
         "--window",
         type=int,
@@ -59,9 +64,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--export",
         type=Path,
         metavar="FILE",
-        help="write the ECU commissioning file (initial estimates, trim)",
+        help="write the ECU commissioning file (initial estimates, trim); a file the ECU would "
+        "refuse is not written (exit 2)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="export a fit that is not trusted (see below) instead of exiting 1",
     )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    low, high = ident.running_range()
+    parser.epilog = (
+        f"A fit is not trusted, and nothing is exported (exit 1, unless --force), when its NRMSE "
+        f"on the validation data is above {ident.MAX_NRMSE_PCT:g} %, or its trim point or any "
+        f"sample lies outside the running range {low:g}..{high:g} %N (from the ECU's start "
+        f"hand-over speed to its overspeed limit)."
+    )
 
 
 def _plot(path: Path, rec: ident.Recording, simulated: np.ndarray, title: str) -> None:
@@ -92,8 +110,9 @@ def run(args: argparse.Namespace) -> int:
     }
     if args.out:
         validation.output_folder("sil identify", "--out", args.out)
-    if args.export and args.export.is_dir():
-        print(f"sil identify: --export: {args.export} is a folder", file=sys.stderr)
+    refusal = _export_refusal(args.export)
+    if refusal:
+        print(f"sil identify: --export: {refusal}", file=sys.stderr)
         return 2
     try:
         rec = ident.read_recording(args.file, **columns)
@@ -116,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError, LogReadError) as exc:
         print(f"sil identify: {exc}", file=sys.stderr)
         return 2
+    reasons = ident.distrust(result, [rec, check] if args.validate else [rec])
     report = {
         "file": str(args.file),
         "samples": len(rec.t),
@@ -124,26 +144,78 @@ def run(args: argparse.Namespace) -> int:
         if args.validate
         else f"last {args.holdout:.0%} of the file",
         **result.as_dict(),
+        "trusted": not reasons,
+        "not_trusted_because": reasons,
     }
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        simulated = ident.simulate(np.asarray(result.theta), result.order, rec, result.trim)
-        _plot(
-            args.out / "identify.png",
-            rec,
-            simulated,
-            f"{args.file.name}: {args.order}-order model, NRMSE {result.nrmse_pct:.2f} %",
-        )
-        ident.write_json(args.out / "identify.json", report)
+    commissioning = None
     if args.export:
         try:
-            ident.write_json(args.export, ident.ecu_commissioning(result))
+            commissioning = _commissioning(result, args.export)
         except ValueError as exc:
             print(f"sil identify: {exc}", file=sys.stderr)
             return 2
-    if args.json:
+    if args.out:
+        _write_out(args, rec, result, report)
+    _print(report, args.json)
+    if reasons and not args.force:
+        nothing = "; nothing exported" if args.export else ""
+        print(f"sil identify: the fit is not trusted: {'; '.join(reasons)}{nothing} "
+              "(--force to export it anyway)", file=sys.stderr)  # fmt: skip
+        return 1
+    if reasons:
+        print(f"sil identify: warning: exported a fit that is not trusted: {'; '.join(reasons)}",
+              file=sys.stderr)  # fmt: skip
+    if commissioning is not None:
+        try:
+            ident.write_json(args.export, commissioning)
+        except OSError as exc:
+            print(f"sil identify: --export: cannot write {args.export}: {exc}", file=sys.stderr)
+            return 2
+    return 0
+
+
+def _export_refusal(export: Path | None) -> str | None:
+    """Why --export cannot be written (None: it can, or there is none)."""
+    if export is None:
+        return None
+    if export.is_dir():
+        return f"{export} is a folder"
+    folder = export.absolute().parent
+    if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+        return f"{export}: {folder} is not a writable folder"
+    return None
+
+
+def _commissioning(result: ident.Identification, export: Path) -> dict:
+    """The commissioning file's content; ValueError (naming --export and the field) for a fit
+    the ECU cannot use or a file it would refuse."""
+    try:
+        data = ident.ecu_commissioning(result)
+    except ValueError as exc:
+        raise ValueError(f"--export {export}: {exc}") from None
+    refusal = ident.commissioning_refusal(data)
+    if refusal is not None:
+        raise ValueError(
+            f"--export {export}: the ECU would refuse this commissioning file ({refusal}); "
+            "nothing written"
+        )
+    return data
+
+
+def _write_out(
+    args: argparse.Namespace, rec: ident.Recording, result: ident.Identification, report: dict
+) -> None:
+    """identify.json and the plot of the fit in --out."""
+    args.out.mkdir(parents=True, exist_ok=True)
+    simulated = ident.simulate(np.asarray(result.theta), result.order, rec, result.trim)
+    title = f"{args.file.name}: {args.order}-order model, NRMSE {result.nrmse_pct:.2f} %"
+    _plot(args.out / "identify.png", rec, simulated, title)
+    ident.write_json(args.out / "identify.json", report)
+
+
+def _print(report: dict, as_json: bool) -> None:
+    if as_json:
         print(strict_json.dumps(report, indent=2))
-        return 0
+        return
     for key, value in report.items():
         print(f"{key}: {value}")
-    return 0

@@ -177,3 +177,61 @@ def test_bad_csv_names_file_and_line(tmp_path):
         text=True,
     )
     assert result.returncode == 2 and "bad.csv, line 3" in result.stderr
+
+
+def _identify_cli(path, *args: str) -> subprocess.CompletedProcess:
+    columns = ("--time-column", "t", "--speed-column", "speed", "--voltage-column", "volts")
+    return subprocess.run(
+        [sys.executable, "-m", "sil.cli", "identify", str(path), *columns, *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_export_refuses_a_file_the_ecu_would_refuse(tmp_path):
+    refusal = ident.commissioning_refusal(
+        {**_commissioning_of_eq_3_23(), "trim_N_pct": -5.0, "trim_V": -12.0}
+    )
+    assert refusal is not None and refusal.startswith("field 'trim_N_pct': trim_n_pct=-5.0")
+    assert ident.commissioning_refusal(_commissioning_of_eq_3_23()) is None
+    _write_csv(tmp_path / "bench.csv", _eq_3_24_record(seconds=60))
+    export = tmp_path / "commission.json"
+    result = _identify_cli(
+        tmp_path / "bench.csv", "--trim-n", "89.68", "--trim-v", "25", "--export", str(export)
+    )
+    assert result.returncode == 2, result.stderr
+    assert f"--export {export}: the ECU would refuse" in result.stderr
+    assert "(field '" in result.stderr and result.stderr.count("\n") == 1
+    assert not export.exists()
+
+
+def _commissioning_of_eq_3_23() -> dict:
+    result = ident.Identification("second", list(THETA_EQ_3_23), TRIM, 7, {})
+    return ident.ecu_commissioning(result)
+
+
+def test_a_fit_outside_the_running_range_is_not_trusted_unless_forced(tmp_path):
+    low, high = ident.running_range()
+    rec = _eq_3_24_record(seconds=60)
+    speed = rec.n_pct.copy()
+    speed[-50:] = low - 10.0  # the engine stopped at the end of the recording
+    _write_csv(tmp_path / "low.csv", ident.Recording(rec.t, speed, rec.v, "low"))
+    export = tmp_path / "commission.json"
+    trim = ("--trim-n", "89.68", "--trim-v", "5")
+    result = _identify_cli(tmp_path / "low.csv", *trim, "--export", str(export), "--json")
+    assert result.returncode == 1, result.stderr
+    assert "not trusted" in result.stderr and f"running range {low:g}..{high:g} %N" in result.stderr
+    assert json.loads(result.stdout)["trusted"] is False and not export.exists()
+    forced = _identify_cli(tmp_path / "low.csv", *trim, "--export", str(export), "--force")
+    assert forced.returncode == 0, forced.stderr
+    assert "warning: exported a fit that is not trusted" in forced.stderr and export.exists()
+
+
+def test_a_large_fit_error_is_not_trusted():
+    result = ident.identify(_eq_3_24_record(seconds=60), trim=TRIM)
+    assert ident.distrust(result, []) == []
+    result.nrmse_pct = ident.MAX_NRMSE_PCT * 1.5
+    assert ident.distrust(result, []) == ["fit error (NRMSE) 15.0 %, above 10 %"]
+    result.nrmse_pct = float("inf")
+    assert "diverging" in ident.distrust(result, [])[0]
