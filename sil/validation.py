@@ -108,6 +108,29 @@ def output_folder(source: str, field: str, path: Path) -> Path:
     return path
 
 
+def output_file(source: str, field: str, path: Path) -> Path:
+    """A file that can be written: not a folder, in a folder that exists and is writable, and
+    writable itself when it exists; nothing is created here."""
+    if path.is_dir():
+        raise InputError.at(source, field, f"{path} is a folder")
+    folder = path.absolute().parent
+    if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError.at(
+            source, field, f"cannot write {path}: {folder} is not a writable folder"
+        )
+    if path.exists() and not os.access(path, os.W_OK):
+        raise InputError.at(source, field, f"cannot write {path}: it is not writable")
+    return path
+
+
+def file_option(text: str) -> Path:
+    """An argparse ``type`` for a file to write (:func:`output_file`)."""
+    try:
+        return output_file("", "", Path(text))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).lstrip(": ")) from None
+
+
 def folder_option(text: str) -> Path:
     """An argparse ``type`` for an output folder (:func:`output_folder`)."""
     try:

@@ -80,3 +80,16 @@ def test_a_missing_bus_driver_is_one_line_and_exit_2(tmp_path, command, spec, wo
     assert result.stderr.count("\n") == 1, result.stderr  # the driver's own warnings swallowed
     assert f"bus {spec}" in result.stderr and words in result.stderr
     assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("events", ["{tmp}", "{tmp}/no-such-folder/events.json"])
+def test_bridge_checks_its_events_file_before_it_starts(tmp_path, events):
+    import time
+
+    faults = tmp_path / "faults.toml"
+    faults.write_text('[[bus_fault]]\nkind = "drop"\nids = ["PlantSensors"]\nstart_s = 0\n')
+    argv = ["bridge", str(faults), "--bus", "virtual:b1", "--ecu-bus", "virtual:b2"]
+    t0 = time.monotonic()
+    result = _sil(*argv, "--duration", "60", "--events", events.format(tmp=tmp_path))
+    assert result.returncode == 2 and "argument --events" in result.stderr
+    assert time.monotonic() - t0 < 30  # refused at once, not after the 60 s bridge

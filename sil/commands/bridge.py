@@ -20,7 +20,7 @@ from pathlib import Path
 from protocol import strict_json
 from protocol.bus import BusSpecError, open_bus, parse_spec
 from protocol.codec import Codec
-from sil import scenario
+from sil import scenario, validation
 
 NAME = "bridge"
 HELP = "put the bus fault injector between two buses (in front of a real ECU, for example)"
@@ -36,8 +36,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="count ticks by the plant's PlantSensors frames instead of the wall clock",
     )
     parser.add_argument("--seed", type=int, help="injector seed (default: the file's)")
-    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    parser.add_argument("--events", type=Path, metavar="FILE", help="write the fault log (JSON)")
+    parser.add_argument(
+        "--duration",
+        type=validation.option(positive=True),
+        metavar="S",
+        help="stop after S seconds",
+    )
+    parser.add_argument(
+        "--events",
+        type=validation.file_option,
+        metavar="FILE",
+        help="write the fault log (JSON; checked before the bridge starts)",
+    )
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
@@ -94,7 +104,11 @@ def run(args: argparse.Namespace) -> int:
         "events": len(injector.events),
     }
     if args.events is not None:
-        args.events.write_text(strict_json.dumps(injector.events, indent=1) + "\n")
+        try:
+            args.events.write_text(strict_json.dumps(injector.events, indent=1) + "\n")
+        except OSError as exc:
+            print(f"sil bridge: --events: cannot write {args.events}: {exc}", file=sys.stderr)
+            return 2
     if args.json:
         print(strict_json.dumps(summary, indent=2))
     else:

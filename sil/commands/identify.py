@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -110,10 +109,8 @@ def run(args: argparse.Namespace) -> int:
     }
     if args.out:
         validation.output_folder("sil identify", "--out", args.out)
-    refusal = _export_refusal(args.export)
-    if refusal:
-        print(f"sil identify: --export: {refusal}", file=sys.stderr)
-        return 2
+    if args.export:
+        validation.output_file("sil identify", "--export", args.export)
     try:
         rec = ident.read_recording(args.file, **columns)
         if args.validate:
@@ -172,18 +169,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"sil identify: --export: cannot write {args.export}: {exc}", file=sys.stderr)
             return 2
     return 0
-
-
-def _export_refusal(export: Path | None) -> str | None:
-    """Why --export cannot be written (None: it can, or there is none)."""
-    if export is None:
-        return None
-    if export.is_dir():
-        return f"{export} is a folder"
-    folder = export.absolute().parent
-    if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
-        return f"{export}: {folder} is not a writable folder"
-    return None
 
 
 def _commissioning(result: ident.Identification, export: Path) -> dict:
