@@ -42,7 +42,7 @@ from __future__ import annotations
 from array import array
 
 from ecu.firmware_params import FirmwareParams
-from ecu.fixedpoint import acc_q40, mul_q24, sat32, sub_sat
+from ecu.fixedpoint import acc_q40, mul_q, mul_q24, mul_q24_round, mul_q_round, sat32, sub_sat
 from ecu.state import AP21, AP22, LAM, TH1, TH2, EcuState
 
 R32 = 1 << 31  # adds half an LSB before a >> 32: round to nearest (ties up), not down
@@ -80,7 +80,7 @@ def estimator_step(
     v_mid = (v0 + v1) >> 1
     f1 = mul_q24(u, n_mid)  # f1 = dN dV, mid interval (Q7.24)
     nn_q16 = ((n0 * n0) >> 33) + ((n1 * n1) >> 33)  # (dN0^2 + dN1^2) / 2 (Q15.16)
-    f2_q16 = sat32((u * nn_q16) >> 24)  # f2 = dN^2 dV, mid interval (Q15.16)
+    f2_q16 = mul_q24(u, nn_q16)  # f2 = dN^2 dV, mid interval (Q15.16)
     g = fuel_shape_q24(p, n_mid, nn_q16)
     # eq. 4.7 row 2 forcing: (A_p-hat - A_m) x + B_p Lambda-hat u + Theta_f-hat f, in %N/s^2;
     # with a fast A_m it exceeds the Q7.24 range in large transients, so it is Q15.16
@@ -111,20 +111,20 @@ def estimator_step(
         return
     # eq. 4.31: increments -(Gamma P dt) phi e in Q7.40: phi e in Q15.16 (it exceeds the Q7.24
     # range in transients) times Gamma P dt in Q3.28, >> 4
-    acc_q40(th, s.theta_ext, AP21, _increment_q40(sat32((n_mid * e + R32) >> 32), p.g_a1_q28))
-    acc_q40(th, s.theta_ext, AP22, _increment_q40(sat32((v_mid * e + R32) >> 32), p.g_a2_q28))
+    acc_q40(th, s.theta_ext, AP21, _increment_q40(mul_q_round(n_mid, e, 32), p.g_a1_q28))
+    acc_q40(th, s.theta_ext, AP22, _increment_q40(mul_q_round(v_mid, e, 32), p.g_a2_q28))
     if p.pump_scaling_on:
         phi = sat32((g * (u + p.pump_v0_q24)) >> 24)  # Lambda-hat's regressor g(dN) (u + V0 - V_d)
-        acc_q40(th, s.theta_ext, LAM, _increment_q40(sat32((phi * e + R32) >> 32), p.g_lam_q28))
+        acc_q40(th, s.theta_ext, LAM, _increment_q40(mul_q_round(phi, e, 32), p.g_lam_q28))
     else:
-        acc_q40(th, s.theta_ext, LAM, _increment_q40(sat32((u * e + R32) >> 32), p.g_lam_q28))
-        acc_q40(th, s.theta_ext, TH1, _increment_q40(sat32((f1 * e + R32) >> 32), p.g_th1_q28))
-        acc_q40(th, s.theta_ext, TH2, _increment_q40(sat32((f2_q16 * e + R24) >> 24), p.g_th2_q28))
+        acc_q40(th, s.theta_ext, LAM, _increment_q40(mul_q_round(u, e, 32), p.g_lam_q28))
+        acc_q40(th, s.theta_ext, TH1, _increment_q40(mul_q_round(f1, e, 32), p.g_th1_q28))
+        acc_q40(th, s.theta_ext, TH2, _increment_q40(mul_q24_round(f2_q16, e), p.g_th2_q28))
     if p.lambda_floor_on and th[LAM] < p.lambda_floor_q24:  # projection onto Lambda >= floor
         th[LAM] = p.lambda_floor_q24
         s.theta_ext[LAM] = 0
     if p.pump_scaling_on:  # Theta_f-hat = Lambda-hat r
-        th[TH1] = sat32((th[LAM] * p.th_per_lam1_q28) >> 28)
-        th[TH2] = sat32((th[LAM] * p.th_per_lam2_q28) >> 28)
+        th[TH1] = mul_q(th[LAM], p.th_per_lam1_q28, 28)
+        th[TH2] = mul_q(th[LAM], p.th_per_lam2_q28, 28)
         s.theta_ext[TH1] = 0
         s.theta_ext[TH2] = 0

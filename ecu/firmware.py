@@ -30,7 +30,17 @@ from ecu import start_sequencer as Q
 from ecu.estimator import estimator_step
 from ecu.fast_model import observer_step
 from ecu.firmware_params import FirmwareParams, compile_params
-from ecu.fixedpoint import INT32_MAX, clamp, div_trunc, sat32, sub_sat, take_sat_events
+from ecu.fixedpoint import (
+    INT32_MAX,
+    clamp,
+    counting_into,
+    div_trunc,
+    mul_q,
+    new_sat_counter,
+    sat32,
+    sub_sat,
+    take_sat_events,
+)
 from ecu.inlet import take_egt_at_rest
 from ecu.limiters import (
     OWNER_SPEED,
@@ -152,6 +162,7 @@ class Ecu:
         self.out = EcuOutputs()
         self.seq = Q.SeqOut()
         self.t = TickVars()
+        self.sat_pending = new_sat_counter()  # this instance's saturation events (ecu_t's)
         self.reset()
 
     def reset(self) -> None:
@@ -173,7 +184,7 @@ class Ecu:
         s.mode = M.OFF
         s.ncor_k_q24 = p.ncor_k_q24  # the operator's day (ecu.inlet)
         s.seq_target_dk = p.seq_day_target_dk
-        take_sat_events()
+        take_sat_events(self.sat_pending)
 
     def _rate_q24(self, age: int) -> int:
         """Central difference of speed at the sample `age` ticks old, %N/s (Q7.24)."""
@@ -195,19 +206,23 @@ class Ecu:
         """One control step, in the stages the C port's ``ecu_tick`` runs in the same order."""
         s = self.s
         t = self.t
-        s.ticks = s.ticks + 1 if s.ticks < INT32_MAX else INT32_MAX
-        t.faults = s.faults & ~F.TRANSIENT
-        t.mode = s.mode
-        self._stage_sensors(i)
-        self._stage_history()
-        self._stage_trips()
-        self._stage_start_sequencer()
-        self._stage_mode()
-        if t.new_mode == M.RUN:
-            self._stage_control_law()
-            self._stage_limit_selection()
-        self._stage_pump_driver()
-        self._stage_health(i)
+        outer = counting_into(self.sat_pending)  # this instance's saturations, as C's ecu_t
+        try:
+            s.ticks = s.ticks + 1 if s.ticks < INT32_MAX else INT32_MAX
+            t.faults = s.faults & ~F.TRANSIENT
+            t.mode = s.mode
+            self._stage_sensors(i)
+            self._stage_history()
+            self._stage_trips()
+            self._stage_start_sequencer()
+            self._stage_mode()
+            if t.new_mode == M.RUN:
+                self._stage_control_law()
+                self._stage_limit_selection()
+            self._stage_pump_driver()
+            self._stage_health(i)
+        finally:
+            counting_into(outer)
         return self.out
 
     def _stage_sensors(self, i: EcuInputs) -> None:
@@ -286,7 +301,7 @@ class Ecu:
         if s.speed_seen < RATE_BUF_LEN:
             s.speed_seen += 1
         m = p.rate_half_window
-        t.n_q24 = sat32((t.n_rpm * p.rpm_to_q24_k) >> 16)
+        t.n_q24 = mul_q(t.n_rpm, p.rpm_to_q24_k, 16)
         t.dn = sub_sat(t.n_q24, p.trim_n_q24)
         if not t.speed_ok:
             t.rate = s.obs_v_q24
@@ -557,7 +572,7 @@ class Ecu:
         if health < p.health_alarm_pm:
             faults |= F.PUMP_HEALTH
         s.faults = faults
-        s.sat_events = sat32(s.sat_events + take_sat_events())
+        s.sat_events = sat32(s.sat_events + take_sat_events(self.sat_pending))
         o.tick = i.tick
         o.duty_cpct = t.duty
         o.pump_mv = t.pump_mv

@@ -15,7 +15,9 @@ Conventions (CMSIS-DSP style, portable to C line by line):
   0/0) and counts a saturation event.
 - Every store into a typed variable goes through :func:`sat32` (or a ``_sat`` primitive), which
   clamps instead of wrapping and counts the event in a sticky counter, like the ARM Q flag.
-  The firmware reads and clears it once per tick with :func:`take_sat_events`.
+  Each firmware instance has its own counter (as the C port's ``ecu_t.sat_pending``): its tick
+  makes it the one the primitives count into (:func:`counting_into`) and reads and clears it
+  once per tick with :func:`take_sat_events`.
 - Slow integrators (parameter update laws, where ``Gamma * x * e * dt`` is a few LSB of Q7.24)
   use a split accumulator: a Q7.24 word plus a 16-bit extension word, i.e. Q7.40 in two
   int32 words, so small increments are never lost to truncation (see :func:`acc_q40`).
@@ -38,14 +40,30 @@ ONE_Q24 = 1 << Q24
 ACC_EXT_BITS = Q40 - Q24  # bits held in the extension word of a split accumulator
 ACC_EXT_MASK = (1 << ACC_EXT_BITS) - 1
 
-# Sticky saturation counter (the ARM Q flag, counted): index 0 holds the events since last read.
+# The sticky saturation counter the primitives count into (the ARM Q flag, counted): index 0
+# holds the events since last read. A firmware instance puts its own in place for its tick.
 _SAT_EVENTS = array("q", [0])
 
 
-def take_sat_events() -> int:
-    """Return the saturation events counted since the last call and clear the counter."""
-    n = _SAT_EVENTS[0]
-    _SAT_EVENTS[0] = 0
+def new_sat_counter() -> array:
+    """A saturation counter of one's own (an ECU instance's)."""
+    return array("q", [0])
+
+
+def counting_into(counter: array) -> array:
+    """Make ``counter`` the one the primitives count into; returns the one it replaces."""
+    global _SAT_EVENTS
+    previous = _SAT_EVENTS
+    _SAT_EVENTS = counter
+    return previous
+
+
+def take_sat_events(counter: array | None = None) -> int:
+    """Return the saturation events counted in ``counter`` (default: the one in place) since
+    the last call, and clear it."""
+    c = _SAT_EVENTS if counter is None else counter
+    n = c[0]
+    c[0] = 0
     return n
 
 
@@ -79,16 +97,6 @@ def sub_sat(a: int, b: int) -> int:
     return sat32(a - b)
 
 
-def neg_sat(a: int) -> int:
-    """-a, saturated (-INT32_MIN does not fit)."""
-    return sat32(-a)
-
-
-def abs_sat(a: int) -> int:
-    """|a|, saturated (|INT32_MIN| does not fit)."""
-    return sat32(-a if a < 0 else a)
-
-
 def mul_q(a: int, b: int, q: int) -> int:
     """(a * b) >> q: 64-bit product truncated by arithmetic shift, saturated to int32."""
     return sat32((a * b) >> q)
@@ -109,21 +117,6 @@ def mul_q24_round(a: int, b: int) -> int:
     return sat32((a * b + (1 << (Q24 - 1))) >> Q24)
 
 
-def shl_sat(a: int, n: int) -> int:
-    """a << n (0 <= n < 32), saturated to int32."""
-    return sat32(a << n)
-
-
-def shr(a: int, n: int) -> int:
-    """Arithmetic shift right (truncation toward minus infinity), as ARM ASR."""
-    return a >> n
-
-
-def shr_round(a: int, n: int) -> int:
-    """Arithmetic shift right with round to nearest (ties up), saturated (n >= 1)."""
-    return sat32((a + (1 << (n - 1))) >> n)
-
-
 def div_trunc(a: int, b: int) -> int:
     """a / b with C semantics (truncation toward zero), saturated; b == 0 saturates explicitly."""
     if b == 0:
@@ -137,11 +130,6 @@ def div_trunc(a: int, b: int) -> int:
     if (a < 0) != (b < 0):
         q = -q
     return sat32(q)
-
-
-def div_q(a: int, b: int, q: int) -> int:
-    """(a << q) / b with C semantics: a Qm.q quotient of two values in the same format."""
-    return div_trunc(a << q, b)
 
 
 def acc_q40(hi: array, lo: array, i: int, inc_q40: int) -> None:

@@ -21,14 +21,13 @@ from __future__ import annotations
 from math import isqrt
 from typing import TYPE_CHECKING
 
-from ecu.params import INLET_RANGE_K
+from ecu.params import INLET_MAX_DK, INLET_MIN_DK
 
 if TYPE_CHECKING:
     from ecu.firmware_params import FirmwareParams
     from ecu.state import EcuState
 
 T_STD_CK = 28815  # 288.15 K
-INLET_MIN_DK, INLET_MAX_DK = (round(t * 10.0) for t in INLET_RANGE_K)
 
 
 def ncor_k_q24(inlet_ck: int) -> int:

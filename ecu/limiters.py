@@ -36,7 +36,7 @@ integrator).
 from __future__ import annotations
 
 from ecu.firmware_params import FirmwareParams
-from ecu.fixedpoint import add_sat, clamp, div_trunc, sat32, sub_sat
+from ecu.fixedpoint import add_sat, clamp, div_trunc, mul_q24, sat32, sub_sat
 from ecu.state import LAM, EcuState
 from ecu.tables import interp_uniform
 
@@ -65,7 +65,7 @@ def egt_lead_step(s: EcuState, p: FirmwareParams, egt_dk: int) -> None:
 def schedule_at(s: EcuState, p: FirmwareParams, table: tuple[int, ...], n_q24: int) -> int:
     """A schedule's table at corrected speed N / sqrt(theta) for the speed n_q24 (Q7.24), theta
     of the day's inlet temperature (ecu.inlet)."""
-    n_cor = sat32((n_q24 * s.ncor_k_q24) >> 24)
+    n_cor = mul_q24(n_q24, s.ncor_k_q24)
     return interp_uniform(table, p.sched_n0_q24, p.sched_step_q24, n_cor)
 
 

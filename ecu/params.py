@@ -35,6 +35,7 @@ SCHED_N0_PCT = 45.0
 SCHED_STEP_PCT = 5.0
 T_STD_K = 288.15
 INLET_RANGE_K = (223.0, 333.0)  # the day's inlet temperatures the ECU accepts
+INLET_MIN_DK, INLET_MAX_DK = (round(t * 10.0) for t in INLET_RANGE_K)  # the same, 0.1 K
 EGT_ERROR_MAX_DK = 1000  # the EGT loop's error is clamped to +- this, 0.1 K (and ecu_core.c)
 EGT_ERROR_MAX_K = EGT_ERROR_MAX_DK / 10.0
 

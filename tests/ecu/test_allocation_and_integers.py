@@ -13,15 +13,63 @@ from types import FrameType
 import ecu
 from ecu.bench import _drive, new_running_ecu, scripted_inputs
 from ecu.firmware import EcuOutputs
+from ecu.firmware_params import compile_params
 from ecu.state import EcuState
 
 ECU_DIR = Path(ecu.__file__).resolve().parent
-# modules whose code runs inside tick(); params (configuration), bench, node and the float
-# twins in ecu/reference are not part of the firmware path
-FIRMWARE_MODULES = (
-    "fixedpoint", "state", "estimator", "mrac", "pid", "fast_model", "limiters", "pump_driver",
-    "faults", "modes", "firmware", "start_sequencer",
-)  # fmt: skip
+
+
+def _modules_run_by_ticks() -> frozenset[str]:
+    """The ecu/ modules whose code runs inside ``tick()``, found by running it: each controller
+    in RUN on the bench's inputs, and a start from rest through the sequencer (the inlet
+    correction, the fuel schedules' tables) to a stop. What only sets up (params, the
+    parameter compiler) runs outside the tick and is not counted."""
+    from ecu.firmware import E2E_NONEWDATA, E2E_OK, Ecu, EcuInputs
+    from ecu.params import EcuParams
+
+    ecus = []
+    for controller in ("mrac", "pid", "pi", "open_loop"):
+        e, i = new_running_ecu()
+        e.p = compile_params(EcuParams(controller=controller))
+        ecus.append((e, i))
+    rest = Ecu(EcuParams())
+    seen: set[str] = set()
+
+    def tracer(frame: FrameType, event: str, arg: object) -> None:
+        if event == "call":
+            seen.add(frame.f_code.co_filename)
+
+    inputs = scripted_inputs(400)
+    i = EcuInputs()
+    sys.setprofile(tracer)
+    try:
+        for e, ei in ecus:
+            _drive(e, ei, inputs, 0, 200)
+        for k in range(300):  # at rest, armed: spin-up, ignition; then the stop's cool-down
+            i.speed_rpm, i.egt_dk, i.supply_mv = 3_000 + 40 * k, 2_900 + 20 * k, 22_200
+            i.demand_cpct, i.arm, i.stop = 3_500, 1, 1 if k > 250 else 0
+            i.sensor_status = i.analog_status = E2E_OK
+            i.demand_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+            rest.tick(i)
+    finally:
+        sys.setprofile(None)
+    return frozenset(
+        Path(f).stem for f in seen if Path(f).parent == ECU_DIR and Path(f).suffix == ".py"
+    )
+
+
+# the modules whose code runs inside tick() (not configuration, the node, benches or the float
+# twins of ecu/reference)
+FIRMWARE_MODULES = tuple(sorted(_modules_run_by_ticks() - {"bench", "firmware_params"}))
+
+
+def test_the_firmware_path_is_found_by_running_it() -> None:
+    """The module list the checks below run over is complete: every stage's module is in it."""
+    assert set(FIRMWARE_MODULES) >= {
+        "fixedpoint", "estimator", "mrac", "pid", "pi", "fast_model", "limiters",
+        "pump_driver", "faults", "modes", "firmware", "start_sequencer", "rate_filter",
+        "tables", "inlet",
+    }  # fmt: skip
 
 
 def test_100k_ticks_do_not_grow_allocated_blocks() -> None:
@@ -58,6 +106,9 @@ def test_tracemalloc_sees_no_growth_from_ecu_lines() -> None:
     assert counts[2] - counts[0] < 50, counts
 
 
+INTEGER_MATH = frozenset({"isqrt", "gcd", "lcm", "comb", "perm", "factorial"})
+
+
 def _float_nodes(tree: ast.AST) -> list[str]:
     bad = []
     for node in ast.walk(tree):
@@ -69,6 +120,9 @@ def _float_nodes(tree: ast.AST) -> list[str]:
             bad.append(f"true division at line {node.lineno}")
         elif isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("float", "round"):
             bad.append(f"{node.func.id}() at line {node.lineno}")
+        elif isinstance(node, ast.ImportFrom) and node.module == "math":
+            if any(a.name not in INTEGER_MATH for a in node.names):  # isqrt is integer only
+                bad.append(f"import of a float function from math at line {node.lineno}")
         elif isinstance(node, ast.Import | ast.ImportFrom):
             names = [a.name for a in node.names] + [getattr(node, "module", None) or ""]
             if any(n in ("math", "numpy", "fractions", "decimal") for n in names):

@@ -11,6 +11,7 @@ from ecu import faults as F
 from ecu import modes as M
 from ecu import start_sequencer as Q
 from ecu.firmware import E2E_NONEWDATA, E2E_OK, EcuInputs
+from ecu.fixedpoint import sat32
 from ecu.params import EcuParams
 from ecu.port.core import make_ecu
 
@@ -129,3 +130,21 @@ def test_demand_lost_in_a_start_is_not_retried_when_it_returns(impl):
         last = mode
     assert last == M.OFF and changes == 1
     assert b.run(100).mode == M.OFF  # demand back, the arm still held
+
+
+@pytest.mark.parametrize("impl", IMPLS)
+def test_saturations_are_counted_per_instance(impl):
+    """Two ECUs ticking in turn: one fed a demand whose Q7.24 value saturates, one not; a reset
+    of one leaves the other's count alone (the C port's ecu_t.sat_pending, in Python too)."""
+    a, b = Bench(impl), Bench(impl)
+    for _ in range(10):
+        a.run(1, demand_cpct=65_535)  # 655.35 %N in Q7.24 does not fit: one event a frame
+        b.run(1)
+    assert a.ecu.out.sat_events == 2 and b.ecu.out.sat_events == 0  # frames every 5 ticks
+    sat32(1 << 40)  # a saturation outside any tick (a tool's, a test's) is no ECU's
+    assert b.run(1).sat_events == 0
+    a.run(4, demand_cpct=65_535)
+    a.run(1, demand_cpct=65_535)  # the saturating store's event is added on the next tick
+    b.ecu.reset()
+    assert a.run(1).sat_events == 3
+    assert b.run(10).sat_events == 0
