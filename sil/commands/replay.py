@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 from pathlib import Path
 
+from protocol import strict_json
 from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
 from sil import replay, validation
 from sil.canlog import LogReadError, read_frames
@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _print_report(report: dict, as_json: bool) -> None:
     if as_json:
-        print(json.dumps(report, indent=2))
+        print(strict_json.dumps(report, indent=2))
         return
     for key, value in report.items():
         print(f"{key}: {value}")
@@ -136,7 +136,7 @@ def _into_ecu(args: argparse.Namespace) -> int:
     result = {"log": str(args.log), "scenario": str(path), **setup, **report.as_dict()}
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "report.json").write_text(json.dumps(result, indent=2) + "\n")
+        (args.out / "report.json").write_text(strict_json.dumps(result, indent=2) + "\n")
         _plot_comparison(report, args.out / "into_ecu.png", args.log.name)
     _print_report(result, args.json)
     verdict = report.verdict()
