@@ -124,17 +124,20 @@ def prepare(s: Scenario, seed: int, run: dict[str, Any], commission: Path | None
     ``run.json``; ``commission``: the ``--commission`` file)."""
     record: dict[str, Any] = {"format": FORMAT, "scenario": s.name, **run, "seed": seed}
     pending = Pending(record, None, None)
-    try:
-        if s.path is not None:
-            record["scenario_source"] = str(s.path)
-            record["scenario_file"] = SCENARIO
+    if s.path is not None:
+        record["scenario_source"] = str(s.path)
+        record["scenario_file"] = SCENARIO
+        try:
             pending.scenario_text = scenario_text(s, seed)
-        if commission is not None:
-            record["commission_source"] = str(commission)
-            record["commissioning_file"] = COMMISSIONING
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            pending.error = f"{s.path}: cannot read the scenario file: {exc}"
+    if commission is not None:
+        record["commission_source"] = str(commission)
+        record["commissioning_file"] = COMMISSIONING
+        try:
             pending.commissioning = commission.read_bytes()
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        pending.error = f"cannot read {exc.filename if isinstance(exc, OSError) else s.path}: {exc}"
+        except OSError as exc:
+            pending.error = f"{commission}: cannot read the commissioning file: {exc.strerror}"
     return pending
 
 
