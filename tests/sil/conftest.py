@@ -1,5 +1,5 @@
 """Fixtures of the SIL tests: the `sil` command in a process of its own, a loopback bus of a
-test's own, a short scenario file."""
+test's own."""
 
 from __future__ import annotations
 
@@ -9,30 +9,8 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import pytest
-
-SHORT_SCENARIO = """
-description = "short MRAC staircase for tests"
-duration_s = {duration}
-[plant]
-model = "aero"
-[controller]
-kind = "mrac"
-preset = "sec5_3_mrac_aero"
-params = {{ limiters_on = 1, dead_zone_on = 1, speed_noise_rpm = 20, rate_window_s = 0.05 }}
-[command]
-base = 0
-[[command.component]]
-kind = "staircase"
-levels = [90, 92, 88]
-step_s = 1
-[[fault]]
-time_s = 1.5
-target = "PUMP_EFFECTIVENESS"
-value = 0.8
-"""
 
 
 def _sil(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
@@ -57,15 +35,3 @@ def sil() -> Callable[..., subprocess.CompletedProcess]:
 def udp_spec() -> Callable[[], str]:
     """``udp_spec()``: a loopback bus spec no other test uses."""
     return _udp_spec
-
-
-@pytest.fixture
-def short_scenario(tmp_path: Path) -> Callable[..., Path]:
-    """``short_scenario(duration=3.0)``: a file of a short MRAC staircase with a pump fault."""
-
-    def write(duration: float = 3.0) -> Path:
-        path = tmp_path / f"short-{duration:g}.toml"
-        path.write_text(SHORT_SCENARIO.format(duration=duration))
-        return path
-
-    return write

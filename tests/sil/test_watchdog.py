@@ -174,8 +174,8 @@ def _stopped_before_ready(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, 
 
 
 @pytest.mark.slow
-def test_a_node_stopped_before_it_is_ready_ends_the_run_naming_it(tmp_path):
-    spec = _udp_spec()
+def test_a_node_stopped_before_it_is_ready_ends_the_run_naming_it(tmp_path, udp_spec):
+    spec = udp_spec()
     proc, out, stopped = _stopped_before_ready(tmp_path, spec)
     assert not (out / ".plant-ready").exists()  # stopped while it was starting
     try:
