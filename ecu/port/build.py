@@ -3,7 +3,8 @@ Cortex-M4 replay firmware and the Cortex-M4 firmware image (both for QEMU). Outp
 directory keyed by a hash of the sources and flags, so an edited source is rebuilt on the next use
 and never reused stale.
 
-The warning flags are the issue's: ``-std=c99 -Wall -Wextra -Wconversion -pedantic -Werror``.
+Every build is warning-free with ``WARNINGS``: ``-std=c99 -Wall -Wextra -Wconversion -Wshadow
+-Wcast-qual -Wundef -Wstrict-prototypes -pedantic -Werror``.
 
     python -m ecu.port.build       build everything this host can and print the paths
 """
@@ -33,13 +34,25 @@ def _build_dir() -> Path:
 
 
 BUILD_DIR = _build_dir()
-WARNINGS = ("-std=c99", "-Wall", "-Wextra", "-Wconversion", "-pedantic", "-Werror")
+WARNINGS = (
+    "-std=c99",
+    "-Wall",
+    "-Wextra",
+    "-Wconversion",
+    "-Wshadow",
+    "-Wcast-qual",
+    "-Wundef",
+    "-Wstrict-prototypes",
+    "-pedantic",
+    "-Werror",
+)
 # the control core, the frame codec and the CAN node (ecu_node.c: the C twin of ecu/node.py)
 CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c", "ecu_node.c")
 HEADERS = (
     "ecu_core.h",
     "ecu_frames.h",
     "generated/turbojet.h",
+    "generated/ecu_constants.h",
     "ecu_node.h",
     "board.h",
     "ecu_main.h",

@@ -4,9 +4,64 @@
  */
 #include "ecu_core.h"
 
+#include <limits.h>
+#include <string.h>
+
+/* ---- what the port relies on, checked at compile time (docs/c-port.md, deviations) --------- */
+
 #if (-1 >> 1) != -1
 #error "ecu_core needs arithmetic right shift of negative values"
 #endif
+#if INT_MAX < 2147483647
+#error "ecu_core needs an int of at least 32 bits"
+#endif
+
+/* A compile-time assertion: C11's _Static_assert, else (the builds are C99) a typedef of an
+ * array whose size is negative when cond is false. name is unique per assertion. */
+#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define ECU_STATIC_ASSERT(cond, name) _Static_assert(cond, #name)
+#else
+#define ECU_STATIC_ASSERT(cond, name) typedef char ecu_static_assert_##name[(cond) ? 1 : -1]
+#endif
+
+/* right shifts of negative values are arithmetic in the compiler's own constant arithmetic
+ * too, at both widths the tick shifts (implementation-defined in C99 6.5.7; not undefined) */
+ECU_STATIC_ASSERT(((int32_t)-5 >> 1) == -3, arithmetic_shift_int32);
+ECU_STATIC_ASSERT(((int64_t)-5 >> 1) == -3 && (INT64_MIN >> 62) == -2, arithmetic_shift_int64);
+
+/* The records are int32 words and nothing else: no padding (their size is exactly their word
+ * count), aligned as int32_t. ecu_params_load and ecu_state_digest read them as those words
+ * (memcpy of the object representation, in member order: C99 6.7.2.1), the Python wrapper
+ * (ecu/port/core.py) lays them out as ctypes int32 fields and the golden vectors as words. */
+typedef struct { char c; int32_t r; } ecu_align_int32_t;
+typedef struct { char c; ecu_params_t r; } ecu_align_params_t;
+typedef struct { char c; ecu_state_t r; } ecu_align_state_t;
+typedef struct { char c; ecu_inputs_t r; } ecu_align_inputs_t;
+typedef struct { char c; ecu_outputs_t r; } ecu_align_outputs_t;
+ECU_STATIC_ASSERT(sizeof(ecu_params_t) == ECU_PARAM_WORDS * sizeof(int32_t), params_no_padding);
+ECU_STATIC_ASSERT(sizeof(ecu_state_t) == ECU_STATE_WORDS * sizeof(int32_t), state_no_padding);
+ECU_STATIC_ASSERT(sizeof(ecu_inputs_t) == ECU_INPUT_WORDS * sizeof(int32_t), inputs_no_padding);
+ECU_STATIC_ASSERT(sizeof(ecu_outputs_t) == ECU_OUTPUT_WORDS * sizeof(int32_t),
+                  outputs_no_padding);
+ECU_STATIC_ASSERT(offsetof(ecu_align_params_t, r) == offsetof(ecu_align_int32_t, r),
+                  params_int32_aligned);
+ECU_STATIC_ASSERT(offsetof(ecu_align_state_t, r) == offsetof(ecu_align_int32_t, r),
+                  state_int32_aligned);
+ECU_STATIC_ASSERT(offsetof(ecu_align_inputs_t, r) == offsetof(ecu_align_int32_t, r),
+                  inputs_int32_aligned);
+ECU_STATIC_ASSERT(offsetof(ecu_align_outputs_t, r) == offsetof(ecu_align_int32_t, r),
+                  outputs_int32_aligned);
+
+/* take_egt_at_rest: ECU_T_STD_CK << 48 fits an int64 (ECU_T_STD_CK < 2^15: the product is
+ * below 2^63), the day's temperature in 0.01 K fits an int32 and is never 0, and the quotient
+ * (ECU_T_STD_CK << 48) / inlet_ck stays under 2^62 at the coldest inlet, so its square root
+ * (1 / sqrt(theta) in Q24) fits an int32 */
+ECU_STATIC_ASSERT(ECU_T_STD_CK > 0 && ECU_T_STD_CK < (1 << 15), t_std_shift_fits_int64);
+ECU_STATIC_ASSERT(ECU_INLET_MIN_DK > 0 && ECU_INLET_MIN_DK <= ECU_INLET_MAX_DK &&
+                      ECU_INLET_MAX_DK <= INT32_MAX / 10,
+                  inlet_range_fits_int32);
+ECU_STATIC_ASSERT(((int64_t)ECU_T_STD_CK << 48) / (ECU_INLET_MIN_DK * 10) < ((int64_t)1 << 62),
+                  ncor_k_fits_int32);
 
 /* Helpers called from several places that are worth no call frame of their own: forced inline
  * (C99's inline is only a hint, which gcc -Os does not take for these). The tick's stack bound
@@ -22,7 +77,6 @@
 
 #define ACC_EXT_BITS 16 /* Q7.40 split accumulator: 16 bits below the Q7.24 word */
 #define ONE_Q24 ((int64_t)1 << 24)
-#define EGT_ERROR_MAX_DK 1000 /* the EGT loop's error clamp, 0.1 K (params.EGT_ERROR_MAX_K) */
 
 static int32_t sat32(ecu_t *e, int64_t x)
 {
@@ -84,31 +138,6 @@ static int32_t mul_q24(ecu_t *e, int32_t a, int32_t b)
 
 /* ---- ecu/faults.py ------------------------------------------------------------------------- */
 
-#define F_SPEED_RANGE (1 << 0)
-#define F_SPEED_RATE (1 << 1)
-#define F_SPEED_STUCK (1 << 2)
-#define F_SPEED_SUBSTITUTED (1 << 3)
-#define F_EGT_OPEN (1 << 4)
-#define F_EGT_OVERTEMP (1 << 5)
-#define F_OVERSPEED (1 << 6)
-#define F_FLAMEOUT (1 << 7)
-#define F_PUMP_STALL (1 << 8)
-#define F_PUMP_DRY (1 << 9)
-#define F_PUMP_HEALTH (1 << 10)
-#define F_DEMAND_LOST (1 << 11)
-#define F_SENSOR_FRAME_LOST (1 << 12)
-#define F_ANALOG_FRAME_LOST (1 << 13)
-#define F_LIMITER_ACTIVE (1 << 14)
-#define F_PUMP_SATURATED (1 << 15)
-#define F_TRANSIENT (F_LIMITER_ACTIVE | F_PUMP_SATURATED | F_SENSOR_FRAME_LOST | \
-                     F_ANALOG_FRAME_LOST | F_PUMP_HEALTH)
-#define F_TRIP (F_OVERSPEED | F_EGT_OVERTEMP | F_PUMP_STALL | F_PUMP_DRY)
-
-/* ecu_state_t.inputs_seen: the sensors that gave a valid reading since power-up */
-#define SEEN_SPEED 1
-#define SEEN_EGT 2
-#define SEEN_ALL (SEEN_SPEED | SEEN_EGT)
-
 static int32_t persist(int32_t count, int bad, int32_t limit)
 {
     if (bad) {
@@ -137,13 +166,13 @@ static int32_t speed_checks(ecu_t *e, int32_t rpm, int32_t prev_rpm, int32_t v_q
         s->speed_stuck_cnt = persist(s->speed_stuck_cnt, moved, p->speed_stuck_ticks);
     }
     if (s->speed_range_cnt >= p->speed_fault_ticks) {
-        tripped |= F_SPEED_RANGE;
+        tripped |= ECU_FAULT_SPEED_RANGE;
     }
     if (s->speed_rate_cnt >= p->speed_fault_ticks) {
-        tripped |= F_SPEED_RATE;
+        tripped |= ECU_FAULT_SPEED_RATE;
     }
     if (s->speed_stuck_cnt >= p->speed_stuck_ticks) {
-        tripped |= F_SPEED_STUCK;
+        tripped |= ECU_FAULT_SPEED_STUCK;
     }
     return tripped;
 }
@@ -153,16 +182,16 @@ static int32_t egt_open_check(ecu_t *e, int32_t egt_dk)
     const ecu_params_t *p = e->p;
     int bad = egt_dk > p->egt_open_high_dk || egt_dk < p->egt_open_low_dk;
     e->s.egt_open_cnt = persist(e->s.egt_open_cnt, bad, p->egt_fault_ticks);
-    return e->s.egt_open_cnt >= p->egt_fault_ticks ? F_EGT_OPEN : 0;
+    return e->s.egt_open_cnt >= p->egt_fault_ticks ? ECU_FAULT_EGT_OPEN : 0;
 }
 
 /* the sensors whose fresh reading is plausible (SEEN_*): speed in its valid range, EGT not
    railed as an open thermocouple reads */
 static int32_t valid_readings(const ecu_params_t *p, int32_t rpm, int32_t egt_dk)
 {
-    int32_t seen = rpm >= 0 && rpm <= p->speed_valid_max_rpm ? SEEN_SPEED : 0;
+    int32_t seen = rpm >= 0 && rpm <= p->speed_valid_max_rpm ? ECU_SEEN_SPEED : 0;
     if (egt_dk >= p->egt_open_low_dk && egt_dk <= p->egt_open_high_dk) {
-        seen |= SEEN_EGT;
+        seen |= ECU_SEEN_EGT;
     }
     return seen;
 }
@@ -201,10 +230,10 @@ static int32_t pump_current_checks(ecu_t *e, int32_t pump_ma, int32_t v_q24)
     dry = applied && p->pump_trip_ma <= pump_ma && pump_ma < dry_ma;
     s->pump_dry_cnt = persist(s->pump_dry_cnt, dry, p->pump_dry_ticks);
     if (s->pump_stall_cnt >= p->pump_stall_ticks) {
-        tripped |= F_PUMP_STALL;
+        tripped |= ECU_FAULT_PUMP_STALL;
     }
     if (s->pump_dry_cnt >= p->pump_dry_ticks) {
-        tripped |= F_PUMP_DRY;
+        tripped |= ECU_FAULT_PUMP_DRY;
     }
     return tripped;
 }
@@ -439,8 +468,6 @@ static void pi_track(ecu_t *e, int32_t err, int32_t n_q24, int32_t u_applied)
 
 /* ---- ecu/limiters.py ----------------------------------------------------------------------- */
 
-enum { OWNER_SPEED, OWNER_EGT, OWNER_ACCEL, OWNER_NLIMIT, OWNER_DECEL };
-
 /* the gas temperature from the thermocouple's reading (ecu/limiters.py egt_lead_step): the lead
  * (T_tc s + 1)/(T_f s + 1) by backward Euler, y in 0.1 K Q12; called before s->egt_dk takes x */
 static void egt_lead_step(ecu_t *e, int32_t egt_dk)
@@ -521,8 +548,9 @@ static int32_t egt_line_v(ecu_t *e, int32_t v_prev, int *on)
     int64_t limit_rise_dk = (int64_t)p->egt_limit_dk - p->egt_zero_fuel_dk;
     s->egt_vf_q24 = vf;
     *on = p->egt_zero_fuel_dk != 0 && 4 * rise_dk >= limit_rise_dk && vf > p->pump_dead_q24;
-    if (!*on)
+    if (!*on) {
         return 0;
+    }
     return sat32(e, (int64_t)p->pump_dead_q24 +
                         div_trunc(e, ((int64_t)vf - p->pump_dead_q24) * limit_rise_dk, rise_dk));
 }
@@ -535,7 +563,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     int32_t v_prev, v, owner, err, v_loop, v_lim, ndot_max, by_line = 0;
     int rate_owned;
     if (!p->limiters_on) {
-        s->owner = OWNER_SPEED;
+        s->owner = ECU_OWNER_SPEED;
         s->v_saturated = 0;
         s->line_owns = 0;
         s->v_applied_q24 = v_speed;
@@ -543,15 +571,15 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
     }
     v_prev = s->v_applied_q24;
     v = v_speed;
-    owner = OWNER_SPEED;
+    owner = ECU_OWNER_SPEED;
     if (egt_ok) {
         err = egt_err_q24;
         if (err < p->egt_engage_q24) {
             v_loop = limit_loop(e, v_prev, err, s->egt_e_prev_q24, p->egt_kp_q24, p->egt_ki_dt_q24,
-                                s->owner == OWNER_EGT);
+                                s->owner == ECU_OWNER_EGT);
             if (v_loop < v) {
                 v = v_loop;
-                owner = OWNER_EGT;
+                owner = ECU_OWNER_EGT;
             }
         }
         s->egt_e_prev_q24 = err;
@@ -561,10 +589,10 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         v_loop = egt_line_v(e, v_prev, &on);
         if (egt_ok && on && v_loop < v) {
             v = v_loop;
-            owner = OWNER_EGT;
+            owner = ECU_OWNER_EGT;
         }
     }
-    rate_owned = s->owner == OWNER_ACCEL && !s->line_owns; /* the rate loop, not the line */
+    rate_owned = s->owner == ECU_OWNER_ACCEL && !s->line_owns; /* the rate loop, not the line */
     ndot_max = p->accel_max_q24;
     if (p->fuel_schedules_on) { /* the acceleration schedule, under the overall limit */
         int32_t sched = schedule_at(e, p->accel_rate_q24, n_q24);
@@ -576,17 +604,17 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
                             rate_owned);
         if (v_loop < v) {
             v = v_loop;
-            owner = OWNER_ACCEL;
+            owner = ECU_OWNER_ACCEL;
         }
     }
     s->acc_e_prev_q24 = err;
     err = sat32(e, (int64_t)p->n_limit_q24 - n_q24);
     if (err < p->n_limit_engage_q24) {
         v_loop = limit_loop(e, v_prev, err, s->nlim_e_prev_q24, p->n_limit_kp_q24,
-                            p->n_limit_ki_dt_q24, s->owner == OWNER_NLIMIT);
+                            p->n_limit_ki_dt_q24, s->owner == ECU_OWNER_NLIMIT);
         if (v_loop < v) {
             v = v_loop;
-            owner = OWNER_NLIMIT;
+            owner = ECU_OWNER_NLIMIT;
         }
     }
     s->nlim_e_prev_q24 = err;
@@ -596,17 +624,17 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         v_loop = schedule_v(e, p->accel_line_q24, n_q24, p->sched_lam_lo_q24, p->sched_lam_hi_q24);
         if (v_loop < v) {
             v = v_loop;
-            owner = OWNER_ACCEL;
+            owner = ECU_OWNER_ACCEL;
             by_line = 1;
         }
     }
     err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above the decel limit */
     if (err < p->rate_engage_q24) {
         v_loop = limit_loop(e, v_prev, -(int64_t)err, -(int64_t)s->dec_e_prev_q24, p->rate_kp_q24,
-                            p->rate_ki_dt_q24, s->owner == OWNER_DECEL);
+                            p->rate_ki_dt_q24, s->owner == ECU_OWNER_DECEL);
         if (v_loop > v) {
             v = v_loop;
-            owner = OWNER_DECEL;
+            owner = ECU_OWNER_DECEL;
         }
     }
     s->dec_e_prev_q24 = err;
@@ -615,14 +643,14 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         v_loop = schedule_v(e, p->decel_floor_q24, n_q24, p->sched_lam_lo_q24, p->lambda_comm_q24);
         if (v_loop > v) {
             v = v_loop;
-            owner = OWNER_DECEL;
+            owner = ECU_OWNER_DECEL;
         }
     }
     v_lim = (int32_t)clamp(v, p->v_min_q24, p->v_max_q24);
     s->v_saturated = v_lim != v ? 1 : 0;
     v_lim = (int32_t)clamp(v_lim, (int64_t)v_prev - p->v_slew_q24, (int64_t)v_prev + p->v_slew_q24);
     s->owner = owner;
-    s->line_owns = owner == OWNER_ACCEL ? by_line : 0;
+    s->line_owns = owner == ECU_OWNER_ACCEL ? by_line : 0;
     s->v_applied_q24 = v_lim;
     return v_lim;
 }
@@ -636,7 +664,7 @@ static void reset_loops(ecu_state_t *s, int32_t v_q24)
     s->acc_e_prev_q24 = 0;
     s->dec_e_prev_q24 = 0;
     s->nlim_e_prev_q24 = 0;
-    s->owner = OWNER_SPEED;
+    s->owner = ECU_OWNER_SPEED;
     s->v_saturated = 0;
 }
 
@@ -733,8 +761,6 @@ static int32_t next_mode(int32_t mode, int arm, int stop, int running, int deman
  * starter_cpct and igniter words, which the tick clears before the sequencer runs; its pump
  * voltage is s->seq_v_q24. */
 
-#define DUTY_FULL_CPCT 10000
-
 static int32_t seq_timer_step(int32_t t)
 {
     return t < INT32_MAX ? t + 1 : INT32_MAX;
@@ -746,12 +772,10 @@ static void seq_enter(ecu_state_t *s, int32_t state)
     s->seq_timer = 0;
 }
 
-/* the day's inlet temperature (ecu/inlet.py) */
-#define ECU_T_STD_CK 28815 /* 288.15 K */
-#define ECU_INLET_MIN_DK 2230 /* INLET_RANGE_K */
-#define ECU_INLET_MAX_DK 3330
-
-/* floor(sqrt(x)), bit by bit */
+/* floor(sqrt(x)), bit by bit, for x < 2^62 (the result fits an int32). The loop is bounded:
+ * `bit` starts at 2^62 and drops by a factor of 4 in every pass of either loop, so the two
+ * loops together run at most 32 passes (31 + 1); the tick calls it only at a start from rest
+ * (take_egt_at_rest). */
 ECU_INLINE uint32_t isqrt_u64(uint64_t x)
 {
     uint64_t r = 0;
@@ -779,6 +803,8 @@ ECU_INLINE void take_egt_at_rest(ecu_t *e)
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
     if (p->inlet_from_egt && s->egt_dk >= ECU_INLET_MIN_DK && s->egt_dk <= ECU_INLET_MAX_DK) {
+        /* inlet_ck in 22300..33300 (0.01 K): no overflow and no division by zero; the shift
+         * and the root's range are checked at compile time (top of this file) */
         int32_t inlet_ck = s->egt_dk * 10;
         int64_t target = (int64_t)p->seq_egt_target_dk * inlet_ck / ECU_T_STD_CK;
         s->ncor_k_q24 = (int32_t)isqrt_u64((uint64_t)(((int64_t)ECU_T_STD_CK << 48) / inlet_ck));
@@ -859,7 +885,7 @@ static int32_t start_step(ecu_t *e, int32_t n_rpm, int32_t egt_dk, int32_t rate_
         fuel_ramp(e, egt_dk, rate_q24, v_cap_q24); /* (Python: in each of the two branches) */
         if (state == ECU_SEQ_RAMP) {
             int64_t duty = p->seq_start_cpct + (int64_t)t * p->seq_starter_step_cpct;
-            s->starter_cpct = duty < DUTY_FULL_CPCT ? (int32_t)duty : DUTY_FULL_CPCT;
+            s->starter_cpct = duty < ECU_DUTY_FULL_CPCT ? (int32_t)duty : ECU_DUTY_FULL_CPCT;
             s->igniter = t < p->seq_igniter_hold_ticks;
             if (n_rpm >= p->seq_cutoff_rpm) {
                 seq_enter(s, ECU_SEQ_STABILISE);
@@ -933,9 +959,6 @@ static void stop_step(ecu_t *e, int32_t n_rpm, int32_t egt_dk)
 
 /* ---- ecu/firmware.py ----------------------------------------------------------------------- */
 
-#define RPM_PER_PCT 1125 /* 112,500 rpm = 100 %N */
-#define AGE_MAX (1 << 30)
-
 static int32_t ring(int32_t idx) /* (idx + RATE_BUF_LEN) % RATE_BUF_LEN for idx > -LEN */
 {
     return (idx + ECU_RATE_BUF_LEN) % ECU_RATE_BUF_LEN;
@@ -966,20 +989,14 @@ static int32_t q24_to_cpct(int64_t x_q24)
 
 static int32_t age(int32_t a)
 {
-    return a < AGE_MAX ? a + 1 : AGE_MAX;
+    return a < ECU_AGE_MAX ? a + 1 : ECU_AGE_MAX;
 }
 
 void ecu_init(ecu_t *e, const ecu_params_t *p)
 {
-    int32_t *w = (int32_t *)(void *)&e->s;
     int k;
-    for (k = 0; k < ECU_STATE_WORDS; k++) {
-        w[k] = 0;
-    }
-    w = (int32_t *)(void *)&e->o;
-    for (k = 0; k < ECU_OUTPUT_WORDS; k++) {
-        w[k] = 0;
-    }
+    memset(&e->s, 0, sizeof e->s); /* every field an int32: all bits zero is 0 */
+    memset(&e->o, 0, sizeof e->o);
     e->p = p;
     for (k = 0; k < ECU_N_THETA; k++) {
         e->s.theta_q24[k] = p->init_theta_q24[k];
@@ -1022,25 +1039,25 @@ static void stage_sensors(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
         s->inputs_seen |= valid_readings(p, in->speed_rpm, in->egt_dk);
     } else {
         s->sensor_age = age(s->sensor_age);
-        t->faults |= F_SENSOR_FRAME_LOST;
+        t->faults |= ECU_FAULT_SENSOR_FRAME_LOST;
     }
-    if (t->faults & (F_SPEED_RANGE | F_SPEED_RATE | F_SPEED_STUCK)) {
+    if (t->faults & (ECU_FAULT_SPEED_RANGE | ECU_FAULT_SPEED_RATE | ECU_FAULT_SPEED_STUCK)) {
         s->speed_failed = 1;
     }
     t->speed_ok = s->speed_failed == 0 && s->sensor_age == 0;
-    t->inputs_valid = s->inputs_seen == SEEN_ALL;
+    t->inputs_valid = s->inputs_seen == ECU_SEEN_ALL;
     if (t->speed_ok) {
         t->n_rpm = s->speed_rpm;
-    } else if (!(s->inputs_seen & SEEN_SPEED)) {
+    } else if (!(s->inputs_seen & ECU_SEEN_SPEED)) {
         t->n_rpm = 0; /* no reading since power-up: nothing to substitute (not the trim speed) */
     } else {
-        t->n_rpm = (int32_t)((((int64_t)s->obs_n_q24 + p->trim_n_q24) * RPM_PER_PCT + (1 << 23))
+        t->n_rpm = (int32_t)((((int64_t)s->obs_n_q24 + p->trim_n_q24) * ECU_RPM_PER_PCT + (1 << 23))
                              >> 24);
         if (s->speed_failed) {
-            t->faults |= F_SPEED_SUBSTITUTED;
+            t->faults |= ECU_FAULT_SPEED_SUBSTITUTED;
         }
     }
-    t->egt_ok = (t->faults & F_EGT_OPEN) == 0;
+    t->egt_ok = (t->faults & ECU_FAULT_EGT_OPEN) == 0;
 
     /* analog frame: supply voltage and pump current */
     t->analog_fresh = in->analog_status == ECU_E2E_OK;
@@ -1052,7 +1069,7 @@ static void stage_sensors(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
         s->analog_age = age(s->analog_age);
         if (s->analog_age > p->analog_loss_ticks) {
             s->supply_mv = p->supply_nominal_mv;
-            t->faults |= F_ANALOG_FRAME_LOST;
+            t->faults |= ECU_FAULT_ANALOG_FRAME_LOST;
         }
     }
 
@@ -1070,7 +1087,7 @@ static void stage_sensors(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
     demand = s->demand_q24;
     if (s->demand_age > p->demand_hold_ticks) {
         demand = p->idle_q24;
-        t->faults |= F_DEMAND_LOST;
+        t->faults |= ECU_FAULT_DEMAND_LOST;
     }
     if (!t->egt_ok && demand > p->egt_fail_demand_q24) {
         demand = p->egt_fail_demand_q24;
@@ -1120,7 +1137,7 @@ static void stage_trips(ecu_t *e, tick_vars_t *t)
     s->overspeed_cnt = persist(s->overspeed_cnt, running && t->n_rpm > p->overspeed_rpm,
                                p->overspeed_ticks);
     if (s->overspeed_cnt >= p->overspeed_ticks) {
-        t->faults |= F_OVERSPEED;
+        t->faults |= ECU_FAULT_OVERSPEED;
     }
     s->flameout_cnt = persist(s->flameout_cnt, t->mode == ECU_RUN && t->n_rpm < p->flameout_rpm,
                               p->flameout_ticks);
@@ -1128,18 +1145,19 @@ static void stage_trips(ecu_t *e, tick_vars_t *t)
                                t->mode == ECU_RUN && t->egt_ok && s->egt_dk < p->flameout_egt_dk,
                                p->flameout_egt_ticks);
     if (s->flameout_cnt >= p->flameout_ticks || s->flame_egt_cnt >= p->flameout_egt_ticks) {
-        t->faults |= F_FLAMEOUT;
+        t->faults |= ECU_FAULT_FLAMEOUT;
         flameout = 1;
     }
     s->egt_over_cnt = persist(s->egt_over_cnt, running && t->egt_ok && s->egt_dk > p->egt_max_dk,
                               p->egt_max_ticks);
     if (s->egt_over_cnt >= p->egt_max_ticks) {
-        t->faults |= F_EGT_OVERTEMP;
+        t->faults |= ECU_FAULT_EGT_OVERTEMP;
     }
     if (t->mode == ECU_RUN && t->analog_fresh) {
         t->faults |= pump_current_checks(e, s->pump_ma, s->v_applied_q24);
     }
-    t->trip_fault = (t->faults & F_TRIP) != 0 || (running && s->sensor_age > p->sensor_loss_ticks);
+    t->trip_fault = (t->faults & ECU_FAULT_TRIP) != 0 ||
+                    (running && s->sensor_age > p->sensor_loss_ticks);
     t->trip_shutdown = flameout || s->demand_age >= p->demand_shutdown_ticks;
     t->relight = flameout && p->start_on && s->relights < p->seq_relight_max;
 }
@@ -1256,7 +1274,7 @@ static void stage_control_law(ecu_t *e, tick_vars_t *t)
     if (s->hist_fill < ECU_RATE_BUF_LEN) {
         s->hist_fill++;
     }
-    if (p->freeze_on && (s->v_saturated || (s->owner != OWNER_SPEED && !line_learns))) {
+    if (p->freeze_on && (s->v_saturated || (s->owner != ECU_OWNER_SPEED && !line_learns))) {
         adapt = 0;
     }
     if (p->adapt_band_q24 && (t->dn > p->adapt_band_q24 || t->dn < -p->adapt_band_q24)) {
@@ -1294,8 +1312,8 @@ static void stage_limit_selection(ecu_t *e, tick_vars_t *t)
     probe_dk = p->egt_limit_dk - s->egt_dk;
     room_dk = (int32_t)clamp(probe_dk, 0, p->egt_gas_margin_dk);
     gas_dk = (int64_t)p->egt_limit_dk + room_dk - (s->egt_lead_q12 >> 12);
-    e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -EGT_ERROR_MAX_DK,
-                          EGT_ERROR_MAX_DK);
+    e_dk = (int32_t)clamp(gas_dk < probe_dk ? gas_dk : probe_dk, -ECU_EGT_ERROR_MAX_DK,
+                          ECU_EGT_ERROR_MAX_DK);
     t->v = select_voltage(e, sat32(e, (int64_t)p->trim_v_q24 + t->u),
                           div_trunc(e, (int64_t)e_dk * ONE_Q24, 10), t->egt_ok, t->n_q24,
                           t->ctrl_rate);
@@ -1305,7 +1323,7 @@ static void stage_limit_selection(ecu_t *e, tick_vars_t *t)
     } else if (p->controller == ECU_CTRL_PI) {
         pi_track(e, sat32(e, (int64_t)t->demand - t->n_q24), t->n_q24, u_applied);
     }
-    if (s->owner != OWNER_SPEED) { /* the lag tracks what a limit applies (anti-windup) */
+    if (s->owner != ECU_OWNER_SPEED) { /* the lag tracks what a limit applies (anti-windup) */
         s->u_lag_q24 = u_applied;
     }
     observer_step(e, u_applied, t->dn, t->speed_ok);
@@ -1322,8 +1340,8 @@ static void stage_pump_driver(ecu_t *e, tick_vars_t *t)
     int run = t->new_mode == ECU_RUN;
     if (run) {
         t->pump_mv = volts_q24_to_mv(t->v);
-        if (s->owner != OWNER_SPEED) {
-            t->faults |= F_LIMITER_ACTIVE;
+        if (s->owner != ECU_OWNER_SPEED) {
+            t->faults |= ECU_FAULT_LIMITER_ACTIVE;
         }
     } else {
         if (t->new_mode == ECU_SHUTDOWN && p->start_on) {
@@ -1345,7 +1363,7 @@ static void stage_pump_driver(ecu_t *e, tick_vars_t *t)
     t->duty = run || t->pump_mv > 0 ? pump_duty(e, t->pump_mv, s->supply_mv) : 0;
     t->enable = run || t->duty > 0;
     if (run && s->v_saturated) {
-        t->faults |= F_PUMP_SATURATED;
+        t->faults |= ECU_FAULT_PUMP_SATURATED;
     }
     if (t->new_mode != ECU_ARMED && t->new_mode != ECU_SHUTDOWN) {
         s->starter_cpct = 0;
@@ -1363,7 +1381,7 @@ static void stage_health(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
     int32_t health = div_trunc(e, (int64_t)th[ECU_LAM] * 1000, p->lambda_comm_q24);
     int64_t pending;
     if (health < p->health_alarm_pm) {
-        t->faults |= F_PUMP_HEALTH;
+        t->faults |= ECU_FAULT_PUMP_HEALTH;
     }
     s->faults = t->faults;
     pending = e->sat_pending;
@@ -1374,7 +1392,7 @@ static void stage_health(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
     o->pump_mv = t->pump_mv;
     o->pump_enable = t->enable;
     o->mode = t->new_mode;
-    o->fault_word = t->faults & 0xFFFF;
+    o->fault_word = t->faults & ECU_FAULT_WORD_MASK;
     o->sat_events = s->sat_events;
     o->ap21_q24 = th[ECU_AP21];
     o->ap22_q24 = th[ECU_AP22];
@@ -1402,7 +1420,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     ecu_state_t *s = &e->s;
     tick_vars_t t = {0};
     s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
-    t.faults = s->faults & ~F_TRANSIENT;
+    t.faults = s->faults & ~ECU_FAULT_TRANSIENT;
     t.mode = s->mode;
     stage_sensors(e, in, &t);
     stage_history(e, &t);
@@ -1420,42 +1438,46 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
 
 /* ---- state digest and parameter load ------------------------------------------------------- */
 
+/* the state's words in member order: each word's bytes copied out of the object
+ * representation (well defined for any layout; the static assertions above make the words the
+ * fields, with no padding between them) */
 uint32_t ecu_state_digest(const ecu_state_t *s)
 {
-    const int32_t *w = (const int32_t *)(const void *)s;
+    const unsigned char *bytes = (const unsigned char *)s;
     uint32_t h = 2166136261u;
-    int k;
-    for (k = 0; k < ECU_STATE_WORDS; k++) {
-        h = (h ^ (uint32_t)w[k]) * 16777619u;
+    int32_t w;
+    size_t k;
+    for (k = 0; k < (size_t)ECU_STATE_WORDS; k++) {
+        memcpy(&w, bytes + k * sizeof w, sizeof w);
+        h = (h ^ (uint32_t)w) * 16777619u;
     }
     return h;
 }
 
+/* the word index of a parameter field (no padding: see the static assertions above) */
+#define PARAM_INDEX(field) ((int)(offsetof(ecu_params_t, field) / sizeof(int32_t)))
+
 int ecu_params_load(ecu_params_t *p, const int32_t *words, size_t n)
 {
-    int32_t *dst = (int32_t *)(void *)p;
-    size_t k;
     if (n != (size_t)ECU_PARAM_WORDS) {
         return ECU_PARAM_WORDS;
     }
-    for (k = 0; k < n; k++) {
-        dst[k] = words[k];
-    }
+    memcpy(p, words, sizeof *p); /* the words in member order (ECU_PARAM_FIELDS) */
     /* what the tick's indexing and divisions rely on; the rest is checked by compile_params */
-    if (p->rate_hz < 1 || p->rate_hz > 1000) {
-        return (int)(&p->rate_hz - dst);
+    if (p->rate_hz < 1 || p->rate_hz > ECU_RATE_MAX_HZ) {
+        return PARAM_INDEX(rate_hz);
     }
     if (p->controller < ECU_CTRL_MRAC || p->controller > ECU_CTRL_PI) {
-        return (int)(&p->controller - dst);
+        return PARAM_INDEX(controller);
     }
     if (p->rate_half_window < 1 || 2 * p->rate_half_window + 1 >= ECU_RATE_BUF_LEN) {
-        return (int)(&p->rate_half_window - dst);
+        return PARAM_INDEX(rate_half_window);
     }
     if (p->pi_step_q24 < 1) {
-        return (int)(&p->pi_step_q24 - dst);
+        return PARAM_INDEX(pi_step_q24);
     }
     if (p->sched_step_q24 < 1) {
-        return (int)(&p->sched_step_q24 - dst);
+        return PARAM_INDEX(sched_step_q24);
     }
     return -1;
 }

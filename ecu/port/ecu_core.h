@@ -22,17 +22,21 @@
  *         ECU_ARMED and ECU_SHUTDOWN), and the ECU frames (ecu_frames.h packs them from the
  *         outputs, with E2E CRC and alive counter).
  *
- * ecu_tick is reentrant per instance, has no loops, uses no floating point and calls nothing but
- * the compiler's 64-bit division helper (__aeabi_ldivmod on Arm). Inputs are expected in their
- * DBC ranges (speed 0..262143 rpm, EGT 0..16383 dK, supply and current 0..65535, demand
- * 0..65535); within them no intermediate overflows 64 bits.
+ * ecu_tick is reentrant per instance, runs in bounded time, uses no floating point and calls
+ * nothing but the compiler's 64-bit division helper (__aeabi_ldivmod on Arm). Its one loop is
+ * the integer square root of the inlet correction, at most 32 passes and only in the tick
+ * that starts the engine from rest; everything else is straight-line code. Inputs are
+ * expected in the ranges their DBC signals can carry (speed 0..262143 rpm, EGT 0..16383 dK,
+ * supply and current 0..65535, demand 0..65535); within them no intermediate overflows 64 bits.
  *
  * Parameters are the integer constants that ecu.firmware_params.compile_params computes from the
  * engineering-unit calibration (the one place where floats become Q formats); they are loaded
  * as ECU_PARAM_WORDS int32 words in the order of ECU_PARAM_FIELDS.
  *
- * Requires: two's-complement int32_t/int64_t and arithmetic right shift of negative values
- * (gcc, clang, armcc, IAR on every 32-bit MCU; checked at compile time in ecu_core.c).
+ * Requires: int32_t/int64_t (exact-width, so two's complement without padding bits), an int
+ * of at least 32 bits and arithmetic right shift of negative values (gcc, clang, armcc, IAR on
+ * every 32-bit MCU); ecu_core.c checks them at compile time, with the records' layout (int32
+ * words only, no padding). See the deviation record in docs/c-port.md.
  */
 #ifndef ECU_CORE_H
 #define ECU_CORE_H
@@ -40,47 +44,20 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/*
+ * The constants shared with the Python firmware and the CAN contract, generated from their
+ * definitions (python -m ecu.port.codegen): array lengths ECU_N_THETA, ECU_PI_POINTS,
+ * ECU_SCHED_POINTS, ECU_RATE_BUF_LEN; theta slots ECU_AP21..ECU_KB; modes ECU_OFF..ECU_FAULT;
+ * sequencer states ECU_SEQ_*; abort reasons ECU_ABORT_*; controllers ECU_CTRL_*; E2E statuses
+ * ECU_E2E_* (OK: a fresh valid frame, its values are used; REPEATED, WRONGSEQUENCE, WRONGCRC:
+ * rejected, the values are not used; NONEWDATA: nothing arrived); loop owners ECU_OWNER_*; fault
+ * word bits ECU_FAULT_*; the ECU's frame IDs, E2E data IDs and signal ranges.
+ */
+#include "generated/ecu_constants.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-#define ECU_N_THETA 12     /* adaptive parameters and slow integrators (ecu/state.py) */
-#define ECU_PI_POINTS 9    /* scheduling speeds of the PI baseline (ecu/pi_design.py) */
-#define ECU_SCHED_POINTS 12 /* fuel schedule breakpoints (ecu/params.py SCHED_POINTS) */
-#define ECU_RATE_BUF_LEN 52 /* speed history ring: 0.05 s at 1000 Hz, +2 samples */
-
-/* slots of theta_q24 / theta_ext (ecu/state.py) */
-enum {
-    ECU_AP21, ECU_AP22, ECU_LAM, ECU_TH1, ECU_TH2,
-    ECU_KX1, ECU_KX2, ECU_KR, ECU_KF1, ECU_KF2, ECU_PID_I, ECU_KB
-};
-
-/* modes (ecu/modes.py) */
-enum { ECU_OFF, ECU_ARMED, ECU_RUN, ECU_SHUTDOWN, ECU_FAULT };
-
-/* start/stop sequencer states (ecu/start_sequencer.py) */
-enum {
-    ECU_SEQ_OFF, ECU_SEQ_SPIN_UP, ECU_SEQ_IGNITION, ECU_SEQ_RAMP, ECU_SEQ_STABILISE, ECU_SEQ_RUN,
-    ECU_SEQ_SPOOL_DOWN, ECU_SEQ_COOL_DOWN, ECU_SEQ_DONE
-};
-
-/* start abort reasons (ecu/start_sequencer.py) */
-enum {
-    ECU_ABORT_NONE, ECU_ABORT_IGNITION_TIMEOUT, ECU_ABORT_SLOW_ACCEL, ECU_ABORT_STARTER_FAILURE,
-    ECU_ABORT_HOT_START, ECU_ABORT_FLAMEOUT, ECU_ABORT_STOPPED
-};
-
-/* controllers (ecu/params.py) */
-enum { ECU_CTRL_MRAC, ECU_CTRL_PID, ECU_CTRL_OPEN_LOOP, ECU_CTRL_PI };
-
-/* E2E receiver status per frame kind, as the CAN layer reports what arrived since last tick */
-enum {
-    ECU_E2E_OK,            /* a fresh, valid frame: its values are used */
-    ECU_E2E_REPEATED,      /* rejected frames: the values are not used */
-    ECU_E2E_WRONGSEQUENCE,
-    ECU_E2E_WRONGCRC,
-    ECU_E2E_NONEWDATA      /* nothing arrived */
-};
 
 /*
  * The four records, as X-macro lists (one list per record: the struct below, the Python
@@ -170,14 +147,14 @@ enum {
     X(pump_mv)        /* pump voltage aimed for, mV */ \
     X(pump_enable)    /* pump driver enable */ \
     X(mode)           /* ECU_OFF .. ECU_FAULT */ \
-    X(fault_word)     /* 16-bit fault word (ecu/faults.py) */ \
+    X(fault_word)     /* 16-bit fault word (ECU_FAULT_* bits, ecu/faults.py) */ \
     X(sat_events)     /* saturation events since power-on (saturating) */ \
     X(ap21_q24) X(ap22_q24) X(lambda_q24) X(theta21_q24) X(theta22_q24) \
     X(kx1_q24) X(kx2_q24) X(kr_q24) X(kf1_q24) X(kf2_q24) \
     X(pump_health_pm) /* Lambda-hat / commissioning Lambda, 0.1 % */ \
     X(nref_cpct)      /* reference-model speed, 0.01 %N */ \
     X(n_cpct)         /* speed used by the control, 0.01 %N */ \
-    X(owner)          /* loop owning the pump command (0 speed, 1 EGT, 2 accel, 3 N, 4 decel) */ \
+    X(owner)          /* loop owning the pump command (ECU_OWNER_*) */ \
     X(starter_cpct)   /* starter PWM duty, 0.01 % (0..10000) */ \
     X(igniter)        /* igniter power bit */ \
     X(seq_state)      /* start/stop sequencer state (ECU_SEQ_*) */ \

@@ -10,10 +10,10 @@
  * writes its values into the tick's inputs. Keep the "best" status per frame kind between ticks
  * (an OK since the last tick wins) and pass ECU_E2E_NONEWDATA for kinds that did not arrive.
  * Send: after ecu_tick, pack EcuActuator every tick, EcuStatus every 50 ms, EcuTelemetry
- * every tick (one of its 13 multiplexed values per frame, round robin) and EcuStarter every
- * tick in ARMED and SHUTDOWN (the start/stop sequencer's starter and igniter), each with the
- * next alive counter and its CRC. Scheduling and the CAN driver are the integrator's; ecu_node.h does
- * all of this as the ECU's CAN node (the twin of ecu/node.py).
+ * every tick (one of its ECU_TELEMETRY_COUNT multiplexed values per frame, round robin) and
+ * EcuStarter every tick in ARMED and SHUTDOWN (the start/stop sequencer's starter and igniter),
+ * each with the next alive counter and its CRC. Scheduling and the CAN driver are the
+ * integrator's; ecu_node.h does all of this as the ECU's CAN node (the twin of ecu/node.py).
  */
 #ifndef ECU_FRAMES_H
 #define ECU_FRAMES_H
@@ -26,14 +26,9 @@
 extern "C" {
 #endif
 
-#define ECU_FRAME_DEMAND 0x080u
-#define ECU_FRAME_SENSORS 0x100u
-#define ECU_FRAME_ANALOG 0x101u
-#define ECU_FRAME_ACTUATOR 0x110u
-#define ECU_FRAME_STARTER 0x111u
-#define ECU_FRAME_STATUS 0x200u
-#define ECU_FRAME_TELEMETRY 0x210u
-#define ECU_TELEMETRY_COUNT 13
+/* The frame IDs ECU_FRAME_DEMAND, _SENSORS, _ANALOG, _ACTUATOR, _STARTER, _STATUS, _TELEMETRY,
+   their E2E data IDs and ECU_TELEMETRY_COUNT come from the DBC with the core's constants
+   (generated/ecu_constants.h, included by ecu_core.h). */
 
 typedef struct {
     int8_t rx_last[3];       /* last accepted alive counter: sensors, analog, demand (-1: none) */

@@ -40,6 +40,26 @@ static uint32_t calibrate(void)
 }
 #endif
 
+/* the records field by field, in their X-macro order (the golden vectors' word order) */
+#define REPLAY_SET_X(name) r->name = w[k++];
+#define REPLAY_SET_A(name, n) for (j = 0; j < (n); j++) { r->name[j] = w[k++]; }
+#define REPLAY_GET_X(name) w[k++] = r->name;
+#define REPLAY_GET_A(name, n) for (j = 0; j < (n); j++) { w[k++] = r->name[j]; }
+
+static void inputs_from_words(ecu_inputs_t *r, const int32_t w[ECU_INPUT_WORDS])
+{
+    int j = 0, k = 0;
+    (void)j; /* for the arrays (none so far) */
+    ECU_INPUT_FIELDS(REPLAY_SET_X, REPLAY_SET_A)
+}
+
+static void outputs_to_words(const ecu_outputs_t *r, int32_t w[ECU_OUTPUT_WORDS])
+{
+    int j = 0, k = 0;
+    (void)j; /* for the arrays (none so far) */
+    ECU_OUTPUT_FIELDS(REPLAY_GET_X, REPLAY_GET_A)
+}
+
 static int read_words(FILE *f, int32_t *w, size_t n)
 {
     unsigned char b[4];
@@ -61,6 +81,7 @@ static int replay(FILE *f, const char *path)
     int32_t words[ECU_PARAM_WORDS];
     int32_t in_w[ECU_INPUT_WORDS];
     int32_t out_w[ECU_OUTPUT_WORDS + 1];
+    int32_t o[ECU_OUTPUT_WORDS];
     ecu_inputs_t in;
     int32_t t, n_ticks;
     int k, bad;
@@ -95,24 +116,23 @@ static int replay(FILE *f, const char *path)
     SYST_CSR = 5u; /* enabled, processor clock, no interrupt */
 #endif
     for (t = 0; t < n_ticks; t++) {
-        const int32_t *o;
+        const ecu_outputs_t *out;
         if (read_words(f, in_w, ECU_INPUT_WORDS) != 0 ||
             read_words(f, out_w, ECU_OUTPUT_WORDS + 1) != 0) {
             printf("%s: truncated at tick %ld\n", path, (long)t);
             return 2;
         }
-        for (k = 0; k < ECU_INPUT_WORDS; k++) {
-            ((int32_t *)(void *)&in)[k] = in_w[k];
-        }
+        inputs_from_words(&in, in_w);
 #ifdef REPLAY_SYSTICK
         {
             uint32_t t0 = SYST_CVR;
-            o = (const int32_t *)(const void *)ecu_tick(&ecu, &in);
+            out = ecu_tick(&ecu, &in);
             counts += systick_since(t0);
         }
 #else
-        o = (const int32_t *)(const void *)ecu_tick(&ecu, &in);
+        out = ecu_tick(&ecu, &in);
 #endif
+        outputs_to_words(out, o);
         for (k = 0; k < ECU_OUTPUT_WORDS; k++) {
             if (o[k] != out_w[k]) {
                 printf("MISMATCH tick %ld output word %d: python %ld, c %ld\n", (long)t, k,
