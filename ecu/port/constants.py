@@ -4,7 +4,8 @@ firmware and the CAN contract, written from their definitions (imported, never r
 - record sizes, theta slots, modes, sequencer states, abort reasons, controllers, E2E statuses,
   loop owners, fault bits and the firmware's scaling and limits: from the Python modules that
   define them (``ecu.state``, ``ecu.modes``, ``ecu.start_sequencer``, ``ecu.params``,
-  ``ecu.firmware``, ``ecu.limiters``, ``ecu.faults``, ``ecu.inlet``, ``ecu.pi_design``);
+  ``ecu.firmware``, ``ecu.limiters``, ``ecu.faults``, ``ecu.inlet``, ``ecu.pi_design``,
+  ``ecu.fixedpoint``);
 - frame IDs, E2E data IDs and the raw range of every signal the ECU packs: from the DBC,
   through :class:`protocol.codec.Codec` (which loads it with ``protocol.dbc.load_database``), so
   that the C frames saturate exactly where the Python codec does;
@@ -106,7 +107,7 @@ def _module_ints(module: ModuleType) -> dict[str, int]:
 def _python_sections() -> list[str]:
     from ecu import faults as F
     from ecu import firmware as FW
-    from ecu import inlet, limiters, modes, params, pi_design, state
+    from ecu import fixedpoint, inlet, limiters, modes, params, pi_design, state
     from ecu import start_sequencer as Q
     from protocol.e2e import E2EStatus
 
@@ -176,6 +177,11 @@ def _python_sections() -> list[str]:
         _define("ECU_SEEN_ALL", _c_int(FW.SEEN_ALL)),
         "",
         "/* scaling and limits */",
+        _define(
+            "ECU_ACC_EXT_BITS",
+            _c_int(fixedpoint.ACC_EXT_BITS),
+            "ecu.fixedpoint: split accumulator extension",
+        ),
         _define("ECU_RPM_PER_PCT", _c_int(FW.RPM_PER_PCT), "ecu.firmware: rpm per %N"),
         _define("ECU_AGE_MAX", _bits(FW.AGE_MAX), "ecu.firmware: frame ages saturate here"),
         _define(

@@ -75,7 +75,6 @@ ECU_STATIC_ASSERT(((int64_t)ECU_T_STD_CK << 48) / (ECU_INLET_MIN_DK * 10) < ((in
 
 /* ---- ecu/fixedpoint.py --------------------------------------------------------------------- */
 
-#define ACC_EXT_BITS 16 /* Q7.40 split accumulator: 16 bits below the Q7.24 word */
 #define ONE_Q24 ((int64_t)1 << 24)
 
 static int32_t sat32(ecu_t *e, int64_t x)
@@ -117,18 +116,19 @@ static int64_t mul_wide_shr(int64_t a, int32_t b, unsigned s)
     return (hi * b + ((lo * b) >> k)) >> (s - k);
 }
 
-/* split accumulator (hi, lo) = Q7.40 in two int32 words, plus a Q7.40 increment */
+/* split accumulator (hi, lo) = Q7.40 in two int32 words (ECU_ACC_EXT_BITS of the extension
+ * below the Q7.24 word), plus a Q7.40 increment */
 static void acc_q40(ecu_t *e, int32_t *hi, int32_t *lo, int64_t inc_q40)
 {
-    int64_t total = (int64_t)*hi * ((int64_t)1 << ACC_EXT_BITS) + *lo + inc_q40;
-    int64_t h = total >> ACC_EXT_BITS;
+    int64_t total = (int64_t)*hi * ((int64_t)1 << ECU_ACC_EXT_BITS) + *lo + inc_q40;
+    int64_t h = total >> ECU_ACC_EXT_BITS;
     if (h > INT32_MAX || h < INT32_MIN) {
         *hi = sat32(e, h);
         *lo = 0;
         return;
     }
     *hi = (int32_t)h;
-    *lo = (int32_t)(total & (((int64_t)1 << ACC_EXT_BITS) - 1));
+    *lo = (int32_t)(total & (((int64_t)1 << ECU_ACC_EXT_BITS) - 1));
 }
 
 static int32_t mul_q24(ecu_t *e, int32_t a, int32_t b)

@@ -9,7 +9,7 @@ import pytest
 
 from ecu import faults as F
 from ecu import firmware as FW
-from ecu import inlet, limiters, modes, params, pi_design, state
+from ecu import fixedpoint, inlet, limiters, modes, params, pi_design, state
 from ecu import start_sequencer as Q
 from ecu.node import TELEMETRY_COUNT, EcuNode
 from ecu.port import build, codegen, constants
@@ -47,6 +47,7 @@ def _python_values() -> dict[str, int]:
         "ECU_FAULT_TRIP": FW.TRIP_FAULT,
         "ECU_SEEN_ALL": FW.SEEN_ALL,
         "ECU_RPM_PER_PCT": FW.RPM_PER_PCT,
+        "ECU_ACC_EXT_BITS": fixedpoint.ACC_EXT_BITS,
         "ECU_AGE_MAX": FW.AGE_MAX,
         "ECU_EGT_ERROR_MAX_DK": params.EGT_ERROR_MAX_DK,
         "ECU_RATE_MAX_HZ": params.RATE_MAX_HZ,

@@ -122,6 +122,7 @@ enum {
 #define ECU_SEEN_ALL 3
 
 /* scaling and limits */
+#define ECU_ACC_EXT_BITS 16                      /* ecu.fixedpoint: split accumulator extension */
 #define ECU_RPM_PER_PCT 1125                     /* ecu.firmware: rpm per %N */
 #define ECU_AGE_MAX 0x40000000                   /* ecu.firmware: frame ages saturate here */
 #define ECU_EGT_ERROR_MAX_DK 1000                /* ecu.params: EGT loop error */
