@@ -1,6 +1,10 @@
 """Property: damaged scenario files and option values give exit 0, 1 or 2 and no traceback.
 
-The number of examples is ``SIL_ROBUSTNESS_EXAMPLES`` (default 200) for a longer run.
+Covered: damaged scenario, campaign and log files, run folders, bus specs, option values
+(`--speed`, `--workers`, `trim`, node options), fault values, and the trim point of an
+identification export (only a file the ECU loads is written). The number of examples is
+``SIL_ROBUSTNESS_EXAMPLES`` (default 200; the slow properties run a fraction of it) for a longer
+run.
 """
 
 from __future__ import annotations
@@ -9,11 +13,13 @@ import math
 import os
 from pathlib import Path
 
+import can
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sil import cli
+from sil.scenario import fault_targets
 
 EXAMPLES = int(os.environ.get("SIL_ROBUSTNESS_EXAMPLES", "200"))
 SETTINGS = settings(
@@ -91,12 +97,12 @@ def test_damaged_scenarios_are_refused_in_one_line(tmp_path: Path, capsys, data)
 
 @SETTINGS
 @given(speed=st.floats(allow_nan=True, allow_infinity=True))
-def test_replay_speed_must_be_positive_and_finite(tmp_path: Path, capsys, speed: float) -> None:
+def test_replay_speed_must_be_within_its_range(tmp_path: Path, capsys, speed: float) -> None:
     log = tmp_path / "can.log"
     log.write_text("(0.000000) vcan0 100#00\n")
     code, output = _main(["replay", str(log), "--dry-run", f"--speed={speed}"], capsys)
     assert "Traceback" not in output
-    if not math.isfinite(speed) or not 0 < speed <= 1000:
+    if not math.isfinite(speed) or not 0.001 <= speed <= 1000:
         assert code == 2
     else:
         assert code in (0, 1)
@@ -349,3 +355,215 @@ def test_trim_answers_inside_its_envelope_or_refuses(capsys, fuel: float, t0: fl
         assert state["fuel_kg_s"] / state["air_kg_s"] <= 0.068 + 1e-9
     else:
         assert len(output.strip().splitlines()) == 1
+
+
+def _split(output: str) -> list[str]:
+    return [line for line in output.strip().splitlines() if line]
+
+
+# -- bus specs -----------------------------------------------------------------------------------
+
+# every python-can interface but those that make files (slcan-device links a terminal at PATH)
+INTERFACES = sorted(
+    can.interfaces.VALID_INTERFACES | {"udp", "socketcan", "virtual", "nonsense", "KVASER", ""}
+)
+channels = st.text(alphabet="abcXYZ019_.:@-", max_size=16)
+
+
+@settings(max_examples=max(20, EXAMPLES // 2), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(interface=st.sampled_from(INTERFACES), channel=channels, sep=st.sampled_from([":", ""]))
+def test_any_bus_spec_opens_or_is_refused_in_one_line(
+    capsys, interface: str, channel: str, sep: str
+) -> None:
+    spec = f"{interface}{sep}{channel}"
+    code = _code(["selfcheck", f"--bus={spec}"])
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    assert code in (0, 2), captured.err
+    if code == 2:
+        assert len(_split(captured.err)) == 1 and captured.err.startswith("sil selfcheck: ")
+
+
+def _code(argv: list[str]) -> int:
+    try:
+        return cli.main(argv)
+    except SystemExit as exc:  # argparse's usage errors
+        return int(exc.code or 0)
+
+
+# -- campaign options and files ------------------------------------------------------------------
+
+CAMPAIGN = """name = "fuzz"
+base = "thesis-5.2-mrac-fast"
+duration_s = 2
+seed = 3
+samples = 2
+
+[sample]
+"plant.pump_gain" = { uniform = [0.9, 1.1] }
+"plant.speed_noise_rpm" = { normal = [20.0, 2.0] }
+"plant.egt_noise_K" = { choice = [0.5, 1.0] }
+
+[sweep]
+"controller.kind" = ["mrac", "pid"]
+
+[[variant]]
+name = "pump"
+[[variant.fault]]
+time_s = 1
+target = "PUMP_EFFECTIVENESS"
+value = 0.5
+
+[invariants]
+max_speed_pct = 102.0
+"""
+CAMPAIGN_NUMBERS = ("2", "3", "0.9", "1.1", "20.0", "2.0", "0.5", "1.0", "1", "102.0")
+odd_values = st.one_of(
+    st.sampled_from(["nan", "inf", "-inf", "1e308", "-1e308", "1.7e308", "1e39", "0", "-1"]),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(-(10**20), 10**20).map(str),
+)
+
+
+def _damaged_campaign(data: st.DataObject) -> tuple[str, str]:
+    """The campaign with one of its numbers replaced; the value put in."""
+    import re
+
+    spots = [m.span() for m in re.finditer(r"(?<![\w.])-?\d+(\.\d+)?(?![\w.])", CAMPAIGN)]
+    start, end = data.draw(st.sampled_from(spots))
+    value = data.draw(odd_values)
+    return CAMPAIGN[:start] + value + CAMPAIGN[end:], value
+
+
+def _all_finite(value: object) -> bool:
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, dict):
+        return all(_all_finite(v) for v in value.values())
+    if isinstance(value, list):
+        return all(_all_finite(v) for v in value)
+    return True
+
+
+@settings(max_examples=EXAMPLES, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(data=st.data())
+def test_campaign_files_with_odd_numbers_load_or_are_refused(tmp_path: Path, data) -> None:
+    import tomllib
+
+    from sil.campaign.spec import CampaignError, load
+
+    text, value = _damaged_campaign(data)
+    path = tmp_path / "campaign.toml"
+    path.write_text(text)
+    try:
+        campaign = load(path)
+    except CampaignError as exc:
+        assert str(exc).startswith(str(path)) and "\n" not in str(exc)
+        return
+    assert value.lstrip("-") not in ("nan", "inf"), f"{value} was accepted"
+    for case in campaign.cases:  # every case a scenario with finite numbers only
+        assert _all_finite(tomllib.loads(case.scenario_toml))
+
+
+@settings(max_examples=max(20, EXAMPLES // 2), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(workers=st.integers(-5, 10**6))
+def test_campaign_workers_are_capped(tmp_path: Path, capsys, workers: int) -> None:
+    import os
+
+    path = tmp_path / "campaign.toml"
+    path.write_text(CAMPAIGN.replace('base = "thesis-5.2-mrac-fast"', 'base = "no-such"'))
+    code = _code(["campaign", str(path), "--workers", str(workers), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(_split(err)) == 1 and "Traceback" not in err
+    if 1 <= workers <= 4 * (os.cpu_count() or 1):
+        assert "field 'base'" in err  # the file's error: the workers were accepted
+    else:
+        assert "--workers: expected a number in 1.." in err
+
+
+# -- fault values --------------------------------------------------------------------------------
+
+fault_values = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, 0.1, 0.5, 1.0, 1.5, 100.0, 180.0, 340.0, 2147.483647, 2147.4837, 1e39]),
+)
+
+
+@settings(max_examples=EXAMPLES, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(
+    target=st.sampled_from(fault_targets()),
+    value=fault_values,
+    model=st.sampled_from(["aero", "fast"]),
+)
+def test_fault_values_pass_only_within_the_plant_and_frame_ranges(
+    tmp_path: Path, capsys, target: str, value: float, model: str
+) -> None:
+    from plant.faults import ENGINE_FAULTS, FAULT_TARGETS
+    from sil.scenario import fault_value_range
+
+    path = tmp_path / "s.toml"
+    text = VALID.replace('model = "aero"', f'model = "{model}"')
+    path.write_text(text + f"[[fault]]\ntime_s = 0.5\ntarget = '{target}'\nvalue = {value!r}\n")
+    code = _code(["scenarios", "--check", str(path)])
+    captured = capsys.readouterr()
+    lo, hi, _ = fault_value_range(target)
+    code_of_target = fault_targets().index(target)
+    lacks = model == "fast" and FAULT_TARGETS.get(code_of_target) in ENGINE_FAULTS
+    expected = 0 if math.isfinite(value) and lo <= value <= hi and not lacks else 2
+    assert code == expected, captured.err
+    if code == 2:
+        assert len(_split(captured.err)) == 1 and f"{path}: field 'fault[0]." in captured.err
+
+
+# -- identify --export ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def engine_trace(tmp_path_factory) -> Path:
+    """60 s of the document's fast model (eq. 3.24) answering a square wave, at 100 Hz."""
+    import numpy as np
+
+    from plant.fast_model import FastEngine
+
+    engine, rows = FastEngine(), []
+    for k in range(6000):
+        volts = 5.0 + (1.0 if (k // 1000) % 2 == 0 else -1.0)
+        rows.append(f"{0.01 * k:.2f},{engine.n_pct!r},{volts!r}")
+        engine.step(volts - 5.0, 0.01)
+    path = tmp_path_factory.mktemp("identify") / "trace.csv"
+    path.write_text("time,speed_meas,PumpVoltageTarget\n" + "\n".join(rows) + "\n")
+    assert np.isfinite(engine.n_pct)
+    return path
+
+
+trims = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([89.68, 60.0, 52.0, 30.0, -5.0, 0.0, 110.0, 5.0, -12.0, 20.0, 25.0, 1.0]),
+)
+
+
+@settings(max_examples=max(10, EXAMPLES // 20), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(trim_n=trims, trim_v=trims)
+def test_identify_exports_only_what_the_ecu_loads(
+    engine_trace: Path, tmp_path: Path, capsys, trim_n: float, trim_v: float
+) -> None:
+    import json
+
+    from sil.identify import commissioning_refusal
+
+    export = tmp_path / "commission.json"
+    export.unlink(missing_ok=True)
+    argv = ["identify", str(engine_trace), f"--trim-n={trim_n}", f"--trim-v={trim_v}"]
+    code = _code([*argv, "--window", "51", "--export", str(export)])
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    assert code in (0, 1, 2), captured.err
+    if code == 0:
+        assert commissioning_refusal(json.loads(export.read_text())) is None
+    else:
+        assert not export.exists()  # nothing half-written, nothing the ECU would refuse
