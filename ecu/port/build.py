@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -184,6 +185,57 @@ def arm_objects() -> dict[str, Path]:
     _require_arm_cc()
     flags = (*WARNINGS, *ARM_FLAGS, "-c")
     return {s: _compile(ARM_CC, flags, (s,), Path(s).stem + ".o") for s in CORE_SOURCES}
+
+
+# the code of the flash target: the control core, the frame codec and E2E; its public functions
+# (declared in FLASH_HEADERS) are what firmware calls
+FLASH_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c")
+FLASH_HEADERS = ("ecu_core.h", "ecu_frames.h")
+
+
+def public_functions(header: str) -> tuple[str, ...]:
+    """The functions a header of the port declares, in order (its ``ecu_*`` prototypes)."""
+    text = re.sub(r"/\*.*?\*/", "", (PORT_DIR / header).read_text(), flags=re.S)
+    return tuple(re.findall(r"^[a-z][\w \t*]*?\b(ecu_\w+)\s*\(", text, re.M))
+
+
+def arm_flash_image() -> Path:
+    """The control core, the frame codec and E2E as firmware links them, for their flash figure:
+    the Cortex-M4 objects of FLASH_SOURCES (``arm_objects``: a section per function and per
+    object) linked with -Wl,--gc-sections, libgcc and newlib-nano, with the public functions of
+    FLASH_HEADERS as the only references from outside (-Wl,--undefined). It holds what those
+    functions need and nothing else: the generated per-signal helpers no code calls are dropped,
+    as from any image linked with --gc-sections. Not for running (no vector table, no start-up
+    code). The linker's map lies next to it (``.map``): where each byte comes from."""
+    objects = arm_objects()
+    roots = tuple(name for header in FLASH_HEADERS for name in public_functions(header))
+    flags = (
+        *ARM_FLAGS,
+        "-nostartfiles",
+        "--specs=nano.specs",
+        "-Wl,--gc-sections",
+        f"-Wl,--entry={roots[0]}",
+        *(f"-Wl,--undefined={name}" for name in roots),
+    )
+    paths = [objects[s] for s in FLASH_SOURCES]
+    h = hashlib.sha256(" ".join((ARM_CC, *flags)).encode())
+    for path in paths:
+        h.update(path.read_bytes())
+    out = BUILD_DIR / h.hexdigest()[:16] / "ecu-flash.elf"
+    if out.exists():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".ecu-flash.")
+    os.close(fd)
+    cmd = [ARM_CC, *flags, *map(str, paths), "-lc", "-lgcc", f"-Wl,-Map={tmp}.map", "-o", tmp]
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        Path(tmp).unlink(missing_ok=True)
+        Path(f"{tmp}.map").unlink(missing_ok=True)
+        raise PortBuildError(f"{' '.join(cmd)} failed:\n{proc.stderr.strip()}")
+    os.replace(f"{tmp}.map", out.with_suffix(".map"))
+    os.replace(tmp, out)  # last: the image stands for both
+    return out
 
 
 def main() -> int:

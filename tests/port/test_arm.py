@@ -1,6 +1,8 @@
 """The Cortex-M4 build (arm-none-eabi-gcc -mcpu=cortex-m4 -mthumb -Os) replays the golden
 vectors under qemu-system-arm (mps2-an386, semihosting), and its figures meet the targets."""
 
+import subprocess
+
 import pytest
 
 from ecu.port import build, qemu
@@ -31,9 +33,30 @@ def test_cortex_m4_reports_a_difference(elf, vectors, tmp_path):
     assert done.returncode != 0 and "state digest" in done.stdout
 
 
+def test_flash_image_holds_the_public_functions_and_only_what_they_need(toolchains):
+    """The flash figure's image: every public function of the core and the frame codec, the
+    generated code they call, none of the generated helpers nobody calls; its bytes add up by
+    origin."""
+    image = build.arm_flash_image()
+    symbols = subprocess.run(
+        ["arm-none-eabi-nm", str(image)], capture_output=True, text=True, check=True
+    ).stdout.split()
+    roots = [*build.public_functions("ecu_core.h"), *build.public_functions("ecu_frames.h")]
+    assert {"ecu_params_load", "ecu_init", "ecu_tick", "ecu_state_digest"} <= set(roots)
+    assert {"ecu_frames_receive", "ecu_frames_telemetry", "ecu_e2e_crc"} <= set(roots)
+    assert set(roots) <= set(symbols)
+    assert "turbojet_ecu_telemetry_pack" in symbols
+    assert not [s for s in symbols if s.endswith("_is_in_phys_range")]
+    parts = bench.linked_bytes(image)
+    assert set(parts) <= {"ecu_core.o", "ecu_frames.o", "turbojet.o", "libgcc", "libc", "fill"}
+    assert sum(parts.values()) == sum(bench._size(image)[:2])
+
+
 def test_flash_ram_and_instructions_per_tick_meet_the_targets(elf, vectors):
     figures = bench.arm_figures(elf)
-    assert figures["cm4_core_flash_bytes"] + figures["cm4_frames_flash_bytes"] <= 16 * 1024
+    flash = figures["cm4_flash_bytes"]
+    assert flash == figures["cm4_core_flash_bytes"] + figures["cm4_frames_flash_bytes"]
+    assert flash <= 16 * 1024
     assert 0 < figures["cm4_ram_bytes"] <= 2 * 1024
     path, g = vectors["mrac-aero"]
     host = bench.callgrind_instructions(build.host_replayer(), path, g.ticks)
