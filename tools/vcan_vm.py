@@ -25,7 +25,6 @@ import io
 import os
 import re
 import shlex
-import shutil
 import signal
 import subprocess
 import sys
@@ -36,6 +35,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 from typing import NoReturn
+
+from protocol import debian_packages
+from protocol.debian_packages import tail as _tail
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_PYTHON = ROOT / ".venv" / "bin" / "python"
@@ -91,63 +93,16 @@ def _log(message: str) -> None:
     print(f"vcan_vm: {message}", file=sys.stderr, flush=True)
 
 
-def _tail(text: str, count: int = 3) -> str:
-    """The last `count` non-empty lines of `text` on one line."""
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    return " | ".join(lines[-count:]) if lines else "(no output)"
-
-
-def _missing_debian_packages() -> list[str]:
-    if shutil.which("dpkg-query") is None:
-        raise VcanVmError("dpkg-query not found: this tool needs a Debian-based host")
-    query = subprocess.run(
-        ["dpkg-query", "-W", "-f=${Package} ${db:Status-Status}\n", *DEBIAN_PACKAGES],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    installed = {
-        name
-        for name, _, status in (line.partition(" ") for line in query.stdout.splitlines())
-        if status == "installed"
-    }
-    return [name for name in DEBIAN_PACKAGES if name not in installed]
-
-
-def _apt_get(*args: str) -> None:
+def _install_debian_packages() -> None:
     # INITRD=No: the kernel's hook skips building an initramfs (about 50 s), which virtme-ng,
     # building its own, never reads.
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive", "INITRD": "No"}
-    done = subprocess.run(
-        ["apt-get", "-q", "-o", "DPkg::Lock::Timeout=300", *args],
-        capture_output=True,
-        text=True,
-        env=env,
-        check=False,
+    debian_packages.ensure(
+        DEBIAN_PACKAGES,
+        log=_log,
+        error=VcanVmError,
+        no_dpkg="dpkg-query not found: this tool needs a Debian-based host",
+        env={"INITRD": "No"},
     )
-    if done.returncode != 0:
-        raise VcanVmError(
-            f"apt-get {args[0]} failed (exit {done.returncode}): {_tail(done.stderr)}"
-        )
-
-
-def _install_debian_packages() -> None:
-    missing = _missing_debian_packages()
-    if not missing:
-        return
-    if os.geteuid() != 0:
-        raise VcanVmError(
-            f"Debian packages missing and not root to install them: {' '.join(missing)}"
-            f" (run: sudo apt-get install --no-install-recommends {' '.join(missing)})"
-        )
-    _log(f"installing Debian packages: {' '.join(missing)}")
-    started = time.monotonic()
-    _apt_get("update")
-    _apt_get("install", "-y", "--no-install-recommends", *missing)
-    still_missing = _missing_debian_packages()
-    if still_missing:
-        raise VcanVmError(f"Debian packages still missing after apt-get: {' '.join(still_missing)}")
-    _log(f"installed Debian packages in {time.monotonic() - started:.0f} s")
 
 
 def _installed_virtme_ng() -> str | None:
