@@ -26,7 +26,7 @@ NONE = 2
 SOURCE_NAMES = ("CAN", "BENCH", "NONE")
 
 
-def _cpct(x_q24: int) -> int:
+def cpct(x_q24: int) -> int:
     """Q7.24 %N -> 0.01 %N per count, rounded."""
     return (x_q24 * 100 + (1 << 23)) >> 24
 
@@ -36,8 +36,8 @@ class BenchDemand:
 
     def __init__(self, p: FirmwareParams) -> None:
         self.hold_ticks = p.demand_hold_ticks
-        self.idle_cpct = _cpct(p.idle_q24)
-        self.max_cpct = _cpct(p.demand_max_q24)
+        self.idle_cpct = cpct(p.idle_q24)
+        self.max_cpct = cpct(p.demand_max_q24)
         self.engaged = False
         self.throttle_cpct = self.idle_cpct
         self.arm = 0

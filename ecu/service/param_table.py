@@ -12,6 +12,7 @@ apply from the next tick. This is configuration-time code (floats), outside the 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import msgpack
@@ -198,21 +199,33 @@ class ParamTable:
 
     def check_write(self, name: str, raw: int, running: bool) -> tuple[EcuParams, FirmwareParams]:
         """The set with ``name`` written, compiled; :class:`WriteRefused` says why not."""
-        spec = self.spec(name)
-        if not spec.raw_lo <= raw <= spec.raw_hi:
-            raise WriteRefused(
-                "OUT_OF_RANGE",
-                f"{name}={spec.to_value(raw):g} {spec.unit}: outside its limits "
-                f"[{spec.lo:g}, {spec.hi:g}]",
-            )
-        if running and not spec.run_safe:
-            raise WriteRefused("REFUSED_IN_RUN", f"{name}: unsafe to change while in RUN")
-        params = _with(self.params, spec, spec.to_value(raw))
+        return self.check_writes(((name, raw),), running)
+
+    def check_writes(
+        self, writes: Sequence[tuple[str, int]], running: bool
+    ) -> tuple[EcuParams, FirmwareParams]:
+        """The set with every (name, raw) of ``writes`` written (each in its limits, none unsafe
+        in RUN while ``running``), checked and compiled once as a whole (so that a table may be
+        written whole although one of its points alone would make it fall); :class:`WriteRefused`
+        says why not, naming the first parameter refused."""
+        params = self.params
+        for name, raw in writes:
+            spec = self.spec(name)
+            if not spec.raw_lo <= raw <= spec.raw_hi:
+                raise WriteRefused(
+                    "OUT_OF_RANGE",
+                    f"{name}={spec.to_value(raw):g} {spec.unit}: outside its limits "
+                    f"[{spec.lo:g}, {spec.hi:g}]",
+                )
+            if running and not spec.run_safe:
+                raise WriteRefused("REFUSED_IN_RUN", f"{name}: unsafe to change while in RUN")
+            params = _with(params, spec, spec.to_value(raw))
         try:
             return params, compile_params(params)
         except (ValueError, ArithmeticError) as exc:
+            names = ", ".join(name for name, _ in writes)
             raise WriteRefused(
-                "INVALID", f"{name}: refused by the parameter checks: {exc}"
+                "INVALID", f"{names}: refused by the parameter checks: {exc}"
             ) from None
 
     def commit(self, params: EcuParams, firmware: FirmwareParams) -> None:
@@ -221,6 +234,11 @@ class ParamTable:
         self._raws = {spec.name: spec.to_raw(_value(params, spec)) for spec in TABLE}
         self._image = msgpack.packb(self._raws)
         self._crc = crc16(self._image)
+        self.version = getattr(self, "version", -1) + 1  # counts the sets committed
+
+    def raws(self) -> list[int]:
+        """Every parameter's raw value, in table order."""
+        return list(self._raws.values())
 
     def image(self) -> bytes:
         """The set as stored in flash: msgpack of {name: raw} in table order."""

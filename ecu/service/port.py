@@ -39,6 +39,7 @@ from ecu.params import EcuParams
 from ecu.service import bench_demand as BD
 from ecu.service import fault_log as FL
 from ecu.service import live
+from ecu.service.bench_control import BenchControl, BenchRefused
 from ecu.service.framing import FrameDecoder, encode_frame
 from ecu.service.message import (
     VERSION,
@@ -93,6 +94,7 @@ class Boot:
     slot: int | None = None
     sequence: int | None = None
     problems: list[str] = field(default_factory=list)
+    saving: object | None = None  # who is saving the set to flash (one save at a time)
 
 
 def boot(params: EcuParams, flash_path: Path | None) -> Boot:
@@ -170,7 +172,6 @@ class ServicePort:
         self._stream_seq = 0
         self._seed: int | None = None
         self._session_until = -1  # poll count until which the session is unlocked
-        self._stop_held = False
         self._writer: SlotWriter | None = None
         self._save_request: Message | None = None
         self._last_request: tuple[int, int] | None = None  # (sequence, service) last handled
@@ -192,7 +193,9 @@ class ServicePort:
             Service.STOP: self._stop,
             Service.THROTTLE: self._throttle,
         }
-        self.bench = BD.BenchDemand(ecu.p)
+        # the bench demand source (arm, throttle, stop), shared with an XCP slave on the node
+        self.bench_control = BenchControl(ecu, self._log_source)
+        self.bench = self.bench_control.demand
         snapshot = self._snapshot()
         if boot_state.state == "defaults":
             self.fault_log.record(0, FL.PARAMS_DEFAULTS, snapshot)
@@ -221,14 +224,7 @@ class ServicePort:
             if self._handle(self._pending.popleft()) == Service.PARAM_WRITE:
                 break  # a write recompiles the parameters: the only one this tick
         ecu = self.ecu
-        ticked = inputs
-        if ticking:
-            ticked, switched = self.bench.step(inputs, ecu.out.mode, ecu.s.rearm_wait)
-            if switched is not None:
-                self._log_source(switched)
-        if self._stop_held and not self.bench.engaged:
-            inputs.stop = 1
-            ecu.s.stop = 1
+        ticked = self.bench_control.step(inputs, ticking)
         self.fault_log.update(ecu.s.ticks, ecu.out.fault_word, self._snapshot(), ecu.out.seq_reason)
         if ticking and self._stream_every and c.polls % self._stream_every == 0:
             self._send_stream()
@@ -430,12 +426,13 @@ class ServicePort:
         self._need_session("saving the parameters")
         if self.boot.flash is None:
             raise ServiceError(Status.STORAGE, "no flash image (start the ECU with --flash FILE)")
-        if self._writer is not None:
+        if self._writer is not None or self.boot.saving is not None:
             raise ServiceError(Status.BUSY, "a save is in progress")
         try:
             self._writer = self.boot.flash.writer(self.table.image())
         except OSError as exc:
             raise ServiceError(Status.STORAGE, f"flash image unreadable: {exc}") from None
+        self.boot.saving = self
         self._save_request = msg  # answered when the last flash operation is done
 
     def _flash_step(self) -> None:
@@ -445,7 +442,7 @@ class ServicePort:
             done = self._writer.step()
         except OSError as exc:
             self._refuse(self._save_request, Status.STORAGE, f"flash write failed: {exc}")
-            self._writer = self._save_request = None
+            self._writer = self._save_request = self.boot.saving = None
             return
         if not done:
             return
@@ -453,8 +450,7 @@ class ServicePort:
         self.boot.state, self.boot.slot, self.boot.sequence = "loaded", slot.index, slot.sequence
         body = {"slot": slot.index, "sequence": slot.sequence, "param_crc": self.table.crc()}
         self._respond(self._save_request, Status.OK, body)
-        self._writer = None
-        self._save_request = None
+        self._writer = self._save_request = self.boot.saving = None
 
     def _fault_log_read(self, msg: Message) -> dict:
         start = _arg(msg.body, "start", int, 0)
@@ -486,51 +482,26 @@ class ServicePort:
         self._session_until = self.counters.polls + round(SESSION_S * self.rate_hz)
         return {"unlocked": True, "timeout_s": SESSION_S}
 
-    def _take_demand(self, what: str) -> None:
-        """Make the bench the demand source for ``what`` (refused while a CAN Demand is)."""
-        bench = self.bench
-        if bench.can_present:
-            raise ServiceError(
-                Status.REFUSED,
-                f"{what}: CAN Demand frames are the demand source (they win while present)",
-            )
-        if bench.engage(self.ecu.out.mode, (self.ecu.s.demand_q24 * 100 + (1 << 23)) >> 24):
-            self._log_source(BD.BENCH)
-
     def _arm(self, msg: Message) -> dict:
         self._need_session("arming")
-        o = self.ecu.out
-        if o.mode == M.FAULT:
-            raise ServiceError(Status.REFUSED, "arm: latched FAULT (power-cycle the ECU)")
-        if o.mode == M.SHUTDOWN:
-            raise ServiceError(Status.REFUSED, "arm: the engine is stopping and cooling down")
-        if not o.inputs_valid:
-            raise ServiceError(
-                Status.REFUSED,
-                "arm: no valid speed and EGT readings yet (is the engine's node on the bus?)",
-            )
-        self._stop_held = False
-        if not self.bench.can_present:  # else the CAN Demand's arm applies, the stop released
-            self._take_demand("arm")
-            self.bench.arm = 1
-            self.bench.stop = 0
-        return {"mode": o.mode, "source": BD.SOURCE_NAMES[self.bench.source]}
+        try:
+            self.bench_control.arm()
+        except BenchRefused as exc:
+            raise ServiceError(Status[exc.reason], str(exc)) from None
+        return {"mode": self.ecu.out.mode, "source": self.bench_control.source_name}
 
     def _stop(self, msg: Message) -> dict:
-        self._stop_held = True
-        self.bench.arm = 0
-        self.bench.stop = 1
+        self.bench_control.stop()
         return {"mode": self.ecu.out.mode}
 
     def _throttle(self, msg: Message) -> dict:
         pct = _arg(msg.body, "pct", (int, float))
         self._need_session("the throttle")
-        top = self.bench.max_cpct / 100
-        if not 0 <= pct <= top:
-            raise ServiceError(Status.OUT_OF_RANGE, f"pct={pct}: 0 (idle) .. {top:g} %N")
-        self._take_demand("throttle")
-        self.bench.set_throttle(round(pct * 100))
+        try:
+            self.bench_control.throttle(pct)
+        except BenchRefused as exc:
+            raise ServiceError(Status[exc.reason], str(exc)) from None
         return {
             "demand_pct": self.bench.throttle_cpct / 100,
-            "source": BD.SOURCE_NAMES[self.bench.source],
+            "source": self.bench_control.source_name,
         }

@@ -1,0 +1,266 @@
+"""The ECU's memory as an XCP master sees it: fixed addresses, little-endian, byte granular.
+
+- calibration, 0x20000000: every parameter of the service port's table
+  (:data:`ecu.service.param_table.TABLE`) in table order, one int32 raw Q integer each (the
+  fuel schedules' tables are consecutive: arrays); read, and written through the parameter
+  checks;
+- measurement, 0x20010000: the firmware's state after its last tick (:data:`MEASUREMENTS`), one
+  int32 each; read only;
+- bench, 0x20020000: the bench's arm, stop and throttle (:data:`BENCH`), one int32 each; a read
+  gives the bench's state, a write is the bench command;
+- axis points, 0x08000000: the fuel schedules' breakpoints, %N corrected (Q7.24); read only;
+- text, 0x08001000: the identification, the A2L's name and the event channels' names (ASCII);
+  read only.
+
+A parameter's address is ``CAL_BASE + 4 * index``, a measurement's ``MEAS_BASE + 4 * index``;
+new entries are only ever appended, so addresses stay where they are. The regions are what an
+A2L describes (:mod:`ecu.xcp.a2l` writes it from these same tables). Reads are served from a
+buffer per region: the calibration image is rebuilt when the parameter set changes, the
+measurement image once per tick at most (when something reads it), so a read costs a slice.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ecu import modes as M
+from ecu import start_sequencer as Q
+from ecu.firmware import Ecu
+from ecu.params import SCHED_N0_PCT, SCHED_POINTS, SCHED_STEP_PCT
+from ecu.service import bench_demand as BD
+from ecu.service.bench_control import BenchControl
+from ecu.service.param_table import TABLE, ParamTable
+
+WORD = 4
+CAL_BASE = 0x2000_0000
+MEAS_BASE = 0x2001_0000
+BENCH_BASE = 0x2002_0000
+AXIS_BASE = 0x0800_0000
+TEXT_BASE = 0x0800_1000
+Q24 = 1.0 / (1 << 24)
+
+OWNER_NAMES = ("SPEED", "EGT_LIMIT", "ACCEL_LIMIT", "OVERSPEED_LIMIT", "DECEL_FLOOR")
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One int32 of the measurement region: physical value = raw * factor, in ``unit``;
+    ``lo``..``hi`` its physical range; ``values`` names the raw codes of an enumeration."""
+
+    name: str
+    description: str
+    unit: str
+    factor: float
+    lo: float
+    hi: float
+    values: tuple[str, ...] = ()
+
+
+def _m(name: str, description: str, unit: str, factor: float, lo: float, hi: float,
+       values: tuple[str, ...] = ()) -> Measurement:  # fmt: skip
+    return Measurement(name, description, unit, factor, lo, hi, values)
+
+
+I32 = 2147483647.0
+MEASUREMENTS: tuple[Measurement, ...] = (
+    _m("ticks", "ticks run since power-up", "", 1.0, 0, I32),
+    _m("mode", "ECU mode", "", 1.0, 0, 4, M.NAMES),
+    _m("fault_word", "fault word (ecu.faults)", "", 1.0, 0, 65535),
+    _m("speed", "shaft speed used by the control (measured or substituted)", "%", 0.01, 0, 150),
+    _m("speed_rpm", "shaft speed as read", "rpm", 1.0, 0, 150000),
+    _m("speed_ref", "reference-model speed", "%", 0.01, 0, 150),
+    _m("speed_rate", "speed rate (central difference or observer)", "%/s", Q24, -128, 128),
+    _m("egt", "EGT as read", "K", 0.1, 0, 1638.3),
+    _m(
+        "egt_gas",
+        "gas temperature estimate (EGT lead; 0: no reading yet)",
+        "K",
+        0.1 / 4096,
+        0,
+        5000,
+    ),  # fmt: skip
+    _m("pump_voltage", "pump voltage command", "V", 0.001, -30, 30),
+    _m("pump_duty", "pump PWM duty", "%", 0.01, 0, 100),
+    _m("pump_enable", "pump driver enable", "", 1.0, 0, 1),
+    _m("supply", "supply voltage", "V", 0.001, 0, 65.535),
+    _m("pump_current", "pump current", "A", 0.001, 0, 65.535),
+    _m("pump_health", "pump health (Lambda-hat / commissioned)", "%", 0.1, 0, 1000),
+    _m("owner", "loop owning the pump command", "", 1.0, 0, 4, OWNER_NAMES),
+    _m("seq_state", "start/stop sequencer step", "", 1.0, 0, 8, Q.NAMES),
+    _m("seq_reason", "last start's abort reason", "", 1.0, 0, 6, Q.REASONS),
+    _m("seq_time", "time in the sequencer's step", "s", 0.001, 0, I32 / 1000),
+    _m("starter", "starter PWM duty", "%", 0.01, 0, 100),
+    _m("igniter", "igniter on", "", 1.0, 0, 1),
+    _m("ap21", "estimate A_p21", "1/s2", Q24, -128, 128),
+    _m("ap22", "estimate A_p22", "1/s", Q24, -128, 128),
+    _m("lambda", "estimate Lambda", "%/(V s2)", Q24, -128, 128),
+    _m("theta21", "estimate Theta_f21", "", Q24, -128, 128),
+    _m("theta22", "estimate Theta_f22", "", Q24, -128, 128),
+    _m("kx1", "MRAC gain K_x1", "V/%", Q24, -128, 128),
+    _m("kx2", "MRAC gain K_x2", "V s/%", Q24, -128, 128),
+    _m("kr", "MRAC gain K_r", "V/%", Q24, -128, 128),
+    _m("kf1", "MRAC gain K_f1", "", Q24, -128, 128),
+    _m("kf2", "MRAC gain K_f2", "", Q24, -128, 128),
+    _m("obs_speed_dev", "fast-model observer: speed deviation from trim", "%", Q24, -128, 128),
+    _m("obs_speed_rate", "fast-model observer: speed rate", "%/s", Q24, -128, 128),
+    _m("sat_events", "saturations since power-up", "", 1.0, 0, I32),
+    _m("inputs_valid", "valid speed and EGT readings since power-up", "", 1.0, 0, 1),
+    _m("demand", "speed demand in force", "%", Q24, -128, 128),
+    _m("demand_source", "demand source", "", 1.0, 0, 2, BD.SOURCE_NAMES),
+    _m("egt_start_target", "the start's EGT target on the day", "K", 0.1, 0, 5000),
+)
+MEAS_INDEX = {m.name: k for k, m in enumerate(MEASUREMENTS)}
+_MEAS = struct.Struct(f"<{len(MEASUREMENTS)}i")
+
+
+def measure(ecu: Ecu, demand_source: int) -> tuple[int, ...]:
+    """The measurement region's values after the ECU's last tick, in :data:`MEASUREMENTS`
+    order."""
+    o = ecu.out
+    s = ecu.s
+    return (
+        s.ticks, o.mode, o.fault_word, o.n_cpct, s.speed_rpm, o.nref_cpct, ecu.t.rate, s.egt_dk,
+        s.egt_lead_q12, o.pump_mv, o.duty_cpct, o.pump_enable, s.supply_mv, s.pump_ma,
+        o.pump_health_pm, o.owner, o.seq_state, o.seq_reason,
+        s.seq_timer * 1000 // ecu.p.rate_hz, o.starter_cpct, o.igniter,
+        o.ap21_q24, o.ap22_q24, o.lambda_q24, o.theta21_q24, o.theta22_q24,
+        o.kx1_q24, o.kx2_q24, o.kr_q24, o.kf1_q24, o.kf2_q24, s.obs_n_q24, s.obs_v_q24,
+        o.sat_events, o.inputs_valid, s.demand_q24, demand_source, s.seq_target_dk,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class BenchWord:
+    name: str
+    description: str
+    unit: str
+    factor: float
+    lo: float
+    hi: float
+
+
+# the bench region: what a read gives, what a write does
+BENCH: tuple[BenchWord, ...] = (
+    BenchWord("bench_arm", "read: the bench's arm; write 1: arm (start the engine)", "", 1.0, 0, 1),
+    BenchWord("bench_stop", "read: a stop held; write 1: stop (always accepted)", "", 1.0, 0, 1),
+    BenchWord("bench_throttle", "read: the bench's speed demand; write: the throttle (0: idle)",
+              "%", 0.01, 0, 120),
+)  # fmt: skip
+BENCH_ARM, BENCH_STOP, BENCH_THROTTLE = range(3)
+
+# the fuel schedules' breakpoints: %N corrected, Q7.24
+AXIS_NAME = "sched_speed_axis"
+AXIS = tuple(round((SCHED_N0_PCT + k * SCHED_STEP_PCT) * (1 << 24)) for k in range(SCHED_POINTS))
+
+
+@dataclass
+class Region:
+    """``size`` bytes from ``base``: ``image()`` gives them as they are now."""
+
+    name: str
+    base: int
+    size: int
+    writable: bool
+    image: Callable[[], bytes | bytearray]
+
+    @property
+    def end(self) -> int:
+        return self.base + self.size
+
+
+class Texts:
+    """Read-only ASCII texts, one after the other from TEXT_BASE; each found by its key."""
+
+    def __init__(self, texts: dict[str, str]) -> None:
+        self.data = bytearray()
+        self.at: dict[str, tuple[int, int]] = {}  # key -> (address, length)
+        for key, text in texts.items():
+            raw = text.encode("ascii")
+            self.at[key] = (TEXT_BASE + len(self.data), len(raw))
+            self.data += raw
+
+
+class MemoryMap:
+    """The regions of one ECU (its firmware, parameter table and bench)."""
+
+    def __init__(
+        self, ecu: Ecu, table: ParamTable, bench: BenchControl, texts: dict[str, str]
+    ) -> None:
+        self.ecu = ecu
+        self.table = table
+        self.bench = bench
+        self.texts = Texts(texts)
+        self._cal = bytearray(WORD * len(TABLE))
+        self._cal_version = -1
+        self._meas = bytearray(_MEAS.size)
+        self._meas_tick = -1
+        self._bench = bytearray(WORD * len(BENCH))
+        axis = struct.pack(f"<{len(AXIS)}i", *AXIS)
+        text = bytes(self.texts.data)
+        self.calibration = Region("calibration", CAL_BASE, len(self._cal), True, self._cal_image)
+        self.measurement = Region(
+            "measurement", MEAS_BASE, len(self._meas), False, self._meas_image
+        )
+        self.bench_region = Region("bench", BENCH_BASE, len(self._bench), True, self._bench_image)
+        self.regions = (
+            Region("axis points", AXIS_BASE, len(axis), False, lambda: axis),
+            Region("text", TEXT_BASE, len(text), False, lambda: text),
+            self.calibration,
+            self.measurement,
+            self.bench_region,
+        )
+
+    def locate(self, address: int, size: int) -> Region | None:
+        """The region holding all of ``address`` .. ``address + size`` (None: none does)."""
+        for region in self.regions:
+            if region.base <= address and address + size <= region.end:
+                return region
+        return None
+
+    def read(self, address: int, size: int) -> bytes | None:
+        region = self.locate(address, size)
+        if region is None:
+            return None
+        start = address - region.base
+        return bytes(region.image()[start : start + size])
+
+    def _cal_image(self) -> bytearray:
+        table = self.table
+        if table.version != self._cal_version:
+            struct.pack_into(f"<{len(TABLE)}i", self._cal, 0, *table.raws())
+            self._cal_version = table.version
+        return self._cal
+
+    def _meas_image(self) -> bytearray:
+        """The measurements of the last tick, packed once per tick."""
+        ticks = self.ecu.s.ticks
+        if ticks != self._meas_tick:
+            _MEAS.pack_into(self._meas, 0, *measure(self.ecu, self.bench.source))
+            self._meas_tick = ticks
+        return self._meas
+
+    def invalidate(self) -> None:
+        """Measurements changed outside a tick (the bench's demand source): repack them."""
+        self._meas_tick = -1
+
+    def _bench_image(self) -> bytearray:
+        d = self.bench.demand
+        struct.pack_into(
+            "<3i", self._bench, 0, d.arm if d.engaged else 0, int(self.bench.stop_held),
+            d.throttle_cpct,
+        )  # fmt: skip
+        return self._bench
+
+
+def parameter_address(index: int) -> int:
+    return CAL_BASE + WORD * index
+
+
+def measurement_address(index: int) -> int:
+    return MEAS_BASE + WORD * index
+
+
+def bench_address(index: int) -> int:
+    return BENCH_BASE + WORD * index

@@ -1,0 +1,97 @@
+"""An ECU with its XCP slave, all in this process: frames go in, ticks run, frames come out."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import pytest
+
+from ecu.firmware import E2E_NONEWDATA, E2E_OK, Ecu, EcuInputs
+from ecu.params import EcuParams
+from ecu.service.port import boot
+from ecu.xcp import codes as C
+from ecu.xcp.seed_key import key_for
+from ecu.xcp.slave import XcpSlave
+
+
+class SlaveRig:
+    """``request(*bytes)`` serves one command at a tick boundary and returns what the slave
+    sent; ``tick()`` runs the firmware (and the DAQ sampling after it)."""
+
+    def __init__(self, params: EcuParams | None = None, flash: Path | None = None) -> None:
+        self.boot = boot(params or EcuParams(), flash)
+        self.ecu = Ecu(self.boot.table.firmware)
+        self.slave = XcpSlave(self.ecu, self.boot, seed=3)
+        self.sent: list[bytes] = []
+        self.i = EcuInputs()
+        self.i.sensor_status = self.i.analog_status = self.i.demand_status = E2E_NONEWDATA
+
+    def send(self, data: bytes) -> None:
+        self.sent.append(bytes(data))
+
+    def serve(self) -> list[bytes]:
+        self.sent = []
+        self.slave.serve(self.send)
+        return self.sent
+
+    def request(self, *frame: int | bytes) -> bytes:
+        """One command; its single answer (or b'' when none came)."""
+        data = b"".join(bytes((x,)) if isinstance(x, int) else x for x in frame)
+        self.slave.receive(data)
+        out = self.serve()
+        assert len(out) <= 1, out
+        return out[0] if out else b""
+
+    def tick(self, n: int = 1) -> list[bytes]:
+        dtos: list[bytes] = []
+        for _ in range(n):
+            self.sent = []
+            self.slave.serve(self.send)
+            self.ecu.tick(self.slave.inputs(self.i))
+            self.slave.sample(self.send)
+            dtos += self.sent
+        return dtos
+
+    def connect(self) -> bytes:
+        return self.request(C.Cmd.CONNECT, 0)
+
+    def unlock(self, resource: int) -> bytes:
+        seed = self.request(C.Cmd.GET_SEED, 0, resource)
+        assert seed[0] == C.PID_RES and seed[1] == 4
+        key = key_for(seed[2:6])
+        return self.request(C.Cmd.UNLOCK, len(key), key)
+
+    def short_upload(self, address: int, size: int) -> bytes:
+        return self.request(C.Cmd.SHORT_UPLOAD, size, 0, 0, struct.pack("<I", address))
+
+    def set_mta(self, address: int) -> bytes:
+        return self.request(C.Cmd.SET_MTA, 0, 0, 0, struct.pack("<I", address))
+
+    def download(self, address: int, data: bytes) -> bytes:
+        assert self.set_mta(address) == b"\xff"
+        return self.request(C.Cmd.DOWNLOAD, len(data), data)
+
+    def engine_running(self) -> None:
+        """Inputs of a running engine with a fresh demand and arm: the ECU warm-starts to RUN."""
+        i = self.i
+        i.sensor_status = i.analog_status = i.demand_status = E2E_OK
+        i.speed_rpm, i.egt_dk, i.supply_mv, i.pump_ma = 100_890, 10_480, 22_200, 1_500
+        i.demand_cpct, i.arm, i.stop = 8_968, 1, 0
+
+    def at_rest(self) -> None:
+        """Sensor and analog frames of a still, cold engine; no Demand frames."""
+        i = self.i
+        i.sensor_status = i.analog_status = E2E_OK
+        i.demand_status = E2E_NONEWDATA
+        i.speed_rpm, i.egt_dk, i.supply_mv, i.pump_ma = 0, 2_900, 22_200, 0
+
+
+@pytest.fixture
+def rig() -> SlaveRig:
+    return SlaveRig()
+
+
+@pytest.fixture
+def rig_factory():
+    return SlaveRig
