@@ -212,6 +212,7 @@ class _CountingText:
         self._crlf: bool | None = None  # the file's lines end with CR LF (its first line's do)
         self._half_end = False  # the last line read ends with CR where the others have CR LF
         self.unterminated = False  # the last line read has no end of line
+        self.read: list[tuple[int, str]] | None = None  # when a list: (number, text) of each line
 
     def __iter__(self) -> _CountingText:
         return self
@@ -230,6 +231,8 @@ class _CountingText:
             return line
         self.line += 1
         self.unterminated = not line.endswith(("\n", "\r"))
+        if self.read is not None:
+            self.read.append((self.line, line.strip()))
         if not self._require_eol:
             self.last = line.strip() or self.last
             return line
@@ -250,18 +253,60 @@ class _CountingText:
 _ASC_END = "end triggerblock"
 
 
-class _TRCReader(can.TRCReader):
-    """python-can's TRC reader, but a line it cannot parse is an error, not a line dropped. PEAK's
-    own tools end a file without an end of line, so a last line without one must be a whole
-    record: a record cut short lacks its last columns (or some data bytes, which
-    :func:`_check_length` finds), and a line of a type python-can skips is no record."""
+# the TRC record types that carry a frame (PEAK's format: data, CAN FD, remote; Rx and Tx in
+# versions 1.1 and 1.3); python-can reads these and skips the others (status, error, event)
+_TRC_FRAME_TYPES = frozenset({"DT", "FD", "FB", "FE", "BI", "RR", "Rx", "Tx"})
 
-    def _parse_line(self, line: str) -> can.Message | None:
+
+class _BadLine(ValueError):
+    """A line found bad after later lines were read: ``line`` is its number."""
+
+    def __init__(self, line: int, reason: str) -> None:
+        super().__init__(reason)
+        self.line = line
+
+
+def _trc_skipped(reader: can.TRCReader, text: str) -> bool:
+    """A whole TRC line that holds no frame, as python-can skips it: a comment, or a record of
+    another type (version 1.0, which has no type column: its bus information line)."""
+    if not text or text.startswith(";"):
+        return True
+    cols = text.split()
+    version = reader.file_version.name
+    if version in ("V2_0", "V2_1"):
+        index = reader.columns.get("T")
+    else:
+        index = {"V1_1": 2, "V1_3": 3}.get(version)
+    if index is None:
+        return version not in ("V2_0", "V2_1") and len(cols) > 2 and cols[2] == "FFFFFFFF"
+    return len(cols) > index and cols[index] not in _TRC_FRAME_TYPES
+
+
+def _trc_frames(f: _CountingText) -> Iterator[can.Message]:
+    """python-can's TRC reader, but a line it cannot parse is an error, not a line dropped (it
+    drops, with a logged warning, a record with a column missing). PEAK's own tools end a file
+    without an end of line, so a last line without one must be a whole record: a record cut
+    short lacks its last columns (or some data bytes, which :func:`_check_length` finds), and a
+    line of a type python-can skips is no record. The reader takes one line for each record,
+    so every line read before a frame's own, since the last frame, must be one it skips."""
+    f.read = read = []
+    reader = can.TRCReader(f)
+    frames = iter(reader)
+    while True:
         try:
-            return self._parse_cols(tuple(line.split(maxsplit=self._num_columns)))
-        except (IndexError, ValueError) as exc:
-            what = "a column missing" if isinstance(exc, IndexError) else str(exc)
-            raise ValueError(f"not a whole TRC record ({what}): {line[:60]!r}") from None
+            message = next(frames, None)
+        except ValueError as exc:
+            text = read[-1][1] if read else ""
+            if _trc_skipped(reader, text):
+                raise
+            raise ValueError(f"not a whole TRC record ({exc}): {text[:60]!r}") from None
+        for number, text in read if message is None else read[:-1]:
+            if not _trc_skipped(reader, text):
+                raise _BadLine(number, f"not a whole TRC record (a column missing): {text[:60]!r}")
+        read.clear()
+        if message is None:
+            return
+        yield message
 
 
 def _candump_frames(f: _CountingText):
@@ -380,8 +425,10 @@ class LogReader:
         try:
             if fmt == "candump":
                 frames = _candump_frames(counted)
+            elif fmt == "trc":
+                frames = _trc_frames(counted)
             else:
-                reader = {"asc": can.ASCReader, "trc": _TRCReader, "csv": can.CSVReader}[fmt]
+                reader = {"asc": can.ASCReader, "csv": can.CSVReader}[fmt]
                 frames = iter(reader(counted))
             frame_line = 0  # the line of the last frame
             check = fmt != "candump"  # (a candump frame's DLC is its data's length)
@@ -399,7 +446,8 @@ class LogReader:
             reason = str(exc) or type(exc).__name__
             if isinstance(exc, EOFError):
                 reason = f"truncated gzip data: {reason}"
-            raise self._error(f"line {counted.line}", reason) from None
+            line = exc.line if isinstance(exc, _BadLine) else counted.line
+            raise self._error(f"line {line}", reason) from None
         finally:
             text.close()
 

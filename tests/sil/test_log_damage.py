@@ -193,3 +193,23 @@ def test_a_frame_of_ours_with_a_wrong_length_is_reported_as_such(tmp_path, fmt):
     ident = _sil("identify", str(path))
     assert ident.returncode == 2
     assert ident.stderr.startswith(f"sil identify: {path}: {where.group(1)}: {WRONG}")
+
+
+def test_a_trc_record_with_a_column_missing_mid_file_is_an_error_other_types_are_skipped(tmp_path):
+    """python-can drops a TRC record it cannot parse (a warning in its log); here it is an
+    error at its line, after the frames before it. A status record (a type python-can skips)
+    holds no frame and is no error."""
+    lines = _write(tmp_path / "full.trc", "trc", _messages(6)).read_text().splitlines(True)
+    first = next(i for i, ln in enumerate(lines) if not ln.startswith(";"))
+    status = "      9      1000.000 ST  1     Rx    00 00 00 04\n"
+    skipped = tmp_path / "status.trc"
+    skipped.write_text("".join([*lines[: first + 2], status, *lines[first + 2 :]]))
+    assert len(list(read_frames(skipped))) == 6
+    cut = tmp_path / "cut.trc"
+    cut.write_text(
+        "".join([*lines[: first + 2], lines[first + 2][:24] + "\n", *lines[first + 3 :]])
+    )
+    got, error = _read_until_error(cut)
+    assert len(got) == error.frames_read == 2
+    assert error.position == f"line {first + 3}", str(error)
+    assert "not a whole TRC record (a column missing)" in error.reason
