@@ -13,11 +13,18 @@ and igniter), then EcuActuator last, following :mod:`protocol.lockstep`:
 - real time: one tick per period of the node's own clock (``on_period``), with whatever frames
   arrived in between; ActuatorTick counts the node's own ticks.
 
+An XCP slave (:mod:`ecu.xcp.slave`, :meth:`EcuNode.attach_xcp`) takes the master's command
+frames as they come and is served at the tick boundary, before the firmware's tick (its
+answers go out first); its DAQ lists are sampled after the tick and their DTOs go out before
+the tick's own frames. In lockstep the engine frames are then those of a node without a master.
+Before the first sensor frame (no tick runs yet) it is served as the frames come.
+
 The node reuses its buffers: nothing it keeps grows per frame or per tick.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ecu import modes as M
@@ -30,6 +37,7 @@ from protocol.node import SendFn
 
 if TYPE_CHECKING:
     from ecu.service.port import ServicePort
+    from ecu.xcp.slave import XcpSlave
 
 _TELEMETRY_FIELDS = (
     "ap21_q24", "ap22_q24", "lambda_q24", "theta21_q24", "theta22_q24",
@@ -111,6 +119,22 @@ class EcuNode:
         self.finished = False
         # the service port (ecu.service.port.ServicePort), polled before each tick, or None
         self.service: ServicePort | None = None
+        self.xcp: XcpSlave | None = None  # the XCP slave (attach_xcp), or None
+        self._xcp_send: Callable[[bytes], None] | None = None
+        self._xcp_send_for: SendFn | None = None
+
+    def attach_xcp(self, slave: XcpSlave) -> None:
+        """Put an XCP slave on the node: its command frames are heard from now on."""
+        self.xcp = slave
+        self.frame_ids = (*self.frame_ids, slave.cmd_id)
+
+    def _xcp_sender(self, send: SendFn) -> Callable[[bytes], None]:
+        """``send`` for the XCP slave's packets, on its response ID (made once per driver)."""
+        if self._xcp_send is None or self._xcp_send_for is not send:
+            res_id = self.xcp.res_id  # type: ignore[union-attr]
+            self._xcp_send = lambda data: send(res_id, data)
+            self._xcp_send_for = send
+        return self._xcp_send
 
     # -- frames in ---------------------------------------------------------------------------
     def start(self, send: SendFn) -> None:
@@ -161,6 +185,10 @@ class EcuNode:
                 i.demand_status = status
             if self.waiting and not self._demand_due():
                 self._run_tick(send)
+        elif self.xcp is not None and frame_id == self.xcp.cmd_id:
+            self.xcp.receive(data)
+            if self.lockstep and not self.sensor_seen:  # no tick yet: served as it comes
+                self.xcp.serve(self._xcp_sender(send))
 
     def _hold_demand(self, data: bytes | bytearray) -> None:
         """Keep a valid Demand until its DemandTick (at once when unticked). Two are held, so
@@ -192,8 +220,10 @@ class EcuNode:
     @property
     def timeout_s(self) -> float | None:
         """Lockstep silence before ``on_timeout`` (None: the driver's guard). Before the first
-        sensor frame a node with a service port polls it every SERVICE_IDLE_POLL_S."""
-        if self._timeout_s is None and self.service is not None and not self.sensor_seen:
+        sensor frame a node with a service port or an XCP slave polls it every
+        SERVICE_IDLE_POLL_S."""
+        idle = self.service is not None or self.xcp is not None
+        if self._timeout_s is None and idle and not self.sensor_seen:
             return SERVICE_IDLE_POLL_S
         return self._timeout_s
 
@@ -214,8 +244,11 @@ class EcuNode:
             self.timeout_s = 1.0 / self.rate_hz
             self.tick = (self.tick + 1) % TICK_MODULO
             self._run_tick(send)
-        elif self.service is not None:
-            self.service.poll(self.i, ticking=False)
+        else:
+            if self.service is not None:
+                self.service.poll(self.i, ticking=False)
+            if self.xcp is not None:
+                self.xcp.serve(self._xcp_sender(send))
 
     def on_period(self, send: SendFn) -> None:
         """Real time: one tick per period of the node's own clock."""
@@ -250,8 +283,19 @@ class EcuNode:
         if self.demand_pending:
             self._apply_demand()
         i.tick = self.tick
-        # the service port may be the demand source (a bench): it gives the inputs to take
-        o = self.ecu.tick(i if self.service is None else self.service.poll(i))
+        xcp = self.xcp
+        if xcp is not None:
+            xcp.serve(self._xcp_sender(send))  # the master's requests, at the tick boundary
+        # the service port (or else the XCP slave) may be the demand source (a bench): it
+        # gives the inputs to take
+        if self.service is not None:
+            o = self.ecu.tick(self.service.poll(i))
+        elif xcp is not None:
+            o = self.ecu.tick(xcp.inputs(i))
+        else:
+            o = self.ecu.tick(i)
+        if xcp is not None:
+            xcp.sample(self._xcp_sender(send))  # the DAQ lists of this tick's events
         i.sensor_status = i.analog_status = i.demand_status = E2E_NONEWDATA
         k = self.ticks
         if k % self.every_status == 0:

@@ -1,6 +1,7 @@
 """A struct-based codec for the hot path, generated from the DBC at start-up.
 
-Every message of ``turbojet.dbc`` becomes a :class:`MessageCodec` holding its signal layout (start
+Every message of ``turbojet.dbc`` (but the XCP transport's, whose payload is a raw XCP packet:
+:func:`protocol.dbc.is_xcp`) becomes a :class:`MessageCodec` holding its signal layout (start
 bit, length, sign, scale, offset and range, all read from the DBC) and a preallocated 8-byte
 transmit buffer. Packing writes into that buffer, sets the alive counter and the E2E CRC, and
 returns a bitmask of the signals that were out of range: they are saturated to the DBC range,
@@ -26,7 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocol.dbc import DBC_PATH, ContractError, load_database, message_attribute
+from protocol.dbc import DBC_PATH, ContractError, is_xcp, load_database, message_attribute
 from protocol.e2e import COUNTER_MODULO, E2EChecker, crc8, data_id_crc_start
 from protocol.packers import PackFn, UnpackFn, mux_packer, mux_unpacker, packer, unpacker
 
@@ -213,7 +214,7 @@ class Codec:
 
     def __init__(self, dbc_path: str | Path = DBC_PATH) -> None:
         self.database = load_database(dbc_path)
-        self.messages = tuple(MessageCodec(m) for m in self.database.messages)
+        self.messages = tuple(MessageCodec(m) for m in self.database.messages if not is_xcp(m))
         self.by_name = {m.name: m for m in self.messages}
         self.by_id = {m.frame_id: m for m in self.messages}
 

@@ -38,3 +38,20 @@ def message_attribute(message, name: str, default: int | str = 0) -> int | str:
         return attrs[name].value
     definitions = message.dbc.attribute_definitions if message.dbc is not None else {}
     return definitions[name].default_value if name in definitions else default
+
+
+def is_xcp(message) -> bool:
+    """A message of the XCP transport (attribute ``Transport`` = XCP): raw XCP packets, not
+    signals of the contract; the codec leaves them out."""
+    return message_attribute(message, "Transport", "None") in (1, "XCP")
+
+
+def xcp_frame_ids(db: Database | None = None) -> tuple[int, int]:
+    """The XCP identifiers the DBC gives: (master to ECU, ECU to master)."""
+    db = db or load_database()
+    messages = [m for m in db.messages if is_xcp(m)]
+    to_ecu = [m.frame_id for m in messages if "ECU" not in m.senders]
+    from_ecu = [m.frame_id for m in messages if "ECU" in m.senders]
+    if len(to_ecu) != 1 or len(from_ecu) != 1:
+        raise ContractError("the DBC needs one XCP message to the ECU and one from it")
+    return to_ecu[0], from_ecu[0]

@@ -97,8 +97,41 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="emulated flash image holding the stored parameter set (created when missing)",
     )
+    parser.add_argument(
+        "--xcp-ids",
+        type=_xcp_ids,
+        metavar="MASTER,ECU",
+        help="the XCP slave's CAN IDs, master to ECU and ECU to master (default: the DBC's "
+        "XcpCommand and XcpResponse, 0x700,0x701); --impl python",
+    )
+    parser.add_argument(
+        "--no-xcp", action="store_true", help="no XCP slave (default: one, with --impl python)"
+    )
     add_launcher_options(parser)
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
+
+
+def _xcp_ids(text: str) -> tuple[int, int]:
+    """MASTER,ECU: two standard CAN IDs (hex with 0x, or decimal), distinct, of no other
+    message of the contract."""
+    from protocol.dbc import is_xcp, load_database
+
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        ids = tuple(int(part.strip(), 0) for part in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected two CAN IDs MASTER,ECU (e.g. 0x700,0x701)"
+        ) from None
+    if not all(0 <= i <= 0x7FF for i in ids) or ids[0] == ids[1]:
+        raise argparse.ArgumentTypeError(f"{text!r}: two different standard IDs, 0..0x7FF")
+    taken = {m.frame_id: m.name for m in load_database().messages if not is_xcp(m)}
+    for i in ids:
+        if i in taken:
+            raise argparse.ArgumentTypeError(f"{text!r}: 0x{i:03X} is {taken[i]}'s ID")
+    return ids[0], ids[1]
 
 
 def _param(text: str) -> tuple[str, float]:
@@ -135,6 +168,11 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
+    xcp_on = args.impl == "python" and not args.no_xcp
+    if args.xcp_ids is not None and not xcp_on:
+        print("sil ecu: --xcp-ids: the XCP slave runs with --impl python (and no --no-xcp)",
+              file=sys.stderr)  # fmt: skip
+        return 2
     if args.controller:
         overrides["controller"] = args.controller
     if args.rate:
@@ -146,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
         if args.commission:
             params = commissioning.apply(params, commissioning.load(args.commission))
         booted = None
-        if args.serial or args.flash:  # the stored set, if any, over the preset and overrides
+        if args.serial or args.flash or xcp_on:
+            # the stored set, if any, over the preset and overrides
             from ecu.service.port import boot
 
             booted = boot(params, args.flash)
@@ -183,6 +222,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"sil ecu: {exc}", file=sys.stderr)
             return 2
         print(f"service port: {node.service.transport.name}", file=sys.stderr, flush=True)
+    if xcp_on and booted is not None:
+        _attach_xcp(node, booted, args)
     try:
         bus = RunBus(open_bus(args.bus), args.run_tag)
     except (BusSpecError, ValueError) as exc:
@@ -215,7 +256,30 @@ def run(args: argparse.Namespace) -> int:
     }
     if node.service is not None:
         summary["service"] = node.service.summary()
+    if node.xcp is not None:
+        summary["xcp"] = node.xcp.summary()
     return _report(summary, args)
+
+
+def _attach_xcp(node, booted, args: argparse.Namespace) -> None:  # noqa: ANN001
+    """The XCP slave on the node: on the DBC's IDs or --xcp-ids, sharing the service port's
+    bench when there is one; in real time its clock is the wall clock since start-up."""
+    import time
+
+    from ecu.xcp.slave import XcpSlave
+    from protocol.dbc import xcp_frame_ids
+
+    ids = args.xcp_ids or xcp_frame_ids()
+    clock_us = None
+    if args.mode == "realtime":
+        start_ns = time.monotonic_ns()
+
+        def clock_us() -> int:
+            return (time.monotonic_ns() - start_ns) // 1000
+
+    bench = node.service.bench_control if node.service is not None else None
+    node.attach_xcp(XcpSlave(node.ecu, booted, bench, ids=ids, clock_us=clock_us))
+    print(f"xcp: CAN IDs 0x{ids[0]:03X} (master) 0x{ids[1]:03X} (ECU)", file=sys.stderr, flush=True)
 
 
 def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)

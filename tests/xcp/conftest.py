@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import random
 import struct
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -95,3 +100,22 @@ def rig() -> SlaveRig:
 @pytest.fixture
 def rig_factory():
     return SlaveRig
+
+
+def _sil(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
+
+
+@pytest.fixture(scope="session")
+def sil():
+    """``sil(*args, timeout=...)``: the `sil` command in a process of its own, output kept."""
+    return _sil
+
+
+@pytest.fixture
+def udp_group() -> tuple[str, int]:
+    """A loopback multicast group and port no other test uses."""
+    rng = random.Random(os.getpid() ^ time.time_ns())
+    return f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", rng.randrange(20000, 60000)

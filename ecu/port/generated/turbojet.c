@@ -57,6 +57,14 @@ static inline uint8_t pack_left_shift_u32(
     return (uint8_t)((uint8_t)(value << shift) & mask);
 }
 
+static inline uint8_t pack_left_shift_u64(
+    uint64_t value,
+    uint8_t shift,
+    uint8_t mask)
+{
+    return (uint8_t)((uint8_t)(value << shift) & mask);
+}
+
 static inline uint8_t pack_right_shift_u16(
     uint16_t value,
     uint8_t shift,
@@ -67,6 +75,14 @@ static inline uint8_t pack_right_shift_u16(
 
 static inline uint8_t pack_right_shift_u32(
     uint32_t value,
+    uint8_t shift,
+    uint8_t mask)
+{
+    return (uint8_t)((uint8_t)(value >> shift) & mask);
+}
+
+static inline uint8_t pack_right_shift_u64(
+    uint64_t value,
     uint8_t shift,
     uint8_t mask)
 {
@@ -87,6 +103,14 @@ static inline uint32_t unpack_left_shift_u32(
     uint8_t mask)
 {
     return (uint32_t)((uint32_t)(value & mask) << shift);
+}
+
+static inline uint64_t unpack_left_shift_u64(
+    uint8_t value,
+    uint8_t shift,
+    uint8_t mask)
+{
+    return (uint64_t)((uint64_t)(value & mask) << shift);
 }
 
 static inline uint8_t unpack_right_shift_u8(
@@ -111,6 +135,14 @@ static inline uint32_t unpack_right_shift_u32(
     uint8_t mask)
 {
     return (uint32_t)((uint32_t)(value & mask) >> shift);
+}
+
+static inline uint64_t unpack_right_shift_u64(
+    uint8_t value,
+    uint8_t shift,
+    uint8_t mask)
+{
+    return (uint64_t)((uint64_t)(value & mask) >> shift);
 }
 
 int turbojet_demand_unpack(
@@ -1115,4 +1147,90 @@ bool turbojet_sim_run_run_tick_is_in_range(uint32_t value)
 bool turbojet_sim_run_run_tick_is_in_phys_range(double value)
 {
     return ((value >= 0.0) && (value <= 4294967295.0));
+}
+
+int turbojet_xcp_command_unpack(
+    struct turbojet_xcp_command_t *dst_p,
+    const uint8_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    dst_p->xcp_command_packet = unpack_right_shift_u64(src_p[0], 0u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[1], 8u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[2], 16u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[3], 24u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[4], 32u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[5], 40u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[6], 48u, 0xffu);
+    dst_p->xcp_command_packet |= unpack_left_shift_u64(src_p[7], 56u, 0xffu);
+
+    return (0);
+}
+
+int turbojet_xcp_command_init(struct turbojet_xcp_command_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct turbojet_xcp_command_t));
+
+    return 0;
+}
+
+bool turbojet_xcp_command_xcp_command_packet_is_in_range(uint64_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool turbojet_xcp_command_xcp_command_packet_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 1.8446744073709552e+19));
+}
+
+int turbojet_xcp_response_pack(
+    uint8_t *dst_p,
+    const struct turbojet_xcp_response_t *src_p,
+    size_t size)
+{
+    if (size < 8u) {
+        return (-EINVAL);
+    }
+
+    memset(&dst_p[0], 0, 8);
+
+    dst_p[0] |= pack_left_shift_u64(src_p->xcp_response_packet, 0u, 0xffu);
+    dst_p[1] |= pack_right_shift_u64(src_p->xcp_response_packet, 8u, 0xffu);
+    dst_p[2] |= pack_right_shift_u64(src_p->xcp_response_packet, 16u, 0xffu);
+    dst_p[3] |= pack_right_shift_u64(src_p->xcp_response_packet, 24u, 0xffu);
+    dst_p[4] |= pack_right_shift_u64(src_p->xcp_response_packet, 32u, 0xffu);
+    dst_p[5] |= pack_right_shift_u64(src_p->xcp_response_packet, 40u, 0xffu);
+    dst_p[6] |= pack_right_shift_u64(src_p->xcp_response_packet, 48u, 0xffu);
+    dst_p[7] |= pack_right_shift_u64(src_p->xcp_response_packet, 56u, 0xffu);
+
+    return (8);
+}
+
+int turbojet_xcp_response_init(struct turbojet_xcp_response_t *msg_p)
+{
+    if (msg_p == NULL) return -1;
+
+    memset(msg_p, 0, sizeof(struct turbojet_xcp_response_t));
+
+    return 0;
+}
+
+bool turbojet_xcp_response_xcp_response_packet_is_in_range(uint64_t value)
+{
+    (void)value;
+
+    return (true);
+}
+
+bool turbojet_xcp_response_xcp_response_packet_is_in_phys_range(double value)
+{
+    return ((value >= 0.0) && (value <= 1.8446744073709552e+19));
 }

@@ -53,6 +53,8 @@ extern "C" {
 #define TURBOJET_ECU_STATUS_FRAME_ID (0x200u)
 #define TURBOJET_ECU_TELEMETRY_FRAME_ID (0x210u)
 #define TURBOJET_SIM_RUN_FRAME_ID (0x7f0u)
+#define TURBOJET_XCP_COMMAND_FRAME_ID (0x700u)
+#define TURBOJET_XCP_RESPONSE_FRAME_ID (0x701u)
 
 /* Frame lengths in bytes. */
 #define TURBOJET_DEMAND_LENGTH (8u)
@@ -63,6 +65,8 @@ extern "C" {
 #define TURBOJET_ECU_STATUS_LENGTH (8u)
 #define TURBOJET_ECU_TELEMETRY_LENGTH (8u)
 #define TURBOJET_SIM_RUN_LENGTH (8u)
+#define TURBOJET_XCP_COMMAND_LENGTH (8u)
+#define TURBOJET_XCP_RESPONSE_LENGTH (8u)
 
 /* Extended or standard frame types. */
 #define TURBOJET_DEMAND_IS_EXTENDED (0)
@@ -73,6 +77,8 @@ extern "C" {
 #define TURBOJET_ECU_STATUS_IS_EXTENDED (0)
 #define TURBOJET_ECU_TELEMETRY_IS_EXTENDED (0)
 #define TURBOJET_SIM_RUN_IS_EXTENDED (0)
+#define TURBOJET_XCP_COMMAND_IS_EXTENDED (0)
+#define TURBOJET_XCP_RESPONSE_IS_EXTENDED (0)
 
 /* Frame cycle times in milliseconds. */
 #define TURBOJET_DEMAND_CYCLE_TIME_MS (50u)
@@ -130,6 +136,8 @@ extern "C" {
 #define TURBOJET_ECU_STATUS_NAME "EcuStatus"
 #define TURBOJET_ECU_TELEMETRY_NAME "EcuTelemetry"
 #define TURBOJET_SIM_RUN_NAME "SimRun"
+#define TURBOJET_XCP_COMMAND_NAME "XcpCommand"
+#define TURBOJET_XCP_RESPONSE_NAME "XcpResponse"
 
 /* Signal Names. */
 #define TURBOJET_DEMAND_DEMAND_CRC_NAME "Demand_CRC"
@@ -189,6 +197,8 @@ extern "C" {
 #define TURBOJET_ECU_TELEMETRY_SATURATION_COUNT_NAME "SaturationCount"
 #define TURBOJET_SIM_RUN_RUN_ID_NAME "RunId"
 #define TURBOJET_SIM_RUN_RUN_TICK_NAME "RunTick"
+#define TURBOJET_XCP_COMMAND_XCP_COMMAND_PACKET_NAME "XcpCommandPacket"
+#define TURBOJET_XCP_RESPONSE_XCP_RESPONSE_PACKET_NAME "XcpResponsePacket"
 
 /**
  * Signals in message Demand.
@@ -661,6 +671,38 @@ struct turbojet_sim_run_t {
      * Offset: 0
      */
     uint32_t run_tick;
+};
+
+/**
+ * Signals in message XcpCommand.
+ *
+ * XCP on CAN (ASAM MCD-1 XCP 1.x), master to ECU: CMD packets, 1 to 8 bytes; the packet is the raw payload (docs/calibration.md). Default ID; the ECU takes others (sil ecu --xcp-ids).
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct turbojet_xcp_command_t {
+    /**
+     * Range: 0..18446744073709551615 (0..18446744073709551615 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint64_t xcp_command_packet;
+};
+
+/**
+ * Signals in message XcpResponse.
+ *
+ * XCP on CAN, ECU to master: RES, ERR, EV and DAQ packets, 1 to 8 bytes; the packet is the raw payload.
+ *
+ * All signal values are as on the CAN bus.
+ */
+struct turbojet_xcp_response_t {
+    /**
+     * Range: 0..18446744073709551615 (0..18446744073709551615 -)
+     * Scale: 1
+     * Offset: 0
+     */
+    uint64_t xcp_response_packet;
 };
 
 /**
@@ -2100,6 +2142,96 @@ bool turbojet_sim_run_run_tick_is_in_range(uint32_t value);
  * @return true if in range, false otherwise.
  */
 bool turbojet_sim_run_run_tick_is_in_phys_range(double value);
+
+/**
+ * Unpack message XcpCommand.
+ *
+ * @param[out] dst_p Object to unpack the message into.
+ * @param[in] src_p Message to unpack.
+ * @param[in] size Size of src_p.
+ *
+ * @return zero(0) or negative error code.
+ */
+int turbojet_xcp_command_unpack(
+    struct turbojet_xcp_command_t *dst_p,
+    const uint8_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from XcpCommand.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int turbojet_xcp_command_init(struct turbojet_xcp_command_t *msg_p);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_xcp_command_xcp_command_packet_is_in_range(uint64_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_xcp_command_xcp_command_packet_is_in_phys_range(double value);
+
+/**
+ * Pack message XcpResponse.
+ *
+ * @param[out] dst_p Buffer to pack the message into.
+ * @param[in] src_p Data to pack.
+ * @param[in] size Size of dst_p.
+ *
+ * @return Size of packed data, or negative error code.
+ */
+int turbojet_xcp_response_pack(
+    uint8_t *dst_p,
+    const struct turbojet_xcp_response_t *src_p,
+    size_t size);
+
+/**
+ * Init message fields to default values from XcpResponse.
+ *
+ * @param[in] msg_p Message to init.
+ *
+ * @return zero(0) on success or (-1) in case of nullptr argument.
+ */
+int turbojet_xcp_response_init(struct turbojet_xcp_response_t *msg_p);
+
+/**
+ * Check that given signal is in allowed range.
+ *
+ * @param[in] value Signal to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_xcp_response_xcp_response_packet_is_in_range(uint64_t value);
+
+/**
+ * Check that given physical value is in allowed range before encoding.
+ *
+ * Use this BEFORE calling _encode() to avoid silent integer overflow:
+ *   encode(-1.0) on a [0,100] signal wraps to 255 and passes is_in_range().
+ *   is_in_phys_range(-1.0) correctly returns false.
+ *
+ * @param[in] value Physical signal value to check.
+ *
+ * @return true if in range, false otherwise.
+ */
+bool turbojet_xcp_response_xcp_response_packet_is_in_phys_range(double value);
 
 
 #ifdef __cplusplus
