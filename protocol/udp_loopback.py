@@ -188,8 +188,15 @@ def _assemble(program: list[tuple]) -> bytes | None:
 class LoopbackUdpMulticastBus(can.BusABC):
     """A ``udp_multicast`` bus whose traffic stays on the local host (see module docstring)."""
 
-    def __init__(self, channel: str, port: int, **kwargs) -> None:
+    def __init__(self, channel: str, port: int | str = 43113, **kwargs) -> None:
+        """``channel``: the group (239.x.y.z); ``port``: its UDP port (python-can's config and
+        command-line tools may give it as text). Registered with python-can as the interface
+        ``turbojet_udp``."""
         is_msgpack_installed()
+        try:
+            port = int(port)
+        except ValueError:
+            raise can.CanInitializationError(f"port {port!r} is not a number") from None
         try:
             address = ipaddress.ip_address(channel)
         except ValueError:
