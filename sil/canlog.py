@@ -16,6 +16,8 @@ from typing import BinaryIO, TextIO
 import can
 import numpy as np
 
+from sil.results import atomic
+
 EXTRA_FORMATS = ("asc", "blf")
 _HEX_DIGITS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
 # two upper-case hex digits per byte value
@@ -140,11 +142,12 @@ class CandumpWriter:
 
 
 def convert(candump_path: Path, fmt: str) -> Path:
-    """Write a copy of a candump log as ASC or BLF with python-can's writers."""
+    """Write a copy of a candump log as ASC or BLF with python-can's writers, atomically
+    (:func:`sil.results.atomic`: a full disk leaves no part of a copy)."""
     if fmt not in EXTRA_FORMATS:
         raise ValueError(f"log format '{fmt}' is not one of {', '.join(EXTRA_FORMATS)}")
     target = candump_path.with_suffix(f".{fmt}")
-    with can.Logger(str(target)) as writer:
+    with atomic(target) as tmp, can.Logger(str(tmp)) as writer:
         for message in can.CanutilsLogReader(str(candump_path)):
             writer.on_message_received(message)
     return target

@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 from ecu import modes  # noqa: E402
 from ecu import start_sequencer as seq  # noqa: E402
 from sil.metrics import REST_PCT  # noqa: E402
+from sil.results import write_with  # noqa: E402
 
 _PANELS = {
     "estimates": (
@@ -40,10 +41,13 @@ _PANELS = {
 
 
 def _save(fig, path: Path) -> Path:
+    """Save the figure as ``path`` atomically (:func:`sil.results.write_with`: a full disk
+    leaves no empty or partial PNG); WriteError names the file."""
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    try:
+        return write_with(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    finally:
+        plt.close(fig)
 
 
 def speed_plot(trace: dict[str, np.ndarray], title: str, path: Path, open_loop: bool) -> Path:

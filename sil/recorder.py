@@ -45,6 +45,7 @@ from protocol.codec import Codec
 from protocol.lockstep import TickTracker
 from sil.canlog import CandumpWriter
 from sil.frame_checks import FrameChecks
+from sil.results import named
 from sil.ticks import ACTUATOR, ECU_IDS, PLANT_IDS, SENSORS, TickUnwrapper, tick_block
 from sil.trace_writer import TraceWriter
 
@@ -121,7 +122,8 @@ class Recorder:
         self.period_s = period_s
         self.commands = commands
         self.wall_clock = wall_clock
-        self.log = CandumpWriter(out_dir / "can.log", channel)
+        with named(out_dir / "can.log"):
+            self.log = CandumpWriter(out_dir / "can.log", channel)
         self.tick = 0  # ticks written (full count; the frames carry it modulo 2**16)
         self.bits = BitCounter()
         self.frames = 0
@@ -139,7 +141,8 @@ class Recorder:
         self._sensor_wrap = TickUnwrapper()
         self._actuator_wrap = TickUnwrapper()
         self._checks = FrameChecks(codec)
-        self.trace = TraceWriter(out_dir / "trace.csv", codec, period_s, commands)
+        with named(out_dir / "trace.csv"):
+            self.trace = TraceWriter(out_dir / "trace.csv", codec, period_s, commands)
         self.rows = 0
 
         # the chunk being gathered: frames heard (bit count), frames written in log order with
@@ -426,9 +429,15 @@ class Recorder:
         for frame_id, data in self._plant_pending + self._ecu_pending:
             self._write(self.tick * self.period_s, frame_id, data)
         self._plant_pending, self._ecu_pending = [], []
-        self._write_chunk()
-        self.log.close()
-        self.trace.close()
+        try:
+            self._write_chunk()
+        finally:
+            try:
+                with named(self.log.path):
+                    self.log.close()
+            finally:
+                with named(self.trace.path):
+                    self.trace.close()
 
     # -- bulk ------------------------------------------------------------------------------------
     def _check_heard(self) -> None:
@@ -588,8 +597,28 @@ class Recorder:
             times = np.concatenate([s.times for s in segments])
             row_ticks = np.concatenate([s.row_ticks for s in segments])
             row_pos = np.concatenate([s.row_pos for s in segments])
-        n = len(ids)
-        if n:
+        with named(self.log.path):
+            self._log_chunk(segments, ids, payload, lengths, times)
+        no_decode: list[int] = []
+        if self._bad or self._bad_events:
+            offsets = np.cumsum([0] + [len(s.ids) for s in segments[:-1]])
+            starts = np.concatenate([s.starts + o for s, o in zip(segments, offsets, strict=True)])
+            heard = np.concatenate([s.heard for s in segments])
+            no_decode = self._not_decoded(ids, payload, lengths, starts, heard)
+        with named(self.trace.path):
+            self.trace.write_rows(ids, payload, lengths, no_decode, row_ticks, row_pos, done)
+            self.trace.flush()
+
+    def _log_chunk(
+        self,
+        segments: list[_Segment],
+        ids: np.ndarray,
+        payload: np.ndarray,
+        lengths: np.ndarray,
+        times: np.ndarray,
+    ) -> None:
+        """A chunk's frames into can.log."""
+        if len(ids):
             if lengths.max() > 8:  # not classical CAN: one by one
                 datas = [
                     d
@@ -600,15 +629,7 @@ class Recorder:
                     self.log.write(t, frame_id, data)
             else:
                 self.log.write_many(times, ids, payload, lengths)
-        no_decode: list[int] = []
-        if self._bad or self._bad_events:
-            offsets = np.cumsum([0] + [len(s.ids) for s in segments[:-1]])
-            starts = np.concatenate([s.starts + o for s, o in zip(segments, offsets, strict=True)])
-            heard = np.concatenate([s.heard for s in segments])
-            no_decode = self._not_decoded(ids, payload, lengths, starts, heard)
-        self.trace.write_rows(ids, payload, lengths, no_decode, row_ticks, row_pos, done)
         self.log.flush()
-        self.trace.flush()
 
     @staticmethod
     def _timestamps(base: list[float] | np.ndarray, count: list[int] | np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ import threading
 from array import array
 from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO, TypeVar
+from typing import BinaryIO, NoReturn, TypeVar
 
 import numpy as np
 
@@ -51,6 +51,7 @@ from sil.ticks import InOrderTicks, tick_block
 BATCH_FRAMES = 4096  # frames per message to the child (about 55 kB)
 _COMMANDS_SENT = -1  # in the ID stream: the command node's commands_sent()
 READY = b"R"  # the child to the parent: its Recorder is made (then, at the end, its figures)
+ERROR = "error"  # ... or, in place of its figures, why it failed (a file it could not write)
 _TICKS = "ticks"  # tags a block of whole ticks: (_TICKS, int32 IDs, (frames, 8) uint8 payload)
 T = TypeVar("T")
 CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
@@ -60,7 +61,12 @@ NICE = 19  # the child's niceness: it is on no node's critical path, so a node t
 
 
 class RecorderFailed(RuntimeError):
-    """The recorder process is gone (what it had been given is on disk)."""
+    """The recorder process is gone (what it had been given is on disk); ``write_error``: it
+    could not write a file (the message names it)."""
+
+    def __init__(self, message: str, *, write_error: bool = False) -> None:
+        super().__init__(message)
+        self.write_error = write_error
 
 
 class RecorderProcess(InOrderTicks):
@@ -174,15 +180,33 @@ class RecorderProcess(InOrderTicks):
 
     def _send(self, message: tuple) -> None:
         if self._broken or self._child.poll() is not None:
-            raise RecorderFailed(self._failure())
+            raise self._failure()
         self._outbox.put(message)
 
-    def _failure(self) -> str:
+    def _failure(self) -> RecorderFailed:
         try:
             code = self._child.wait(5.0)
         except subprocess.TimeoutExpired:
-            return "the recorder process stopped taking frames"
-        return f"the recorder process exited with code {code}"
+            return RecorderFailed("the recorder process stopped taking frames")
+        said = self._child_error()
+        if said is not None:
+            return RecorderFailed(said, write_error=True)
+        return RecorderFailed(f"the recorder process exited with code {code}")
+
+    def _child_error(self) -> str | None:
+        """What the child said failed it (a file it could not write), once it has exited."""
+        stdout = self._child.stdout
+        if stdout is None or stdout.closed or self._child.poll() is None:
+            return None
+        try:
+            if not self._ready:
+                if stdout.read(1) != READY:
+                    return None
+                self._ready = True
+            said = pickle.load(stdout)
+        except (OSError, EOFError, ValueError, pickle.UnpicklingError):
+            return None
+        return str(said[ERROR]) if isinstance(said, dict) and ERROR in said else None
 
     def close(self) -> None:
         """Send what is left, let the child write it and close its files; take its figures."""
@@ -224,9 +248,12 @@ class RecorderProcess(InOrderTicks):
                 if stdout.read(1) != READY:
                     raise EOFError
                 self._ready = True
-            return pickle.load(stdout)
+            totals = pickle.load(stdout)
         except (EOFError, pickle.UnpicklingError):
-            raise RecorderFailed(self._failure()) from None
+            raise self._failure() from None
+        if ERROR in totals:  # the child could not write its files
+            raise RecorderFailed(str(totals[ERROR]), write_error=True)
+        return totals
 
     def _reap(self) -> None:
         try:
@@ -276,32 +303,56 @@ def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
     try:
         recorder = Recorder(out_dir, Codec(), period_s, commands=commands, channel=channel)
     except OSError as exc:
-        print(f"sil recorder: error: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
+        _failed(outbox, exc, ready=False)
     outbox.write(READY)
     outbox.flush()
+    error = None
     try:
-        while (batch := _next(inbox)) is not None:
-            if isinstance(batch[0], str):  # (_TICKS, IDs, payload): whole ticks
-                _, ids, data = batch
-                frame_ids = np.frombuffer(ids, np.int32)
-                recorder.record_ticks(frame_ids, np.frombuffer(data, np.uint8).reshape(-1, 8))
-                continue
-            ids, lengths, data = batch
-            record, commands_sent = recorder.record, recorder.commands_sent
-            at = 0
-            length = iter(lengths)
-            for frame_id in array("i", ids):
-                if frame_id == _COMMANDS_SENT:
-                    commands_sent()
-                    continue
-                end = at + next(length)
-                record(frame_id, data[at:end])
-                at = end
+        _take(inbox, recorder)
+    except OSError as exc:  # a full disk, a file it may not write: the run is told why
+        error = exc
     finally:
-        recorder.close()
+        try:
+            recorder.close()
+        except OSError as exc:
+            error = error or exc
+    if error is not None:
+        _failed(outbox, error, ready=True)
     pickle.dump(recorder.totals(), outbox)
     outbox.flush()
+
+
+def _take(inbox: BinaryIO, recorder: Recorder) -> None:
+    """The batches, into the recorder, until the parent says there are no more."""
+    while (batch := _next(inbox)) is not None:
+        if isinstance(batch[0], str):  # (_TICKS, IDs, payload): whole ticks
+            _, ids, data = batch
+            frame_ids = np.frombuffer(ids, np.int32)
+            recorder.record_ticks(frame_ids, np.frombuffer(data, np.uint8).reshape(-1, 8))
+            continue
+        ids, lengths, data = batch
+        record, commands_sent = recorder.record, recorder.commands_sent
+        at = 0
+        length = iter(lengths)
+        for frame_id in array("i", ids):
+            if frame_id == _COMMANDS_SENT:
+                commands_sent()
+                continue
+            end = at + next(length)
+            record(frame_id, data[at:end])
+            at = end
+
+
+def _failed(outbox: BinaryIO, error: OSError, *, ready: bool) -> NoReturn:
+    """Tell the parent why the recorder failed (in place of its figures), and end."""
+    try:
+        if not ready:
+            outbox.write(READY)
+        pickle.dump({ERROR: str(error)}, outbox)
+        outbox.flush()
+    except OSError:  # the parent is gone
+        pass
+    raise SystemExit(3)
 
 
 def _next(inbox: BinaryIO) -> tuple | None:

@@ -1,24 +1,43 @@
-"""A run's results folder (``sil run --out``): the names a run writes, and its summary's status.
+"""A run's results folder (``sil run --out``): the names a run writes, its summary's status, and
+how results are written.
 
 A run owns only the names in :data:`RUN_FILES`: before it starts, those left by an earlier run
 in the folder are removed (a user's own files stay), and ``summary.json`` says at once that the
 run is ``running``. It is replaced, atomically, by the final summary (``completed`` or
 ``aborted``), or by a ``failed`` one naming the reason when the run fails before it began or
 while it ended. A run killed outright leaves ``running``. ``status`` is always the first key.
+
+Results written at once (the summary, the run's record, plots, the log's other formats, `sil
+compare`'s and `sil replay --into-ecu`'s files) are written under a temporary name in the folder
+and renamed over the final one (:func:`write_atomically`, :func:`atomic`): a reader sees the old
+file or the new one, never half a file, and a full disk leaves no empty file behind. A write that
+fails raises :class:`WriteError`, which names the file.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from protocol import strict_json
 
 SUMMARY = "summary.json"
 COMPLETED = "completed"
-PLOTS = ("speed.png", "egt.png", "estimates.png", "gains.png")  # sil.plots.plot_run
-RUN_FILES = (
+# sil.plots.plot_run: every plot a run may write (start.png only for a run from rest)
+PLOTS = ("speed.png", "egt.png", "estimates.png", "gains.png", "start.png")
+HANDSHAKE = (  # the node processes' handshake and stats files (sil.runner)
+    ".plant-ready",
+    ".ecu-ready",
+    ".plant-start",
+    ".plant-stats.json",
+    ".ecu-stats.json",
+)
+REPLAY_FILES = ("report.json", "into_ecu.png")  # `sil replay --into-ecu --out`
+RESULTS = (
     SUMMARY,
     "can.log",
     "can.asc",
@@ -30,14 +49,79 @@ RUN_FILES = (
     "ecu.log",
     *PLOTS,
     "compare.png",  # `sil compare`'s plot goes into the second run's folder by default
-    # the node processes' handshake and stats files (sil.runner), the summary being written
-    ".plant-ready",
-    ".ecu-ready",
-    ".plant-start",
-    ".plant-stats.json",
-    ".ecu-stats.json",
-    f".{SUMMARY}.tmp",
+    *REPLAY_FILES,  # a replay of the run's log into the ECU, written into its folder
 )
+TEMP_PREFIX = ".tmp."  # a result being written: renamed over its name once complete
+RUN_FILES = (*RESULTS, *HANDSHAKE, *(f"{TEMP_PREFIX}{name}" for name in RESULTS))
+
+
+class WriteError(OSError):
+    """A result that could not be written (a full disk, no permission); the message names the
+    file: ``PATH: cannot write: No space left on device``."""
+
+    def __init__(self, path: Path | str, error: OSError) -> None:
+        super().__init__(error.errno, error.strerror or str(error), str(path))
+        self.path = Path(path)
+
+    def __str__(self) -> str:
+        return f"{self.filename}: cannot write: {self.strerror}"
+
+    @classmethod
+    def of(cls, path: Path | str, error: OSError) -> WriteError:
+        return error if isinstance(error, WriteError) else cls(path, error)
+
+
+@contextmanager
+def named(path: Path | str) -> Iterator[None]:
+    """An OSError in the block becomes a :class:`WriteError` naming ``path``."""
+    try:
+        yield
+    except WriteError:
+        raise
+    except OSError as exc:
+        raise WriteError(path, exc) from None
+
+
+def temp_path(path: Path) -> Path:
+    """Where ``path`` is written before it is renamed over its name (same folder, same
+    suffix, so that writers that go by the suffix write the right format)."""
+    return path.with_name(f"{TEMP_PREFIX}{path.name}")
+
+
+@contextmanager
+def atomic(path: Path) -> Iterator[Path]:
+    """Write ``path`` by writing the temporary path yielded: once the block ends, it replaces
+    ``path``; should the block fail, it is removed and ``path`` is left as it was. An OSError
+    becomes a :class:`WriteError` naming ``path``."""
+    tmp = temp_path(path)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise FileNotFoundError(errno.ENOENT, "nothing was written")
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        if isinstance(exc, OSError):
+            raise WriteError.of(path, exc) from None
+        raise
+
+
+def write_atomically(path: Path, data: str | bytes) -> Path:
+    """Write ``data`` (text as UTF-8) to ``path`` atomically (:func:`atomic`)."""
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    with atomic(path) as tmp:
+        tmp.write_bytes(raw)
+    return path
+
+
+def write_with(path: Path, writer: Callable[[Path], object]) -> Path:
+    """``writer(tmp)`` writes the file, which then replaces ``path`` (:func:`atomic`)."""
+    with atomic(path) as tmp:
+        writer(tmp)
+    return path
 
 
 def clear(out_dir: Path) -> list[str]:
@@ -47,9 +131,15 @@ def clear(out_dir: Path) -> list[str]:
     for name in RUN_FILES:
         path = out_dir / name
         if path.is_file() or path.is_symlink():
-            path.unlink()
+            with named(path):
+                path.unlink()
             removed.append(name)
     return removed
+
+
+def kept(out_dir: Path) -> list[str]:
+    """The results a run has in its folder (not its temporary or handshake files)."""
+    return [name for name in RESULTS if (out_dir / name).is_file()]
 
 
 def status_first(summary: dict) -> dict:
@@ -59,10 +149,19 @@ def status_first(summary: dict) -> dict:
 
 def write_summary(out_dir: Path, summary: dict) -> Path:
     """Write ``summary.json`` (status first) atomically: a reader sees the old or the new one."""
+    text = strict_json.dumps(status_first(summary), indent=2, default=float) + "\n"
+    return write_atomically(out_dir / SUMMARY, text)
+
+
+def write_summary_in_place(out_dir: Path, summary: dict) -> Path:
+    """The last resort when :func:`write_summary` fails (a full disk): the summary, compact,
+    over the one in the folder, in the space it has (not atomic). WriteError if that fails too."""
     path = out_dir / SUMMARY
-    tmp = out_dir / f".{SUMMARY}.tmp"
-    tmp.write_text(strict_json.dumps(status_first(summary), indent=2, default=float) + "\n")
-    os.replace(tmp, path)
+    raw = (strict_json.dumps(status_first(summary), default=float) + "\n").encode("utf-8")
+    with named(path):
+        with path.open("r+b") as f:
+            f.write(raw)
+            f.truncate()
     return path
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol import strict_json
+from sil.results import write_atomically
 from sil.scenario import Scenario
 
 RECORD = "run.json"
@@ -107,15 +108,21 @@ class Pending:
     commissioning: bytes | None
     error: str | None = None  # why a file could not be read (raised by write)
 
-    def write(self, out_dir: Path) -> dict[str, Any]:
-        """Write scenario.toml, commissioning.json and run.json into ``out_dir``; the record."""
+    def check(self) -> None:
+        """ValueError naming the scenario or commissioning file that could not be read."""
         if self.error is not None:
             raise ValueError(self.error)
+
+    def write(self, out_dir: Path) -> dict[str, Any]:
+        """Write scenario.toml, commissioning.json and run.json into ``out_dir``, each
+        atomically (:class:`sil.results.WriteError` names a file that cannot be written); the
+        record."""
+        self.check()
         if self.scenario_text is not None:
-            (out_dir / SCENARIO).write_text(self.scenario_text)
+            write_atomically(out_dir / SCENARIO, self.scenario_text)
         if self.commissioning is not None:
-            (out_dir / COMMISSIONING).write_bytes(self.commissioning)
-        (out_dir / RECORD).write_text(strict_json.dumps(self.record, indent=2) + "\n")
+            write_atomically(out_dir / COMMISSIONING, self.commissioning)
+        write_atomically(out_dir / RECORD, strict_json.dumps(self.record, indent=2) + "\n")
         return self.record
 
 

@@ -55,7 +55,7 @@ from protocol.codec import Codec
 from protocol.node import DriverStats, InProcessBus, bus_batch_receiver, bus_sender, unusable
 from protocol.run_bus import RunBus
 from protocol.run_tag import TagClaim, claim_tag
-from sil import metrics, profiles, results, run_record
+from sil import metrics, profiles, results, run_folder, run_record
 from sil.busfault.bridge import Bridge, SensorTicks, WallTicks
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
@@ -125,6 +125,21 @@ class RunState:
     run_bus: RunBus | None = None  # the command node's bus: its foreign-frame counts
     warnings: list[str] = field(default_factory=list)  # said on stderr and in the summary
     record: dict = field(default_factory=dict)  # what shaped the run (run.json)
+    specs: tuple[BusSpec, BusSpec] | None = None  # on a bus: the run's bus and the ECU's
+    bus_handle: can.BusABC | None = None  # the command node's bus, opened before the run
+    write_errors: list[str] = field(default_factory=list)  # results that could not be written
+
+    def close_bus(self) -> None:
+        """Shut the command node's bus if the run did not take it over."""
+        if self.bus_handle is not None:
+            self.bus_handle.shutdown()
+            self.bus_handle = None
+
+    def take_bus(self) -> can.BusABC:
+        """The command node's bus, opened by the input checks; from now on the caller's."""
+        bus, self.bus_handle = self.bus_handle, None
+        assert bus is not None
+        return bus
 
     def release(self) -> None:
         """Give back the run's tags (once the node processes are stopped)."""
@@ -247,22 +262,66 @@ class _Progress:
 
 
 def run(opts: RunOptions) -> dict:
-    """Run the scenario, write can.log, trace.csv, summary.json and plots; return the summary."""
+    """Run the scenario, write can.log, trace.csv, summary.json and plots; return the summary.
+
+    Every input (the scenario and commissioning files, the ECU parameters, the bus, ``--out``)
+    is checked before the run folder is touched; a refusal raises ValueError (BusSpecError,
+    :class:`~sil.run_folder.FolderError`) and leaves the folder as it was. The folder is then
+    made and locked for the run's time (:class:`~sil.run_folder.FolderLock`), cleared of an
+    earlier run's files and marked running. A result that cannot be written raises
+    :class:`~sil.results.WriteError` before the run began; once it flew, the run is aborted
+    with the file named."""
     s = opts.overrides.apply(opts.scenario)
     seed = s.seed if opts.seed is None else opts.seed
     record = run_record.prepare(s, seed, _shaped_by(opts), opts.commission)
-    results.clear(opts.out_dir)  # an earlier run's files never pass for this one's
-    opts.out_dir.mkdir(parents=True, exist_ok=True)
-    results.mark(opts.out_dir, "running", s.name)
+    record.check()
     state = RunState()
+    _check_inputs(opts, s, state)
     try:
+        run_folder.check("--out", opts.out_dir)
+        lock = run_folder.FolderLock(opts.out_dir)
+    except BaseException:
+        state.close_bus()
+        raise
+    with lock:
+        return _run_in_folder(opts, s, seed, record, state)
+
+
+def _check_inputs(opts: RunOptions, s: Scenario, state: RunState) -> None:
+    """Refuse, before the run folder is touched, what the run could not fly: ``--ecu-impl pil``
+    in process, a bus that cannot be opened (it is opened here, for the run), a commissioning
+    file the ECU would refuse, ECU parameters it would refuse (checked at the preset's trim;
+    the run's own trim is checked again once the plant is built)."""
+    if opts.mode == "inproc" and opts.ecu_impl == "pil":
+        raise ValueError("--ecu-impl pil runs the image on a bus: use --mode lockstep or "
+                         "realtime")  # fmt: skip
+    nominal = {
+        k: v for k, v in ecu_overrides(s, 0.0, 0.0).items() if k not in ("trim_v", "entry_v")
+    }
+    params = preset(s.controller.preset or "default", **nominal)
+    if opts.commission is not None:
+        params = commissioning.apply(params, commissioning.load(opts.commission))
+    compile_params(params)
+    if opts.mode == "inproc":
+        return
+    spec = _bus_spec(opts)
+    ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
+    state.specs = (spec, ecu_spec)
+    state.bus_handle = open_bus(spec)
+
+
+def _run_in_folder(
+    opts: RunOptions, s: Scenario, seed: int, record: run_record.Pending, state: RunState
+) -> dict:
+    """The run, its folder locked: cleared, marked running, flown, its results written."""
+    try:
+        results.clear(opts.out_dir)  # an earlier run's files never pass for this one's
+        results.mark(opts.out_dir, "running", s.name)
         state.record = record.write(opts.out_dir)
-        if opts.mode == "inproc" and opts.ecu_impl == "pil":
-            raise ValueError("--ecu-impl pil runs the image on a bus: use --mode lockstep or "
-                             "realtime")  # fmt: skip
         return _run(opts, s, seed, state)
     except BaseException as exc:
-        results.mark(opts.out_dir, "failed", s.name, _failure(exc, state))
+        state.close_bus()
+        _mark_failed(opts.out_dir, s.name, _failure(exc, state))
         _stop(state.children)
         state.release()
         if state.recorder is not None:
@@ -272,6 +331,18 @@ def run(opts: RunOptions) -> dict:
             if log.exists() and log.stat().st_size == 0:
                 log.unlink()
         raise
+
+
+def _mark_failed(out_dir: Path, scenario: str, reason: str) -> None:
+    """The summary of a run that failed: ``failed`` with the reason, if it can be written."""
+    try:
+        results.mark(out_dir, "failed", scenario, reason)
+    except OSError:
+        try:
+            summary = {"status": "failed", "abort_reason": reason, "scenario": scenario}
+            results.write_summary_in_place(out_dir, summary)
+        except OSError:
+            pass  # (the error that failed the run is reported)
 
 
 def _shaped_by(opts: RunOptions) -> dict:
@@ -305,8 +376,8 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     if opts.mode != "realtime" and not s.bus_faults:
         state.recorder = RecorderProcess()
     if opts.mode != "inproc":
-        spec = _bus_spec(opts)
-        ecu_spec = _ecu_side(opts, spec) if s.bus_faults else spec
+        assert state.specs is not None
+        spec, ecu_spec = state.specs
         state.bus = str(spec)
         state.ecu_bus = str(ecu_spec) if s.bus_faults else None
         state.run_id = int.from_bytes(os.urandom(4), "little")
@@ -386,23 +457,31 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
             _run_on_bus(opts, s, seed, (spec, ecu_spec), command, state)
     except KeyboardInterrupt as exc:
         state.status, state.abort_reason = "aborted", interrupt_reason(exc)
-    except RecorderFailed as exc:
-        state.status, state.abort_reason = "aborted", str(exc)
+    except (RecorderFailed, results.WriteError) as exc:  # the recorder's files, a full disk
+        _recording_failed(state, exc)
     finally:
         _stop(state.children)
         state.release()
         progress.close()
         try:
             recorder.close()
-        except RecorderFailed as exc:
-            state.status = "aborted"
-            state.abort_reason = state.abort_reason or str(exc)
+        except (RecorderFailed, results.WriteError) as exc:
+            _recording_failed(state, exc)
         except KeyboardInterrupt as exc:  # came while the recorder finished its files: they stand
             state.status = "aborted"
             state.abort_reason = state.abort_reason or interrupt_reason(exc)
         gc.unfreeze()
     wall = time.perf_counter() - state.started
     return _finish(opts, s, seed, recorder, command, state, wall)
+
+
+def _recording_failed(state: RunState, exc: RecorderFailed | results.WriteError) -> None:
+    """The recorder failed (its process died, or a file could not be written): the run is
+    aborted with the first such reason."""
+    state.status = "aborted"
+    state.abort_reason = state.abort_reason or str(exc)
+    if isinstance(exc, results.WriteError) or getattr(exc, "write_error", False):
+        state.write_errors.append(str(exc))
 
 
 def _inproc_nodes(opts: RunOptions, s: Scenario, params: EcuParams, plant: Plant) -> list:
@@ -567,7 +646,7 @@ def _run_on_bus(
     ``specs``: the run's bus and the ECU's (the same bus unless there are bus faults)."""
     spec, ecu_spec = specs
     tags = [claim.tag for claim in state.claims]
-    with RunBus(open_bus(spec), tags[0]) as bus, ExitStack() as stack:
+    with RunBus(state.take_bus(), tags[0]) as bus, ExitStack() as stack:
         state.run_bus = bus
         if s.bus_faults:
             injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, command.codec)
@@ -839,16 +918,55 @@ def _finish(
         if log.exists():
             summary[f"{name}_log"] = log.name
     for fmt in opts.log_formats:
-        convert(opts.out_dir / "can.log", fmt)
+        try:
+            convert(opts.out_dir / "can.log", fmt)
+        except results.WriteError as exc:
+            state.write_errors.append(str(exc))
     if opts.plots and trace is not None:
-        from sil import plots  # matplotlib: only when plotting (campaign runs do not)
-
-        title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
-        limit = _egt_limit_k(s)
-        summary["plots"] = [
-            p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind, limit)
-        ]
-    results.write_summary(opts.out_dir, summary)
+        summary["plots"] = _plots(opts, s, trace, state)
+    _write_summary(opts.out_dir, summary, state)
     for path in _handshake_files(opts.out_dir):
         path.unlink(missing_ok=True)
     return results.status_first(summary)
+
+
+def _plots(opts: RunOptions, s: Scenario, trace: dict, state: RunState) -> list[str]:
+    """Write the run's plots; the names written (a plot that cannot be written is noted in
+    ``state.write_errors``, and the rest are not tried)."""
+    from sil import plots  # matplotlib: only when plotting (campaign runs do not)
+
+    title = f"{s.name} ({s.controller.kind}, {s.plant.model} plant)"
+    limit = _egt_limit_k(s)
+    try:
+        return [
+            p.name for p in plots.plot_run(trace, opts.out_dir, title, s.controller.kind, limit)
+        ]
+    except results.WriteError as exc:
+        state.write_errors.append(str(exc))
+        return [name for name in results.PLOTS if (opts.out_dir / name).is_file()]
+
+
+def _write_summary(out_dir: Path, summary: dict, state: RunState) -> None:
+    """The final summary; a run whose results could not all be written is aborted, naming the
+    first file, and lists what it kept. If even the summary cannot be written, a compact one
+    goes over the ``running`` one in its space; the returned summary says why either way."""
+    if state.write_errors:
+        _not_all_written(out_dir, summary, state)
+    try:
+        results.write_summary(out_dir, summary)
+        return
+    except results.WriteError as exc:
+        state.write_errors.append(str(exc))
+    _not_all_written(out_dir, summary, state)
+    keys = ("status", "abort_reason", "scenario", "write_errors", "kept")
+    try:  # the least that says what happened, in the room the running summary had
+        results.write_summary_in_place(out_dir, {k: summary[k] for k in keys})
+    except results.WriteError:
+        summary["kept"] = [name for name in summary["kept"] if name != results.SUMMARY]
+
+
+def _not_all_written(out_dir: Path, summary: dict, state: RunState) -> None:
+    summary["status"] = "aborted"
+    summary["abort_reason"] = summary["abort_reason"] or state.write_errors[0]
+    summary["write_errors"] = list(state.write_errors)
+    summary["kept"] = sorted({*results.kept(out_dir), results.SUMMARY})

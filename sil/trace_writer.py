@@ -64,6 +64,7 @@ class TraceWriter:
         names = list(self._columns)
         self._build_groups()
         self._carry = np.full(len(names), math.nan)  # the latest value of every column
+        self.path = path
         self._file: TextIO = path.open("w", newline="")
         header = ["time[s]", "tick[-]", "command[%N or V]", "speed_true[%]", "speed_meas[%]"]
         header += [f"{n}[{u or '-'}]" for n, u in zip(names, units, strict=True)]

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from protocol import strict_json
-from sil import results, validation  # noqa: E402
+from sil import results, run_folder  # noqa: E402
 from sil.metrics import load_trace  # noqa: E402
 
 NAME = "compare"
@@ -42,9 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("run_a", type=Path, help="output folder of the first run")
     parser.add_argument("run_b", type=Path, help="output folder of the second run")
-    parser.add_argument(
-        "--out", type=validation.folder_option, help="folder for compare.png (default: RUN_B)"
-    )
+    parser.add_argument("--out", metavar="DIR", help="folder for compare.png (default: RUN_B)")
     parser.add_argument(
         "--allow-incomplete",
         action="store_true",
@@ -89,28 +87,25 @@ def run(args: argparse.Namespace) -> int:
     except results.IncompleteRun as exc:
         print(f"sil compare: {exc}", file=sys.stderr)
         return 2
+    try:
+        out = run_folder.out_path("--out", args.out) or args.run_b
+        run_folder.check("--out", out)
+        lock = run_folder.FolderLock(out)
+    except run_folder.FolderError as exc:
+        print(f"sil compare: {exc}", file=sys.stderr)
+        return 2
     for run_dir, why in ((args.run_a, why_a), (args.run_b, why_b)):
         if why is not None:
             print(f"sil compare: {run_dir}: INCOMPLETE run ({why})", file=sys.stderr)
     code = 0 if why_a is None and why_b is None else 1
     names = (_name(sa, args.run_a, why_a), _name(sb, args.run_b, why_b))
     rows = [{"field": f, "a": sa.get(f), "b": sb.get(f)} for f in FIELDS]
-    out = args.out or args.run_b
-    out.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(10, 5))
-    ax.plot(ta["time"], ta["command"], color="0.6", lw=1, label="command")
-    ax.plot(
-        ta["time"], ta["ReferenceSpeed"], "--", color="tab:green", lw=1, label="reference model"
-    )
-    ax.plot(ta["time"], ta["speed_true"], lw=1.2, label=names[0])
-    ax.plot(tb["time"], tb["speed_true"], lw=1.2, label=names[1])
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("shaft speed [%N_max]")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "compare.png", dpi=110)
-    plt.close(fig)
+    try:
+        with lock:
+            _plot(ta, tb, names, out / "compare.png")
+    except results.WriteError as exc:
+        print(f"sil compare: {exc}", file=sys.stderr)
+        return 1
     if args.json:
         print(
             strict_json.dumps(
@@ -131,6 +126,26 @@ def run(args: argparse.Namespace) -> int:
         print(f"{r['field']:<{key}} {_fmt(r['a']):>28} {_fmt(r['b']):>28}")
     print(f"plot: {out / 'compare.png'}")
     return code
+
+
+def _plot(ta: dict, tb: dict, names: tuple[str, str], path: Path) -> None:
+    """The overlay of speed, written atomically as ``path`` (WriteError names it)."""
+    fig, ax = plt.subplots(figsize=(10, 5))
+    ax.plot(ta["time"], ta["command"], color="0.6", lw=1, label="command")
+    ax.plot(
+        ta["time"], ta["ReferenceSpeed"], "--", color="tab:green", lw=1, label="reference model"
+    )
+    ax.plot(ta["time"], ta["speed_true"], lw=1.2, label=names[0])
+    ax.plot(tb["time"], tb["speed_true"], lw=1.2, label=names[1])
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("shaft speed [%N_max]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    try:
+        results.write_with(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    finally:
+        plt.close(fig)
 
 
 def _name(summary: dict, run: Path, why: str | None) -> str:

@@ -9,8 +9,9 @@ from pathlib import Path
 
 from protocol import strict_json
 from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
-from sil import replay, validation
+from sil import replay, run_folder, validation
 from sil.canlog import LogReadError, read_frames
+from sil.results import REPLAY_FILES, WriteError, named, write_atomically, write_with
 
 NAME = "replay"
 HELP = (
@@ -51,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="--into-ecu: change an ECU parameter (e.g. to check a change)",
     )
     parser.add_argument(
-        "--out", type=validation.folder_option, help="--into-ecu: folder for report.json and a plot"
+        "--out", metavar="DIR", help="--into-ecu: folder for report.json and a plot"
     )
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
 
@@ -114,6 +115,9 @@ def _into_ecu(args: argparse.Namespace) -> int:
     from sil.run_record import load as load_record
 
     try:
+        out = run_folder.out_path("--out", args.out)
+        if out is not None:
+            run_folder.check("--out", out)
         record = load_record(args.log.parent)
         path = args.scenario or (record.scenario if record else args.log.parent / "scenario.toml")
         if record is not None and record.mode == "realtime":
@@ -124,7 +128,7 @@ def _into_ecu(args: argparse.Namespace) -> int:
         s = scenarios.load(path)
         node, setup = _ecu_for(s, record, args.param)
         report = replay.into_ecu(args.log, node)
-    except (scenarios.ScenarioError, ParamError, ValueError, TypeError) as exc:
+    except (scenarios.ScenarioError, ParamError, ValueError, TypeError) as exc:  # (FolderError)
         print(f"sil replay: {exc}", file=sys.stderr)
         return 2
     except (PortBuildError, PortError) as exc:
@@ -134,16 +138,33 @@ def _into_ecu(args: argparse.Namespace) -> int:
         print(f"sil replay: {exc}", file=sys.stderr)
         return 1
     result = {"log": str(args.log), "scenario": str(path), **setup, **report.as_dict()}
-    if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "report.json").write_text(strict_json.dumps(result, indent=2) + "\n")
-        _plot_comparison(report, args.out / "into_ecu.png", args.log.name)
+    if out is not None:
+        try:
+            _write_report(out, result, report, args.log.name)
+        except run_folder.FolderError as exc:
+            print(f"sil replay: {exc}", file=sys.stderr)
+            return 2
+        except WriteError as exc:
+            print(f"sil replay: {exc}", file=sys.stderr)
+            return 1
     _print_report(result, args.json)
     verdict = report.verdict()
     if verdict is not None:
         print(f"sil replay: {args.log}: {verdict}", file=sys.stderr)
         return 1
     return 0
+
+
+def _write_report(out: Path, result: dict, report: replay.EcuComparison, title: str) -> None:
+    """report.json and into_ecu.png into ``out``, locked while written (FolderError: another
+    command holds it), an earlier replay's removed first, each written atomically
+    (WriteError names a file that could not be)."""
+    with run_folder.FolderLock(out):
+        for name in REPLAY_FILES:
+            with named(out / name):
+                (out / name).unlink(missing_ok=True)
+        write_atomically(out / "report.json", strict_json.dumps(result, indent=2) + "\n")
+        _plot_comparison(report, out / "into_ecu.png", title)
 
 
 def _ecu_for(s, record, param_texts: list[str]):  # noqa: ANN001, ANN202 (Scenario, RunRecord)
@@ -194,8 +215,10 @@ def _plot_comparison(report: replay.EcuComparison, path: Path, title: str) -> No
     ax2.set_xlabel("time [s]")
     ax2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        write_with(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    finally:
+        plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:

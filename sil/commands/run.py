@@ -10,7 +10,7 @@ import threading
 from pathlib import Path
 
 from protocol.bus import BusSpecError
-from sil import results, validation
+from sil import results, run_folder
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
 from sil.node_options import add_pil_link
@@ -79,7 +79,9 @@ def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCE
         help="lockstep (default): the plant owns time; realtime: wall clock; "
         "inproc: all nodes in this process, no bus",
     )
-    parser.add_argument("--out", type=Path, help=f"output folder (default: {out_default})")
+    parser.add_argument(
+        "--out", metavar="DIR", help=f"output folder (default: {out_default}; '.' for this one)"
+    )
     parser.add_argument("--seed", type=int, help="noise seed (default: the scenario's)")
     parser.add_argument(
         "--log-format",
@@ -173,23 +175,18 @@ def _interrupt_on_signals() -> None:
 
 
 def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None) -> int:
+    """Fly ``scenario_ref`` into ``out`` (default: ``--out``, else out/SCENARIO). Every input is
+    checked before the folder is touched: a refusal (exit 2) leaves it as it was."""
     from sil.runner import RunOptions
     from sil.runner import run as run_scenario
 
     try:
+        given = out or run_folder.out_path("--out", args.out)
         scenario = scenarios.load(scenario_ref)
-    except scenarios.ScenarioError as exc:
-        print(f"sil run: {exc}", file=sys.stderr)
-        _refused_into(out or args.out, scenario_ref, str(exc))
-        return 2
-    out = out or args.out or Path("out") / scenario.name
-    try:
-        validation.output_folder("sil run", "--out", out)
+        out = given or Path("out") / scenario.name
+        run_folder.check("--out", out)
         changes = overrides(args)
-    except validation.InputError as exc:
-        print(exc, file=sys.stderr)
-        return 2
-    except ValueError as exc:
+    except (scenarios.ScenarioError, run_folder.FolderError, ValueError) as exc:
         print(f"sil run: {exc}", file=sys.stderr)
         return 2
     options = RunOptions(
@@ -214,6 +211,9 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
     except (BusSpecError, ValueError) as exc:
         print(f"sil run: {exc}", file=sys.stderr)
         return 2
+    except results.WriteError as exc:  # before the run began: a full disk, say
+        print(f"sil run: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as exc:  # before the run began, or while it ended
         print(f"sil run: aborted: {interrupt_reason(exc)}", file=sys.stderr)
         return 1
@@ -225,14 +225,6 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         print(f"sil run: aborted: {summary['abort_reason']}", file=sys.stderr)
         return 1
     return 0
-
-
-def _refused_into(out: Path | None, scenario_ref: str, reason: str) -> None:
-    """A refused run into an existing folder leaves no earlier run's results claiming to be its
-    own: they are removed and the summary says it failed (a folder not there is not made)."""
-    if out is not None and out.is_dir():
-        results.clear(out)
-        results.mark(out, "failed", scenario_ref, f"{reason} (before the run began)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -216,10 +216,10 @@ def test_a_recorder_that_cannot_write_names_the_file_and_the_run_is_aborted(tmp_
     (out / "can.log").mkdir(parents=True)  # where the log should go
     summary = runner.run(RunOptions(s, out, mode="inproc", plots=False))
     assert summary["status"] == "aborted"
-    assert summary["abort_reason"] == "the recorder process exited with code 2"
-    assert f"sil recorder: error: [Errno 21] Is a directory: '{out / 'can.log'}'" in (
-        capfd.readouterr().err
-    )
+    assert summary["abort_reason"] == f"{out / 'can.log'}: cannot write: Is a directory"
+    assert summary["write_errors"] == [summary["abort_reason"]]
+    assert "can.log" not in summary["kept"] and "summary.json" in summary["kept"]
+    assert capfd.readouterr().err == ""  # the run says why, the recorder process says nothing
 
 
 def test_open_returns_once_the_child_has_made_its_recorder(tmp_path):

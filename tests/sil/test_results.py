@@ -68,21 +68,57 @@ def _only_users_files_and(out: Path, *names: str) -> None:
     assert (out / "notes.txt").read_text() == "mine"
 
 
-def test_a_run_failing_at_set_up_leaves_no_stale_results(tmp_path):
+def _as_it_was(out: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(out.iterdir())}
+
+
+def test_a_run_refused_for_a_bad_parameter_leaves_the_folder_as_it_was(tmp_path):
     out = tmp_path / "run"
     _good_run(tmp_path, out)
+    before = _as_it_was(out)
     bad = _sil(
         "run", str(_scenario(tmp_path, "bad", window=1000.0)), "--mode", "inproc",
         "--out", str(out),
     )  # fmt: skip
     assert bad.returncode == 2
     assert "rate_window_s=1000.0: must span at least two ticks" in bad.stderr
+    assert len(bad.stderr.splitlines()) == 1
+    assert _as_it_was(out) == before  # checked before the folder was touched
+    assert _summary(out)["status"] == "completed"
+
+
+def test_a_refused_scenario_file_leaves_the_folder_as_it_was(tmp_path):
+    out = tmp_path / "run"
+    _good_run(tmp_path, out)
+    before = _as_it_was(out)
+    broken = tmp_path / "broken.toml"
+    broken.write_text("duration_s = 5\n[controller]\nkind = 'fuzzy'\n[command]\n")
+    result = _sil("run", str(broken), "--out", str(out))
+    assert result.returncode == 2 and "field 'controller.kind'" in result.stderr
+    assert len(result.stderr.splitlines()) == 1
+    assert _as_it_was(out) == before
+
+
+def test_a_run_failing_once_set_up_began_is_marked_failed(tmp_path, monkeypatch):
+    from sil import runner
+
+    out = tmp_path / "run"
+    _good_run(tmp_path, out)
+
+    def no_plant(*args, **kwargs):
+        raise ValueError("no plant today")
+
+    monkeypatch.setattr(runner, "build_plant", no_plant)
+    opts = runner.RunOptions(
+        _load(_scenario(tmp_path, "good")), out, mode="inproc", plots=False, progress=False
+    )
+    with pytest.raises(ValueError, match="no plant today"):
+        runner.run(opts)
     _only_users_files_and(out, "scenario.toml", "run.json", "summary.json")
     summary = _summary(out)
     assert list(summary)[:2] == ["status", "abort_reason"]
     assert summary["status"] == "failed"
-    assert "rate_window_s=1000.0" in summary["abort_reason"]
-    assert "before the run began" in summary["abort_reason"]
+    assert summary["abort_reason"] == "no plant today (before the run began)"
     refused = _sil("compare", str(out), str(out))
     assert refused.returncode == 2
     assert f"{out}: incomplete run (status failed: " in refused.stderr
@@ -92,16 +128,10 @@ def test_a_run_failing_at_set_up_leaves_no_stale_results(tmp_path):
     assert allowed.returncode == 2 and f"{out}: no trace.csv (status failed" in allowed.stderr
 
 
-def test_a_refused_scenario_file_clears_the_folder_it_was_to_write(tmp_path):
-    out = tmp_path / "run"
-    _good_run(tmp_path, out)
-    broken = tmp_path / "broken.toml"
-    broken.write_text("duration_s = 5\n[controller]\nkind = 'fuzzy'\n[command]\n")
-    result = _sil("run", str(broken), "--out", str(out))
-    assert result.returncode == 2 and "field 'controller.kind'" in result.stderr
-    _only_users_files_and(out, "summary.json")
-    assert _summary(out)["status"] == "failed"
-    assert "field 'controller.kind'" in _summary(out)["abort_reason"]
+def _load(path: Path):
+    from sil import scenario
+
+    return scenario.load(str(path))
 
 
 def _start(tmp_path: Path, out: Path) -> subprocess.Popen:
@@ -163,7 +193,10 @@ def test_a_run_killed_outright_still_says_running(tmp_path):
     proc.kill()
     proc.communicate(timeout=60)
     assert _summary(out)["status"] == "running"
-    _only_users_files_and(out, "scenario.toml", "run.json", "summary.json", "can.log", "trace.csv")
+    # and its lock file, no longer locked: the next run into the folder takes it
+    _only_users_files_and(
+        out, "scenario.toml", "run.json", "summary.json", "can.log", "trace.csv", ".lock"
+    )
     refused = _sil("compare", str(out), str(out))
     assert refused.returncode == 2
     assert "status running: the run is still going or was killed" in refused.stderr
