@@ -1,5 +1,6 @@
-"""Options the node commands share (`sil ecu`, `sil plant`), and the PIL link option that
-`sil run` passes on to `sil ecu`: one definition each."""
+"""Options the node commands share (`sil ecu`, `sil plant`), the PIL link option that `sil run`
+passes on to `sil ecu`, and the XCP identifiers of `sil ecu` and `sil a2l`: one definition
+each."""
 
 from __future__ import annotations
 
@@ -37,3 +38,26 @@ def add_pil_link(parser: argparse.ArgumentParser, applies: str) -> None:
         help=f"with {applies}: the image's CAN link, its Ethernet controller (eth, one frame per "
         "Ethernet frame) or slcan on its UART (as a USB-CAN adapter; slower)",
     )
+
+
+def xcp_ids(text: str) -> tuple[int, int]:
+    """MASTER,ECU: two standard CAN IDs (hex with 0x, or decimal), distinct, of no other
+    message of the contract."""
+    from protocol.dbc import is_xcp, load_database
+
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        ids = tuple(int(part.strip(), 0) for part in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected two CAN IDs MASTER,ECU (e.g. 0x700,0x701)"
+        ) from None
+    if not all(0 <= i <= 0x7FF for i in ids) or ids[0] == ids[1]:
+        raise argparse.ArgumentTypeError(f"{text!r}: two different standard IDs, 0..0x7FF")
+    taken = {m.frame_id: m.name for m in load_database().messages if not is_xcp(m)}
+    for i in ids:
+        if i in taken:
+            raise argparse.ArgumentTypeError(f"{text!r}: 0x{i:03X} is {taken[i]}'s ID")
+    return ids[0], ids[1]

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from ecu.params import CONTROLLERS
-from sil.node_options import add_launcher_options, add_pil_link
+from sil.node_options import add_launcher_options, add_pil_link, xcp_ids
 from sil.parent_death import NodeStop
 from sil.validation import option
 
@@ -99,7 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--xcp-ids",
-        type=_xcp_ids,
+        type=xcp_ids,
         metavar="MASTER,ECU",
         help="the XCP slave's CAN IDs, master to ECU and ECU to master (default: the DBC's "
         "XcpCommand and XcpResponse, 0x700,0x701); --impl python",
@@ -109,29 +109,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_launcher_options(parser)
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
-
-
-def _xcp_ids(text: str) -> tuple[int, int]:
-    """MASTER,ECU: two standard CAN IDs (hex with 0x, or decimal), distinct, of no other
-    message of the contract."""
-    from protocol.dbc import is_xcp, load_database
-
-    parts = text.split(",")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        ids = tuple(int(part.strip(), 0) for part in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: expected two CAN IDs MASTER,ECU (e.g. 0x700,0x701)"
-        ) from None
-    if not all(0 <= i <= 0x7FF for i in ids) or ids[0] == ids[1]:
-        raise argparse.ArgumentTypeError(f"{text!r}: two different standard IDs, 0..0x7FF")
-    taken = {m.frame_id: m.name for m in load_database().messages if not is_xcp(m)}
-    for i in ids:
-        if i in taken:
-            raise argparse.ArgumentTypeError(f"{text!r}: 0x{i:03X} is {taken[i]}'s ID")
-    return ids[0], ids[1]
 
 
 def _param(text: str) -> tuple[str, float]:
