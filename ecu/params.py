@@ -18,7 +18,7 @@ RATE_WINDOW_MAX_S = 0.05
 RATE_BUF_LEN = RATE_MAX_HZ // 20 + 2  # central-difference ring: 0.05 s at 1000 Hz, +2 samples
 
 CONTROLLERS = ("mrac", "pid", "open_loop", "pi")
-# how the document's printed gains are read (shared/reference/thesis_errata.md, docs/errata.md):
+# how the document's printed gains are read (docs/errata.md, "Two readings"):
 # "printed": f = [dN dV, dN^2 dV] and an absolute Lambda, as eq. 3.11 and 4.7 print them;
 # "reproducing": f in the order of eq. 3.10, [dN^2 dV, dN dV], and Lambda a factor of
 # B_p = [0, b0] (b0 = READING_B0), the reading that reproduces the published sec. 4.2 / 5.2 results

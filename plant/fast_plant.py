@@ -118,8 +118,10 @@ def fast_period(
     s: np.ndarray, t: np.ndarray, u: float, pump_enabled: bool, tick: int, pump_in_loop: bool
 ) -> int:
     """One ECU period of the fast plant on its state array s and tables t: pump wear, driver
-    and battery at duty u (the pump is always in the loop here), eq. 3.24 (advance_fast), the
-    running line at the new speed, limits and sensors into s. Returns the flags."""
+    and battery at duty u, eq. 3.24 (advance_fast), the running line at the new speed, limits
+    and sensors into s. Returns the flags. The pump is always in the loop here: pump_in_loop is
+    there for the kernels' common signature (PlantBase._period_with calls either plant's kernel
+    with it; aero_period's fuel-commanded periods pass False), and is not read."""
     if pump_health(s):
         _theta_changed(s)
     n_axis = vec(t, 0)

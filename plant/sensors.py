@@ -166,7 +166,3 @@ class Thermocouple:
     @open_circuit.setter
     def open_circuit(self, on: bool) -> None:
         self._s[self._b + TC_OPEN] = 1.0 if on else 0.0
-
-    @property
-    def probe_k(self) -> float:
-        return float(self._s[self._b + TC_PROBE])

@@ -14,14 +14,14 @@ LEVELS_PCT = (83.0, 90.0, 94.0, 97.0, 94.0, 90.0, 83.0)
 DT_S = 0.001
 
 
-def steady_fuel_for(model: EngineModel, table: dict[str, np.ndarray], n_pct: float) -> float:
+def steady_fuel_for(table: dict[str, np.ndarray], n_pct: float) -> float:
     """Fuel flow of the running line at n_pct (running-line table from plant.steady_line)."""
     return float(np.interp(n_pct, table["N_pct"], table["fuel_kg_s"]))
 
 
 def steady_voltage_for(model: EngineModel, table: dict[str, np.ndarray], n_pct: float) -> float:
     """Pump voltage holding the engine at n_pct: the running-line fuel against its P3."""
-    g_fuel = steady_fuel_for(model, table, n_pct)
+    g_fuel = steady_fuel_for(table, n_pct)
     s = solve_steady(model, g_fuel)
     p = model.params
     p_out = s.x[0] + p.injector_dp_pa - p.p0_pa

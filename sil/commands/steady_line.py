@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     csv_path, png_path = args.out / "steady_line.csv", args.out / "steady_line.png"
     write_csv(table, csv_path)
     plot(table, png_path)
-    fuels = [staircase.steady_fuel_for(model, table, n) for n in staircase.LEVELS_PCT]
+    fuels = [staircase.steady_fuel_for(table, n) for n in staircase.LEVELS_PCT]
     t, x, u = staircase.run(model, solve_steady(model, 0.008).x, fuels, 8.0, pump_in_loop=False)
     stairs_path = args.out / "staircase.png"
     staircase.plot(t, x, u, str(stairs_path))

@@ -23,8 +23,8 @@ from sil.verify import aero, fast
 from sil.verify.fast import RunResult, rms
 from sil.verify.rows import Row, check, info, rel
 
-# sec. 4.2 and 5.2 results as published (shared/reference/thesis_reference.json); Theta_f-hat is
-# printed in the order [dN dV, dN^2 dV] and K_f in the order of eq. 3.10, [dN^2 dV, dN dV]
+# sec. 4.2 and 5.2 results as published (eq. 4.34-4.41 and 5.33-5.38); Theta_f-hat is printed
+# in the order [dN dV, dN^2 dV] and K_f in the order of eq. 3.10, [dN^2 dV, dN dV]
 # (K_f = -Theta_f-hat / Lambda-hat reversed: docs/errata.md)
 PUBLISHED = {
     "sec4_2": {"ap21": -1.805, "ap22": -2.336, "lam": 4.821,
@@ -35,8 +35,8 @@ PUBLISHED = {
                "kf_dn2dv": -0.0008, "kf_dndv": 0.03831},
 }  # fmt: skip
 # the printed set-up's values, predicted by an independent float64 integration of the printed
-# equations (continuous time, and RK4 at 1 ms; shared/reference/thesis_errata.md); tests recompute
-# the sec. 4.2 ones
+# equations (continuous time, and RK4 at 1 ms; docs/errata.md, "Why the printed set-up cannot
+# reach the published results"); tests recompute the sec. 4.2 ones
 PREDICTED_PRINTED = {
     "sec4_2": {"ap21": -1.333, "ap22": -1.190, "lam": 1.018},
     "sec5_2": {"ap21": -1.819, "ap22": -2.264, "lam": 4.304,

@@ -115,6 +115,7 @@ class AeroTruth:
     the pump voltage (deviation from trim) as input, no sensor noise."""
 
     def __init__(self, dt_s: float) -> None:
+        self.dt_s = dt_s
         cfg = PlantConfig(ecu_period_s=dt_s, speed_pickup=SpeedPickupConfig(noise_rpm=0.0))
         self.plant = AeroThermalPlant(cfg)
         self.trim_v = self.plant.trim_pump_voltage
@@ -132,6 +133,10 @@ class AeroTruth:
         return self.out.n_pct
 
     def step(self, dv_volt: float, dt_s: float) -> None:
+        """One period of the plant (``dt_s``: the caller's step, as fast.TruePlant passes it,
+        which must be the period the plant was built with)."""
+        if not math.isclose(dt_s, self.dt_s, rel_tol=1e-12):
+            raise ValueError(f"AeroTruth steps {self.dt_s} s (its plant's period), not {dt_s} s")
         duty = min(max((self.trim_v + dv_volt) / self.out.supply_v, 0.0), 1.0)
         self.out = self.plant.step(duty)
         self._update()

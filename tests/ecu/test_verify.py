@@ -4,8 +4,8 @@ in both readings of the document (ecu.params.READINGS).
 Module-scoped runs feed the tests: the fixed-point kernels on the true state and their float64
 twin, the whole firmware and its twin on whole-rpm speed. The expectations are independent of
 the code under test: the published numbers, the reproducing reading's figures and the printed
-set-up's predictions of an independent integration (shared/reference/thesis_errata.md), and a
-continuous-time integration written here.
+set-up's predictions of an independent integration (docs/errata.md), and a continuous-time
+integration written here.
 """
 
 from __future__ import annotations

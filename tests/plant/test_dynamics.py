@@ -16,7 +16,7 @@ HOLD_S = 6.0
 
 @pytest.fixture(scope="module")
 def fuel_staircase(model, trim, running):
-    fuels = [staircase.steady_fuel_for(model, running, n) for n in staircase.LEVELS_PCT]
+    fuels = [staircase.steady_fuel_for(running, n) for n in staircase.LEVELS_PCT]
     return staircase.run(model, trim.x, fuels, HOLD_S, pump_in_loop=False)
 
 

@@ -1,6 +1,7 @@
 """`sil verify`'s aero-thermal sections: the trim, the identified models, sec. 4.3/5.3, the
-controller tests of sec. 5.4 and the claims of ch. 6, against the published numbers
-(shared/reference/thesis_reference.json); and the rows' own arithmetic."""
+controller tests of sec. 5.4 and the claims of ch. 6, against the published numbers (the
+reference data file REF, kept next to the repository, is read as data); and the rows' own
+arithmetic."""
 
 from __future__ import annotations
 
