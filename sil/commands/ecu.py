@@ -207,6 +207,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
     listen_for(node, bus)  # its filters set before it says it is ready
+    if node.xcp is not None:  # said once the node listens: a master may connect from now on
+        x = node.xcp
+        print(f"xcp: CAN IDs 0x{x.cmd_id:03X} (master) 0x{x.res_id:03X} (ECU)", file=sys.stderr,
+              flush=True)  # fmt: skip
     if args.ready_file:
         args.ready_file.write_text("ready\n")
     stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
@@ -256,7 +260,6 @@ def _attach_xcp(node, booted, args: argparse.Namespace) -> None:  # noqa: ANN001
 
     bench = node.service.bench_control if node.service is not None else None
     node.attach_xcp(XcpSlave(node.ecu, booted, bench, ids=ids, clock_us=clock_us))
-    print(f"xcp: CAN IDs 0x{ids[0]:03X} (master) 0x{ids[1]:03X} (ECU)", file=sys.stderr, flush=True)
 
 
 def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)
