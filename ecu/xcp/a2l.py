@@ -301,7 +301,7 @@ def a2l_text(rate_hz: int | None = None, ids: tuple[int, int] = S.DEFAULT_IDS) -
     for k, m in enumerate(MEM.MEASUREMENTS):
         conv = use(Conversion(m.factor, m.unit, m.values, m.name if m.values else ""))
         body.append(
-            f"    /begin MEASUREMENT {m.name} {_text(m.description)} SLONG {conv.name} 1 0 "
+            f"    /begin MEASUREMENT {m.name} {_text(m.description)} {m.datatype} {conv.name} 1 0 "
             f"{_number(m.lo)} {_number(m.hi)}\n"
             f"      ECU_ADDRESS 0x{MEM.measurement_address(k):08X}\n"
             f'      FORMAT "{FORMAT}"\n'
@@ -350,7 +350,7 @@ def _mod_par(identification: str, epk_address: int) -> str:
         ("Calibration", "parameters (raw Q integers)", "CALIBRATION_VARIABLES", "RAM",
          MEM.CAL_BASE, 4 * len(TABLE)),
         ("Measurement", "the firmware's state after its last tick", "VARIABLES", "RAM",
-         MEM.MEAS_BASE, 4 * len(MEM.MEASUREMENTS)),
+         MEM.MEAS_BASE, MEM.MEAS_SIZE),
         ("Bench", "the bench's arm, stop and throttle", "VARIABLES", "RAM", MEM.BENCH_BASE,
          4 * len(MEM.BENCH)),
         ("AxisPoints", "the fuel schedules' breakpoints", "DATA", "FLASH", MEM.AXIS_BASE,

@@ -4,19 +4,22 @@
   (:data:`ecu.service.param_table.TABLE`) in table order, one int32 raw Q integer each (the
   fuel schedules' tables are consecutive: arrays); read, and written through the parameter
   checks;
-- measurement, 0x20010000: the firmware's state after its last tick (:data:`MEASUREMENTS`), one
-  int32 each; read only;
+- measurement, 0x20010000: the firmware's state after its last tick (:data:`MEASUREMENTS`), each
+  in its own C type (UBYTE codes and flags, 16-bit words where the CAN contract's range fits,
+  int32 otherwise), at an address aligned to its size; read only;
 - bench, 0x20020000: the bench's arm, stop and throttle (:data:`BENCH`), one int32 each; a read
   gives the bench's state, a write is the bench command;
 - axis points, 0x08000000: the fuel schedules' breakpoints, %N corrected (Q7.24); read only;
 - text, 0x08001000: the identification, the A2L's name and the event channels' names (ASCII);
   read only.
 
-A parameter's address is ``CAL_BASE + 4 * index``, a measurement's ``MEAS_BASE + 4 * index``;
-new entries are only ever appended, so addresses stay where they are. The regions are what an
-A2L describes (:mod:`ecu.xcp.a2l` writes it from these same tables). Reads are served from a
-buffer per region: the calibration image is rebuilt when the parameter set changes, the
-measurement image once per tick at most (when something reads it), so a read costs a slice.
+A parameter's address is ``CAL_BASE + 4 * index``, a measurement's its place after those
+before it (:func:`measurement_address`); new entries are only ever appended, so addresses stay
+where they are. A measurement holds the firmware's value saturated to its type. The regions
+are what an A2L describes (:mod:`ecu.xcp.a2l` writes it from these same tables). Reads are
+served from a buffer per region: the calibration image is rebuilt when the parameter set
+changes, the measurement image once per tick at most (when something reads it), so a read
+costs a slice.
 """
 
 from __future__ import annotations
@@ -44,12 +47,23 @@ Q24 = 1.0 / (1 << 24)
 OWNER_NAMES = ("SPEED", "EGT_LIMIT", "ACCEL_LIMIT", "OVERSPEED_LIMIT", "DECEL_FLOOR")
 
 
+# A2L data type -> (struct code, bytes, lowest, highest)
+TYPES = {
+    "UBYTE": ("B", 1, 0, 0xFF),
+    "UWORD": ("H", 2, 0, 0xFFFF),
+    "SWORD": ("h", 2, -0x8000, 0x7FFF),
+    "SLONG": ("i", 4, -0x8000_0000, 0x7FFF_FFFF),
+}
+
+
 @dataclass(frozen=True)
 class Measurement:
-    """One int32 of the measurement region: physical value = raw * factor, in ``unit``;
-    ``lo``..``hi`` its physical range; ``values`` names the raw codes of an enumeration."""
+    """One value of the measurement region, of A2L type ``datatype``: physical value = raw *
+    factor, in ``unit``; ``lo``..``hi`` its physical range; ``values`` names the raw codes of an
+    enumeration."""
 
     name: str
+    datatype: str
     description: str
     unit: str
     factor: float
@@ -57,62 +71,95 @@ class Measurement:
     hi: float
     values: tuple[str, ...] = ()
 
+    @property
+    def size(self) -> int:
+        return TYPES[self.datatype][1]
 
-def _m(name: str, description: str, unit: str, factor: float, lo: float, hi: float,
-       values: tuple[str, ...] = ()) -> Measurement:  # fmt: skip
-    return Measurement(name, description, unit, factor, lo, hi, values)
+
+def _m(name: str, datatype: str, description: str, unit: str, factor: float, lo: float,
+       hi: float, values: tuple[str, ...] = ()) -> Measurement:  # fmt: skip
+    return Measurement(name, datatype, description, unit, factor, lo, hi, values)
 
 
 I32 = 2147483647.0
+U8, U16, S16, S32 = "UBYTE", "UWORD", "SWORD", "SLONG"
 MEASUREMENTS: tuple[Measurement, ...] = (
-    _m("ticks", "ticks run since power-up", "", 1.0, 0, I32),
-    _m("mode", "ECU mode", "", 1.0, 0, 4, M.NAMES),
-    _m("fault_word", "fault word (ecu.faults)", "", 1.0, 0, 65535),
-    _m("speed", "shaft speed used by the control (measured or substituted)", "%", 0.01, 0, 150),
-    _m("speed_rpm", "shaft speed as read", "rpm", 1.0, 0, 150000),
-    _m("speed_ref", "reference-model speed", "%", 0.01, 0, 150),
-    _m("speed_rate", "speed rate (central difference or observer)", "%/s", Q24, -128, 128),
-    _m("egt", "EGT as read", "K", 0.1, 0, 1638.3),
+    _m("ticks", S32, "ticks run since power-up", "", 1.0, 0, I32),
+    _m("mode", U8, "ECU mode", "", 1.0, 0, 4, M.NAMES),
+    _m("fault_word", U16, "fault word (ecu.faults)", "", 1.0, 0, 65535),
+    _m(
+        "speed",
+        S16,
+        "shaft speed used by the control (measured or substituted)",
+        "%",
+        0.01,
+        -327.68,
+        327.67,
+    ),  # fmt: skip
+    _m("speed_rpm", S32, "shaft speed as read", "rpm", 1.0, 0, 262143),
+    _m("speed_ref", S16, "reference-model speed", "%", 0.01, -327.68, 327.67),
+    _m("speed_rate", S32, "speed rate (central difference or observer)", "%/s", Q24, -128, 128),
+    _m("egt", S16, "EGT as read", "K", 0.1, 0, 1638.3),
     _m(
         "egt_gas",
+        S32,
         "gas temperature estimate (EGT lead; 0: no reading yet)",
         "K",
         0.1 / 4096,
         0,
         5000,
     ),  # fmt: skip
-    _m("pump_voltage", "pump voltage command", "V", 0.001, -30, 30),
-    _m("pump_duty", "pump PWM duty", "%", 0.01, 0, 100),
-    _m("pump_enable", "pump driver enable", "", 1.0, 0, 1),
-    _m("supply", "supply voltage", "V", 0.001, 0, 65.535),
-    _m("pump_current", "pump current", "A", 0.001, 0, 65.535),
-    _m("pump_health", "pump health (Lambda-hat / commissioned)", "%", 0.1, 0, 1000),
-    _m("owner", "loop owning the pump command", "", 1.0, 0, 4, OWNER_NAMES),
-    _m("seq_state", "start/stop sequencer step", "", 1.0, 0, 8, Q.NAMES),
-    _m("seq_reason", "last start's abort reason", "", 1.0, 0, 6, Q.REASONS),
-    _m("seq_time", "time in the sequencer's step", "s", 0.001, 0, I32 / 1000),
-    _m("starter", "starter PWM duty", "%", 0.01, 0, 100),
-    _m("igniter", "igniter on", "", 1.0, 0, 1),
-    _m("ap21", "estimate A_p21", "1/s2", Q24, -128, 128),
-    _m("ap22", "estimate A_p22", "1/s", Q24, -128, 128),
-    _m("lambda", "estimate Lambda", "%/(V s2)", Q24, -128, 128),
-    _m("theta21", "estimate Theta_f21", "", Q24, -128, 128),
-    _m("theta22", "estimate Theta_f22", "", Q24, -128, 128),
-    _m("kx1", "MRAC gain K_x1", "V/%", Q24, -128, 128),
-    _m("kx2", "MRAC gain K_x2", "V s/%", Q24, -128, 128),
-    _m("kr", "MRAC gain K_r", "V/%", Q24, -128, 128),
-    _m("kf1", "MRAC gain K_f1", "", Q24, -128, 128),
-    _m("kf2", "MRAC gain K_f2", "", Q24, -128, 128),
-    _m("obs_speed_dev", "fast-model observer: speed deviation from trim", "%", Q24, -128, 128),
-    _m("obs_speed_rate", "fast-model observer: speed rate", "%/s", Q24, -128, 128),
-    _m("sat_events", "saturations since power-up", "", 1.0, 0, I32),
-    _m("inputs_valid", "valid speed and EGT readings since power-up", "", 1.0, 0, 1),
-    _m("demand", "speed demand in force", "%", Q24, -128, 128),
-    _m("demand_source", "demand source", "", 1.0, 0, 2, BD.SOURCE_NAMES),
-    _m("egt_start_target", "the start's EGT target on the day", "K", 0.1, 0, 5000),
+    _m("pump_voltage", S16, "pump voltage command", "V", 0.001, -32.768, 32.767),
+    _m("pump_duty", S16, "pump PWM duty", "%", 0.01, 0, 100),
+    _m("pump_enable", U8, "pump driver enable", "", 1.0, 0, 1),
+    _m("supply", U16, "supply voltage", "V", 0.001, 0, 65.535),
+    _m("pump_current", U16, "pump current", "A", 0.001, 0, 65.535),
+    _m("pump_health", S32, "pump health (Lambda-hat / commissioned)", "%", 0.1, 0, 100000),
+    _m("owner", U8, "loop owning the pump command", "", 1.0, 0, 4, OWNER_NAMES),
+    _m("seq_state", U8, "start/stop sequencer step", "", 1.0, 0, 8, Q.NAMES),
+    _m("seq_reason", U8, "last start's abort reason", "", 1.0, 0, 6, Q.REASONS),
+    _m("seq_time", S32, "time in the sequencer's step", "s", 0.001, 0, I32 / 1000),
+    _m("starter", S16, "starter PWM duty", "%", 0.01, 0, 100),
+    _m("igniter", U8, "igniter on", "", 1.0, 0, 1),
+    _m("ap21", S32, "estimate A_p21", "1/s2", Q24, -128, 128),
+    _m("ap22", S32, "estimate A_p22", "1/s", Q24, -128, 128),
+    _m("lambda", S32, "estimate Lambda", "%/(V s2)", Q24, -128, 128),
+    _m("theta21", S32, "estimate Theta_f21", "", Q24, -128, 128),
+    _m("theta22", S32, "estimate Theta_f22", "", Q24, -128, 128),
+    _m("kx1", S32, "MRAC gain K_x1", "V/%", Q24, -128, 128),
+    _m("kx2", S32, "MRAC gain K_x2", "V s/%", Q24, -128, 128),
+    _m("kr", S32, "MRAC gain K_r", "V/%", Q24, -128, 128),
+    _m("kf1", S32, "MRAC gain K_f1", "", Q24, -128, 128),
+    _m("kf2", S32, "MRAC gain K_f2", "", Q24, -128, 128),
+    _m(
+        "obs_speed_dev", S32, "fast-model observer: speed deviation from trim", "%", Q24, -128, 128
+    ),  # fmt: skip
+    _m("obs_speed_rate", S32, "fast-model observer: speed rate", "%/s", Q24, -128, 128),
+    _m("sat_events", S32, "saturations since power-up", "", 1.0, 0, I32),
+    _m("inputs_valid", U8, "valid speed and EGT readings since power-up", "", 1.0, 0, 1),
+    _m("demand", S32, "speed demand in force", "%", Q24, -128, 128),
+    _m("demand_source", U8, "demand source", "", 1.0, 0, 2, BD.SOURCE_NAMES),
+    _m("egt_start_target", S16, "the start's EGT target on the day", "K", 0.1, 0, 3276.7),
 )
 MEAS_INDEX = {m.name: k for k, m in enumerate(MEASUREMENTS)}
-_MEAS = struct.Struct(f"<{len(MEASUREMENTS)}i")
+
+
+def _layout(measurements: tuple[Measurement, ...]) -> tuple[tuple[int, ...], str, int]:
+    """Offsets (each aligned to its size), the struct format with its pad bytes, the size."""
+    offsets, fmt, at = [], "<", 0
+    for m in measurements:
+        pad = -at % m.size
+        fmt += "x" * pad + TYPES[m.datatype][0]
+        at += pad
+        offsets.append(at)
+        at += m.size
+    pad = -at % WORD
+    return tuple(offsets), fmt + "x" * pad, at + pad
+
+
+MEAS_OFFSETS, _MEAS_FORMAT, MEAS_SIZE = _layout(MEASUREMENTS)
+_MEAS = struct.Struct(_MEAS_FORMAT)
+_BOUNDS = tuple((TYPES[m.datatype][2], TYPES[m.datatype][3]) for m in MEASUREMENTS)
 
 
 def measure(ecu: Ecu, demand_source: int) -> tuple[int, ...]:
@@ -194,7 +241,7 @@ class MemoryMap:
         self.texts = Texts(texts)
         self._cal = bytearray(WORD * len(TABLE))
         self._cal_version = -1
-        self._meas = bytearray(_MEAS.size)
+        self._meas = bytearray(MEAS_SIZE)
         self._meas_tick = -1
         self._bench = bytearray(WORD * len(BENCH))
         axis = struct.pack(f"<{len(AXIS)}i", *AXIS)
@@ -234,10 +281,15 @@ class MemoryMap:
         return self._cal
 
     def _meas_image(self) -> bytearray:
-        """The measurements of the last tick, packed once per tick."""
+        """The measurements of the last tick, each saturated to its type, packed once per
+        tick."""
         ticks = self.ecu.s.ticks
         if ticks != self._meas_tick:
-            _MEAS.pack_into(self._meas, 0, *measure(self.ecu, self.bench.source))
+            values = [
+                lo if v < lo else hi if v > hi else v
+                for v, (lo, hi) in zip(measure(self.ecu, self.bench.source), _BOUNDS, strict=True)
+            ]
+            _MEAS.pack_into(self._meas, 0, *values)
             self._meas_tick = ticks
         return self._meas
 
@@ -259,7 +311,7 @@ def parameter_address(index: int) -> int:
 
 
 def measurement_address(index: int) -> int:
-    return MEAS_BASE + WORD * index
+    return MEAS_BASE + MEAS_OFFSETS[index]
 
 
 def bench_address(index: int) -> int:

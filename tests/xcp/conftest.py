@@ -119,3 +119,45 @@ def udp_group() -> tuple[str, int]:
     """A loopback multicast group and port no other test uses."""
     rng = random.Random(os.getpid() ^ time.time_ns())
     return f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", rng.randrange(20000, 60000)
+
+
+def pyxcp_master(
+    interface: str, channel: str, *, policy=None, bus=None, handle_errors=False, **params
+):
+    """pyXCP's master as it is, configured in code (no pyxcp_conf.py): XCP on CAN over the
+    python-can ``interface`` (``turbojet_udp``, ``slcan``, ...) on ``channel``, the DBC's IDs,
+    the seed and key of ecu.xcp.seed_key; ``params``: the interface's further arguments (for
+    the loopback bus, ``port``); ``bus``: a python-can bus to use instead of opening one;
+    ``handle_errors``: pyXCP's own error handling (off: refusals raise XcpResponseError)."""
+    import logging
+
+    from pyxcp.config import PyXCP
+    from pyxcp.master import Master
+    from traitlets.config import Config
+
+    from protocol.dbc import xcp_frame_ids
+
+    cmd, res = xcp_frame_ids()
+    c = Config()
+    c.Transport.layer = "CAN"
+    c.Transport.Can.interface = interface
+    c.Transport.Can.channel = channel
+    c.Transport.Can.can_id_master = cmd
+    c.Transport.Can.can_id_slave = res
+    c.Transport.Can.bitrate = 500_000
+    if interface == "slcan":
+        c.SlCan.sleep_after_open = 0.0
+    else:
+        c.CanCustom.extra_params = params
+    c.General.seed_n_key_function = lambda resource, seed: key_for(bytes(seed))
+    # pyXCP's error handler ends the process (SystemExit) on an error it cannot recover from;
+    # without it a refusal is an XcpResponseError carrying the slave's error code
+    c.General.disable_error_handling = not handle_errors
+    app = PyXCP(config=c)
+    app.log_level = logging.WARNING
+    app._setup_logger()
+    from pyxcp.config import General, Transport
+
+    app.general = General(config=app.config, parent=app)
+    app.transport = Transport(parent=app)
+    return Master("CAN", config=app, policy=policy, transport_layer_interface=bus)

@@ -85,7 +85,8 @@ def test_every_characteristic_uploads_the_slaves_values(a2l, rig):
 def test_measurements_ids_epk_and_events_are_the_slaves(a2l, rig):
     for m in a2l["measurements"]:
         k = MEM.MEAS_INDEX[m["name"]]
-        assert m["address"] == MEM.measurement_address(k) and m["type"] == "SLONG"
+        assert m["address"] == MEM.measurement_address(k)
+        assert m["type"] == MEM.MEASUREMENTS[k].datatype
         assert m["factor"] in (None, MEM.MEASUREMENTS[k].factor)  # None: a value table
     assert a2l["can"] == [0x700, 0x701]
     rig.connect()

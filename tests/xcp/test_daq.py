@@ -72,8 +72,8 @@ def test_a_list_on_the_control_tick_samples_every_tick_with_its_timestamp(rig):
     rig.connect()
     rig.unlock(C.RES_DAQ)
     rig.at_rest()
-    # ODT 0: the timestamp and 3 bytes; then the tick count and the EGT whole, 7-byte entries
-    odts = [[(meas("ticks"), 3)], [(meas("ticks") + 3, 1), (meas("egt"), 4)]]
+    # ODT 0: the timestamp and 3 bytes; then the tick count's last byte and the EGT (a SWORD)
+    odts = [[(meas("ticks"), 3)], [(meas("ticks") + 3, 1), (meas("egt"), 2)]]
     (first,) = configure(rig, [(0, 1, odts)])
     assert rig.request(C.Cmd.GET_STATUS)[1] & C.SESSION_DAQ_RUNNING
     for k in range(1, 6):
@@ -82,7 +82,7 @@ def test_a_list_on_the_control_tick_samples_every_tick_with_its_timestamp(rig):
         (stamp,) = struct.unpack_from("<I", dtos[0], 1)
         assert stamp == k * 10_000  # the ECU's time after tick k, in us (100 Hz)
         ticks = int.from_bytes(dtos[0][5:8] + dtos[1][1:2], "little")
-        (egt,) = struct.unpack_from("<i", dtos[1], 2)
+        (egt,) = struct.unpack_from("<h", dtos[1], 2)
         assert (ticks, egt) == (k, 2_900)
     res = rig.request(C.Cmd.GET_DAQ_CLOCK)
     assert res[:4] == bytes((0xFF, 0, 0, 0)) and struct.unpack_from("<I", res, 4)[0] == 50_000

@@ -74,14 +74,14 @@ def _daq_setup() -> list[bytes]:
     """A master's DAQ set-up of 20 measurements on the control tick (after CONNECT and the
     DAQ unlock), as frames."""
     frames = [bytes((C.Cmd.FREE_DAQ,)), bytes((C.Cmd.ALLOC_DAQ, 0, 1, 0))]
-    addresses = [MEM.measurement_address(k) for k in range(20)]
-    odts = [addresses[:0]] + [addresses[k : k + 1] for k in range(20)]  # ODT 0: the stamp
+    entries = [(MEM.measurement_address(k), m.size) for k, m in enumerate(MEM.MEASUREMENTS[:20])]
+    odts = [entries[:0]] + [entries[k : k + 1] for k in range(20)]  # ODT 0: the stamp
     frames.append(bytes((C.Cmd.ALLOC_ODT, 0, 0, 0, len(odts))))
     frames += [bytes((C.Cmd.ALLOC_ODT_ENTRY, 0, 0, 0, j, len(o))) for j, o in enumerate(odts)]
     for j, odt in enumerate(odts):
         if odt:
             frames.append(bytes((C.Cmd.SET_DAQ_PTR, 0, 0, 0, j, 0)))
-            frames += [struct.pack("<BBBBI", C.Cmd.WRITE_DAQ, 0xFF, 4, 0, a) for a in odt]
+            frames += [struct.pack("<BBBBI", C.Cmd.WRITE_DAQ, 0xFF, n, 0, a) for a, n in odt]
     frames.append(struct.pack("<BBHHBB", C.Cmd.SET_DAQ_LIST_MODE, 0x10, 0, 0, 1, 0))
     frames += [bytes((C.Cmd.START_STOP_DAQ_LIST, 2, 0, 0)), bytes((C.Cmd.START_STOP_SYNCH, 1))]
     return frames

@@ -82,8 +82,8 @@ def test_measurements_follow_the_ticks(rig):
     rig.at_rest()
     rig.tick(3)
     ticks = rig.short_upload(MEM.measurement_address(MEM.MEAS_INDEX["ticks"]), 4)
-    egt = rig.short_upload(MEM.measurement_address(MEM.MEAS_INDEX["egt"]), 4)
-    assert struct.unpack("<i", ticks[1:])[0] == 3 and struct.unpack("<i", egt[1:])[0] == 2_900
+    egt = rig.short_upload(MEM.measurement_address(MEM.MEAS_INDEX["egt"]), 2)  # a SWORD
+    assert struct.unpack("<i", ticks[1:])[0] == 3 and struct.unpack("<h", egt[1:])[0] == 2_900
 
 
 def test_uploads_outside_the_map_or_too_long_are_refused(rig):
@@ -151,3 +151,13 @@ def test_a_burst_of_frames_is_bounded_per_tick_and_counted(rig):
     assert len(served) == 48  # MAX_FRAMES a tick
     assert rig.slave.counters.queue_overflow == 200 - 64  # MAX_QUEUE waiting
     assert len(rig.serve()) == 64 - 48
+
+
+def test_a_measurement_outside_its_type_is_saturated_not_a_crash(rig):
+    rig.connect()
+    rig.at_rest()
+    rig.tick()
+    rig.ecu.s.egt_dk = 10**6  # beyond the SWORD it is measured in
+    rig.ecu.s.ticks += 1  # a new tick's image
+    res = rig.short_upload(MEM.measurement_address(MEM.MEAS_INDEX["egt"]), 2)
+    assert struct.unpack("<h", res[1:])[0] == 32767
