@@ -194,18 +194,22 @@ def run_lockstep(
     node: Node,
     bus: can.BusABC,
     *,
-    guard_s: float = 1.0,
+    guard_s: float | Callable[[], float] = 1.0,
     should_stop: Callable[[], bool] = lambda: False,
 ) -> DriverStats:
-    """Drive a node by the frames it hears; ``on_timeout`` after ``guard_s`` of silence."""
+    """Drive a node by the frames it hears; ``on_timeout`` after ``guard_s`` of silence (a
+    callable: the guard as it is now, looked at again while the node waits, so that a launcher
+    may shorten it)."""
     stats = DriverStats()
     send = bus_sender(bus, stats)
     receive = bus_receiver(bus)
     listen_for(node, bus)
     node.start(send)
     on_frame = node.on_frame
+    guard = guard_s if callable(guard_s) else (lambda: guard_s)
     while not node.finished and not should_stop():
-        got = _receive_within(receive, getattr(node, "timeout_s", None) or guard_s, should_stop)
+        timeout = getattr(node, "timeout_s", None)
+        got = _receive_within(receive, timeout or guard, should_stop)
         if type(got) is tuple:  # the usual case, inline
             stats.received += 1
             on_frame(got[0], got[1], send)
@@ -220,16 +224,24 @@ def run_lockstep(
 
 
 def _receive_within(
-    receive: Callable[[float | None], Received], timeout: float, should_stop: Callable[[], bool]
+    receive: Callable[[float | None], Received],
+    timeout: float | Callable[[], float],
+    should_stop: Callable[[], bool],
 ) -> Received | None:
     """A frame within ``timeout`` seconds, or None. Waits of more than ``STOP_POLL_S`` go in
     slices of that, with ``should_stop()`` between them: a stop request (a signal handler
     setting a flag while the wait is in a system call, which Python then resumes) ends the
-    wait within one slice, not the guard time."""
-    if timeout <= STOP_POLL_S:
-        return receive(timeout)
-    deadline = time.monotonic() + timeout
+    wait within one slice, not the guard time. A callable ``timeout`` is looked at again after
+    each slice."""
+    limit = timeout if callable(timeout) else None
+    first: float = limit() if limit is not None else timeout  # type: ignore[assignment]
+    if first <= STOP_POLL_S:
+        return receive(first)
+    start = time.monotonic()
+    deadline = start + first
     while (got := receive(STOP_POLL_S)) is None and not should_stop():
+        if limit is not None:
+            deadline = start + limit()
         left = deadline - time.monotonic()
         if left <= STOP_POLL_S:
             return receive(left) if left > 0 else None

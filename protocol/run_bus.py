@@ -6,6 +6,11 @@ frames of other runs are dropped and counted (``foreign_frames``). The SimRun be
 command node sends it with its run's RunId) is never handed on: a foreign one tells the runs
 apart (``foreign_runs``), so a run that ended and a later one with the same tag count as two.
 
+Within its own run's frames, a :class:`~protocol.run_sequence.RunSequence` given as ``sequence``
+tells the run's frames from another sender's of the same IDs (a replay of a log onto the run's
+bus, a device): those are dropped and counted too (``other_sender_frames``, per ID), and the
+frames of a lockstep turn are held until the turn's last frame.
+
 It offers what the node drivers use (:mod:`protocol.node`: ``send_frame``, ``recv_frame``,
 ``recv_frames`` where the wrapped bus has them) and the plain ``send``/``recv`` of any bus.
 """
@@ -14,9 +19,11 @@ from __future__ import annotations
 
 import struct
 import time
+from collections import deque
 
 import can
 
+from protocol.run_sequence import RunSequence
 from protocol.run_tag import DBC_ID_MASK, split_id, wire_id
 
 SIMRUN_ID = 2032  # the DBC's SimRun: RunId u32, RunTick u32, little-endian
@@ -33,7 +40,7 @@ def simrun_payload(run_id: int, run_tick: int) -> bytes:
 class RunBus(can.BusABC):
     """The frames of run ``tag`` on ``bus`` (which it owns: :meth:`shutdown` shuts it down)."""
 
-    def __init__(self, bus: can.BusABC, tag: int = 0) -> None:
+    def __init__(self, bus: can.BusABC, tag: int = 0, sequence: RunSequence | None = None) -> None:
         try:
             wire_id(tag, 0)  # refuses a bad tag
         except ValueError:
@@ -41,7 +48,10 @@ class RunBus(can.BusABC):
             raise
         self.bus = bus
         self.tag = tag
-        self.foreign_frames = 0
+        self.sequence = sequence
+        self._ready: deque[Frame] = deque()  # frames released by the sequence, not yet taken
+        self._relax = False  # relax() was asked for
+        self.foreign_frames = 0  # other runs' frames (see stats for another sender's)
         self._foreign: dict[int, set[int]] = {}  # foreign tag -> RunIds of its beacons
         self._recv_frames = getattr(bus, "recv_frames", None)
         self.channel_info = f"run tag {tag} on {bus.channel_info}"
@@ -55,19 +65,26 @@ class RunBus(can.BusABC):
         return sum(max(1, len(ids)) for ids in self._foreign.values())
 
     def stats(self) -> dict:
+        """``foreign_frames``: every frame dropped, other runs' and another sender's;
+        ``foreign_runs``; with a sequence, another sender's frames alone, per ID."""
+        other = self.sequence.stats() if self.sequence is not None else {}
         return {
             "run_tag": self.tag,
-            "foreign_frames": self.foreign_frames,
+            "foreign_frames": self.foreign_frames + other.get("other_sender_frames", 0),
             "foreign_runs": self.foreign_runs,
+            **other,
         }
 
     # -- sending --------------------------------------------------------------------------------
     def send_frame(self, frame_id: int, data: bytes | bytearray) -> None:
         if self.tag == 0 and (send_frame := getattr(self.bus, "send_frame", None)) is not None:
             send_frame(frame_id, data)
-            return
-        wire, extended = wire_id(self.tag, frame_id)
-        self.bus.send(can.Message(arbitration_id=wire, data=bytes(data), is_extended_id=extended))
+        else:
+            wire, extended = wire_id(self.tag, frame_id)
+            message = can.Message(arbitration_id=wire, data=bytes(data), is_extended_id=extended)
+            self.bus.send(message)
+        if self.sequence is not None:
+            self.sequence.sent(frame_id)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if msg.is_extended_id or msg.is_error_frame:
@@ -75,17 +92,27 @@ class RunBus(can.BusABC):
         wire, extended = wire_id(self.tag, msg.arbitration_id)
         out = msg if not extended else _with_id(msg, wire, extended)
         self.bus.send(out, timeout)
+        if self.sequence is not None:
+            self.sequence.sent(msg.arbitration_id)
 
     # -- receiving ------------------------------------------------------------------------------
     def recv_frame(self, timeout: float | None) -> Frame | None:
         """The next frame of this run (as the wrapped bus's ``recv_frame`` or ``recv`` gives
         it, with its DBC ID), or None after ``timeout`` seconds (None: wait for ever)."""
+        if self._relax:
+            self._relaxed()
+        if self._ready:
+            return self._ready.popleft()
         receive = getattr(self.bus, "recv_frame", self.bus.recv)
         deadline = None if timeout is None else time.monotonic() + timeout
         while (got := receive(timeout)) is not None:
             own = self._own(got)
             if own is not None:
-                return own
+                if self.sequence is None:
+                    return own
+                self._ready.extend(self._checked(own))
+                if self._ready:
+                    return self._ready.popleft()
             if deadline is not None:
                 timeout = max(0.0, deadline - time.monotonic())
         return None
@@ -93,15 +120,53 @@ class RunBus(can.BusABC):
     def recv_frames(self, timeout: float | None) -> list[Frame]:
         """Every frame of this run queued, as the wrapped bus's ``recv_frames`` gives them."""
         own = self._own
-        return [f for got in self._recv_frames(timeout) if (f := own(got)) is not None]
+        frames = [f for got in self._recv_frames(timeout) if (f := own(got)) is not None]
+        if self.sequence is None:
+            return frames
+        if self._relax:
+            self._relaxed()
+        out = list(self._ready)
+        self._ready.clear()
+        for frame in frames:
+            out += self._checked(frame)
+        return out
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._relax:
+            self._relaxed()
+        if self._ready:
+            ready = self._ready.popleft()
+            assert isinstance(ready, can.Message)
+            return ready, False
         msg = self.bus.recv(timeout)
         if msg is None:
             return None, False
         own = self._own(msg)
         assert own is None or isinstance(own, can.Message)
-        return own, False
+        if own is None or self.sequence is None:
+            return own, False
+        self._ready.extend(self._checked(own))
+        return (self._ready.popleft() if self._ready else None), False
+
+    def relax(self) -> None:
+        """The run's lockstep is over (:meth:`RunSequence.relax`): only another sender's frames
+        of this node's own IDs are dropped from the next read on, and the frames held are
+        handed on then (safe from a signal handler)."""
+        self._relax = self.sequence is not None
+
+    def _relaxed(self) -> None:
+        assert self.sequence is not None
+        self._relax = False
+        self._ready.extend(self.sequence.relax())
+
+    def _checked(self, frame: Frame) -> list[Frame]:
+        """The frames the sequence hands on for one frame of this run (with its DBC ID)."""
+        assert self.sequence is not None
+        if type(frame) is tuple:
+            return self.sequence.heard(frame, frame[0], frame[1])
+        if frame.is_error_frame or frame.is_remote_frame or frame.is_fd or frame.is_extended_id:
+            return [frame]  # of no run: the driver counts it (protocol.node)
+        return self.sequence.heard(frame, frame.arbitration_id, frame.data)
 
     def _own(self, got: Frame) -> Frame | None:
         """The frame as this run's node sees it, or None (another run's, or a beacon)."""
@@ -141,6 +206,8 @@ class RunBus(can.BusABC):
             return
         ids = {(f["can_id"] & DBC_ID_MASK, f["can_mask"] & DBC_ID_MASK) for f in filters}
         ids.add((SIMRUN_ID, DBC_ID_MASK))
+        if self.sequence is not None:  # another sender's frames of the node's own IDs: counted
+            ids.update((i, DBC_ID_MASK) for i in self.sequence.own_ids)
         self.bus.set_filters([{"can_id": i, "can_mask": m} for i, m in sorted(ids)])
 
     def fileno(self) -> int:

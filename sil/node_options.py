@@ -6,8 +6,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ecu.port.build import PIL_LINKS
+
+if TYPE_CHECKING:
+    from protocol.codec import Codec
 
 
 def add_launcher_options(parser: argparse.ArgumentParser) -> None:
@@ -21,12 +25,35 @@ def add_launcher_options(parser: argparse.ArgumentParser) -> None:
         "the DBC IDs as they are; frames of other tags are dropped and counted",
     )
     parser.add_argument(
+        "--foreign-frames",
+        choices=("ids", "sequence"),
+        help="in a run (sil run gives it): drop and count another sender's frames: 'ids' those "
+        "of the IDs this node sends, 'sequence' also those that break the run's lockstep "
+        "sequence (protocol.run_sequence)",
+    )
+    parser.add_argument(
         "--stats-file",
         type=Path,
         metavar="PATH",
         help="write the run summary (frames, timeouts; in real time the periods' jitter and "
         "overruns) as JSON to this file at the end (for launchers)",
     )
+
+
+def run_sequence(  # noqa: ANN201 (RunSequence | None: protocol imported when needed)
+    args: argparse.Namespace, codec: Codec | None, role: str, rate_hz: float
+):
+    """The node's :class:`~protocol.run_sequence.RunSequence` as ``--foreign-frames`` asks
+    (None without it); ``role``: the DBC sender the node is (Plant, ECU); ``codec``: the
+    node's, or None for one of its own."""
+    from protocol.codec import Codec
+    from protocol.run_sequence import RunSequence, sent_by
+
+    if args.foreign_frames is None:
+        return None
+    codec = codec or Codec()
+    strict = args.foreign_frames == "sequence"
+    return RunSequence(codec, rate_hz, sent_by(codec, role), strict=strict)
 
 
 def add_pil_link(parser: argparse.ArgumentParser, applies: str) -> None:

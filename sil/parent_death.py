@@ -1,7 +1,8 @@
 """Child processes of a run die with it: Linux sends them SIGTERM when the parent ends
 (``PR_SET_PDEATHSIG``), however it ends, so a killed run leaves no process behind. A parent
 killed before its child asked for that signal sends none; so the child is also told its parent's
-pid (``PARENT_ENV``) and a node stops as on SIGTERM once its parent is another (``NodeStop``)."""
+pid (``PARENT_ENV``) and a node stops as on SIGTERM once its parent is another (``NodeStop``).
+A node whose peer the run found dead is told so (``PeerLost``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable
 
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 PARENT_ENV = "SIL_PARENT_PID"
@@ -43,3 +45,32 @@ class NodeStop:
         if not self._event.is_set() and self._parent and os.getppid() != self._parent:
             self._event.set()
         return self._event.is_set()
+
+
+PEER_LOST_SIGNAL = signal.SIGUSR1
+PEER_LOST_GUARD_S = 0.02  # a node told its peer is gone waits no longer than this for a frame
+
+
+class PeerLost:
+    """The run's word that this node's peer is gone (``sil run`` sends SIGUSR1 once it has
+    found the peer dead, stopped or stuck): in lockstep the node, which waited as long as the
+    run let it, now runs on its own clock (its guard becomes :data:`PEER_LOST_GUARD_S`), so
+    that its reaction to the loss is recorded; ``on_lost`` runs then (in the main thread)."""
+
+    def __init__(self, on_lost: Callable[[], None] | None = None) -> None:
+        self._lost = False
+        self._on_lost = on_lost
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(PEER_LOST_SIGNAL, self._handle)
+
+    def _handle(self, *_: object) -> None:
+        self._lost = True
+        if self._on_lost is not None:
+            self._on_lost()
+
+    def is_set(self) -> bool:
+        return self._lost
+
+    def guard(self, guard_s: float) -> Callable[[], float]:
+        """The node's lockstep guard: ``guard_s`` until the peer is lost."""
+        return lambda: PEER_LOST_GUARD_S if self._lost else guard_s

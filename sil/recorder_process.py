@@ -9,8 +9,11 @@ and the command node's ``commands_sent``, in order and sends them in batches to 
 which hands them in the same order to a Recorder there (whole ticks given at once, by
 ``record_ticks``, go as one message, after the frames before them). The files are therefore the
 ones the Recorder writes in the run's process, byte for byte. The child is on no node's critical
-path, so it runs at the lowest priority (niceness 19): a node that wakes up takes the core from it
-at once, and it still gets a share of a busy machine, so it never starves.
+path, so once its Recorder is made it runs at the lowest priority (niceness 19): a node that wakes
+up takes the core from it at once, and it still gets a share of a busy machine, so it never
+starves. (Its start-up, imports and all, runs at the run's priority: at the lowest, on a machine
+loaded by other work, it would take minutes.) On a loaded machine it may fall behind the run; its
+parent waits for it as long as it works (:meth:`RecorderProcess.close`).
 
 While the run goes, the command node reads back the newest sensor tick (taken from the frames
 here, as the Recorder takes it) and the ticks answered: one per EcuActuator, since no frame is
@@ -36,6 +39,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from array import array
 from collections.abc import Callable
 from pathlib import Path
@@ -54,7 +58,7 @@ READY = b"R"  # the child to the parent: its Recorder is made (then, at the end,
 ERROR = "error"  # ... or, in place of its figures, why it failed (a file it could not write)
 _TICKS = "ticks"  # tags a block of whole ticks: (_TICKS, int32 IDs, (frames, 8) uint8 payload)
 T = TypeVar("T")
-CLOSE_TIMEOUT_S = 60.0  # the child's last chunk and its figures, at most
+CLOSE_TIMEOUT_S = 60.0  # the child's start, or its last chunk: at most this long asleep
 NICE = 19  # the child's niceness: it is on no node's critical path, so a node that wakes up
 # never waits for it (SCHED_IDLE did no better, and an unprivileged process could not leave it to
 # write its last chunks on a busy machine)
@@ -115,10 +119,27 @@ class RecorderProcess(InOrderTicks):
     def _wait_ready(self) -> None:
         stdout = self._child.stdout
         assert stdout is not None
-        ready, _, _ = select.select([stdout], [], [], CLOSE_TIMEOUT_S)
+        ready = self._while_working(lambda s: bool(select.select([stdout], [], [], s)[0]))
         if not ready or stdout.read(1) != READY:  # (the child failed: its exit code tells)
             self._broken = True
         self._ready = True
+
+    def _while_working(self, wait: Callable[[float], bool]) -> bool:
+        """``wait(seconds)`` until it returns True, for as long as the child is working (it,
+        or a child of it, uses CPU time or is runnable: on a loaded machine it is slow, not
+        stuck); False once it has been asleep, using no CPU time, for CLOSE_TIMEOUT_S."""
+        from sil.watchdog import sample
+
+        pid = self._child.pid
+        cpu, idle_since = None, time.monotonic()
+        while not wait(1.0):
+            got = sample([pid]).get(pid)
+            now = time.monotonic()
+            if got is not None and (got.working or got.cpu_ticks != cpu):
+                cpu, idle_since = got.cpu_ticks, now
+            elif now - idle_since > CLOSE_TIMEOUT_S or self._child.poll() is not None:
+                return False
+        return True
 
     def discard(self) -> None:
         """The run ended before it began: the child goes without writing anything."""
@@ -226,8 +247,8 @@ class RecorderProcess(InOrderTicks):
             if self._ids:
                 self._send_batch()
             self._outbox.put(None)
-            _patiently(lambda: self._feeder.join(CLOSE_TIMEOUT_S), interrupted)
-            if self._feeder.is_alive():  # the child took nothing for a minute
+            _patiently(lambda: self._while_working(self._feeder_done), interrupted)
+            if self._feeder.is_alive():  # the child took nothing for a minute, asleep
                 self._child.kill()
                 raise RecorderFailed("the recorder process stopped taking frames")
             self._totals = _patiently(self._read_totals, interrupted)
@@ -238,6 +259,10 @@ class RecorderProcess(InOrderTicks):
             threading.Thread(target=self._reap, name="sil-recorder-reap", daemon=True).start()
         if interrupted:  # the Ctrl-C that came while the child finished its files, now
             raise interrupted[0]
+
+    def _feeder_done(self, seconds: float) -> bool:
+        self._feeder.join(seconds)
+        return not self._feeder.is_alive()
 
     def _read_totals(self) -> dict:
         """The child's figures, sent once its files are closed."""
@@ -283,9 +308,17 @@ def _patiently(wait: Callable[[], T], interrupted: list[KeyboardInterrupt]) -> T
 
 
 def _child_setup() -> None:
-    """In the child before exec: it dies with the run and yields the cores to the nodes."""
+    """In the child before exec: it dies with the run."""
     die_with_parent()
-    os.nice(NICE)
+
+
+def _yield_to_the_nodes() -> None:
+    """Once its Recorder is made (its imports and set-up at the run's priority, which on a
+    loaded machine would crawl at the lowest), the child yields the cores to the nodes."""
+    try:
+        os.nice(NICE)
+    except OSError:  # (not allowed here: it runs as it is)
+        pass
 
 
 def _exit(signum: int, _frame: object) -> None:
@@ -306,6 +339,7 @@ def serve(inbox: BinaryIO, outbox: BinaryIO) -> None:
         _failed(outbox, exc, ready=False)
     outbox.write(READY)
     outbox.flush()
+    _yield_to_the_nodes()
     error = None
     try:
         _take(inbox, recorder)

@@ -54,6 +54,7 @@ from protocol.busload import bus_load_pct
 from protocol.codec import Codec
 from protocol.node import DriverStats, InProcessBus, bus_batch_receiver, bus_sender, unusable
 from protocol.run_bus import RunBus
+from protocol.run_sequence import RunSequence, sent_by
 from protocol.run_tag import TagClaim, claim_tag
 from sil import metrics, profiles, results, run_folder, run_record
 from sil.busfault.bridge import Bridge, SensorTicks, WallTicks
@@ -62,12 +63,13 @@ from sil.busfault.inproc import FaultyInProcessBus
 from sil.canlog import convert
 from sil.command_node import CommandNode
 from sil.compiled_loop import CompiledLoop, compile_loop
-from sil.parent_death import child_env, die_with_parent
+from sil.parent_death import PEER_LOST_SIGNAL, child_env, die_with_parent
 from sil.recorder import Recorder
 from sil.recorder_process import RecorderFailed, RecorderProcess
 from sil.run_record import Overrides
 from sil.scenario import HEALTH, PlantSettings, Scenario
-from sil.watchdog import Starting, StartWatch, Watchdog, interrupt_reason
+from sil.ticks import ACTUATOR, ECU_IDS, PLANT_IDS, SENSORS
+from sil.watchdog import Starting, StartWatch, TurnWatch, Watchdog, interrupt_reason
 
 # fault bits listed in the summary: all but the two that only describe the present tick
 REPORTED_FAULTS = {
@@ -75,8 +77,12 @@ REPORTED_FAULTS = {
     for bit, name in ecu_faults.NAMES.items()
     if not bit & (ecu_faults.LIMITER_ACTIVE | ecu_faults.PUMP_SATURATED)
 }
-NODE_GUARD_S = 2.0  # lockstep: silence after which a node runs on its own clock
+NODE_GUARD_S = 2.0  # lockstep with bus faults: silence after which a node runs on its own clock
 GRACE_S = NODE_GUARD_S + 2.0  # recording continues this long after a node died
+# lockstep without bus faults: a node waits for its peer as long as the run lets it (the run's
+# TurnWatch tells a slow peer from a dead one, and tells the node when its peer is dead)
+LOCKSTEP_GUARD_S = 3600.0
+PEER_GRACE_S = 0.5  # ... then records this long, the node on its own clock, before it ends
 # lockstep on a bus that hands over every frame queued at once (the loopback bus): the command
 # node reads it at most this often while frames come; they queue in between, so that one read
 # takes a tick's frames and no sender has to wake this process for each of them
@@ -128,6 +134,7 @@ class RunState:
     specs: tuple[BusSpec, BusSpec] | None = None  # on a bus: the run's bus and the ECU's
     bus_handle: can.BusABC | None = None  # the command node's bus, opened before the run
     write_errors: list[str] = field(default_factory=list)  # results that could not be written
+    turn_watch: TurnWatch | None = None  # lockstep without bus faults: the mid-run watch
 
     def close_bus(self) -> None:
         """Shut the command node's bus if the run did not take it over."""
@@ -523,8 +530,22 @@ def _handshake_files(out_dir: Path) -> tuple[Path, ...]:
     )
 
 
+def _strict(opts: RunOptions, s: Scenario) -> bool:
+    """A lockstep run without bus faults: one sequence of frames, each node waiting for its
+    peer as long as the run lets it (no node runs on its own clock)."""
+    return opts.mode == "lockstep" and not s.bus_faults
+
+
 def _guard_s(opts: RunOptions, s: Scenario) -> float:
+    if _strict(opts, s):
+        return LOCKSTEP_GUARD_S
     return BRIDGED_GUARD_S if s.bus_faults and opts.mode == "lockstep" else NODE_GUARD_S
+
+
+def _foreign_frames(opts: RunOptions, s: Scenario) -> str:
+    """The nodes' --foreign-frames: the run's sequence in lockstep without bus faults, else
+    only their own IDs (protocol.run_sequence)."""
+    return "sequence" if _strict(opts, s) else "ids"
 
 
 def _plant_args(
@@ -555,6 +576,8 @@ def _plant_args(
         str(seed),
         "--guard-s",
         str(_guard_s(opts, s)),
+        "--foreign-frames",
+        _foreign_frames(opts, s),
         "--ready-file",
         str(_ready_file(opts.out_dir, "plant")),
         "--start-file",
@@ -613,6 +636,8 @@ def _ecu_args(
         str(_ready_file(opts.out_dir, "ecu")),
         "--guard",
         str(_guard_s(opts, s)),
+        "--foreign-frames",
+        _foreign_frames(opts, s),
         "--json",
         "--impl",
         opts.ecu_impl,
@@ -646,7 +671,10 @@ def _run_on_bus(
     ``specs``: the run's bus and the ECU's (the same bus unless there are bus faults)."""
     spec, ecu_spec = specs
     tags = [claim.tag for claim in state.claims]
-    with RunBus(state.take_bus(), tags[0]) as bus, ExitStack() as stack:
+    codec = command.codec
+    own = sent_by(codec, "Command")
+    sequence = RunSequence(codec, s.ecu_rate_hz, own, strict=_strict(opts, s))
+    with RunBus(state.take_bus(), tags[0], sequence) as bus, ExitStack() as stack:
         state.run_bus = bus
         if s.bus_faults:
             injector = Injector(s.bus_faults, s.ecu_rate_hz, seed, command.codec)
@@ -677,6 +705,7 @@ def _run_on_bus(
             send,
             realtime=opts.mode == "realtime",
             period=1.0 / s.ecu_rate_hz,
+            turns=_strict(opts, s),
         )
 
 
@@ -760,10 +789,14 @@ def _listen(
     *,
     realtime: bool,
     period: float,
+    turns: bool = False,
 ) -> None:
     """The command node's loop: frames in (all those queued at each read), and a watch on the
-    node processes: one that exits, or one that sends nothing for ``watchdog.SILENCE_S`` (stopped
-    or stuck), aborts the run."""
+    node processes. One that exits aborts the run; so does one that falls silent: with
+    ``turns`` (lockstep without bus faults) the node whose turn it is, once /proc shows it dead
+    (:class:`sil.watchdog.TurnWatch`; a slow one is waited for), its peer then told and
+    recorded on its own clock for PEER_GRACE_S; else one that sends nothing for
+    ``watchdog.SILENCE_S``, its peer having run on its own clock since its guard time."""
     died_at = None
     receive = bus_batch_receiver(bus)
     paced = not realtime and getattr(bus, "recv_frames", None) is not None
@@ -771,6 +804,10 @@ def _listen(
     next_period = next_check = start
     dog = Watchdog(command.codec.messages, start)
     seen: dict[int, float] = {}  # frame ID -> when last heard
+    watch = _TurnState(state.children, start) if turns else None
+    state.turn_watch = watch.watch if watch is not None else None
+    grace = PEER_GRACE_S if turns else GRACE_S
+    drained = False  # the last read found no frame queued: what was heard is up to date
     while not command.finished:
         now = time.monotonic()
         if realtime and now >= next_period:
@@ -781,24 +818,69 @@ def _listen(
             next_check = now + 0.2
             if died_at is None:
                 died_at = _node_exited(state, now)
-                if died_at is None and (silent := _silent(dog, seen, state, now)) is not None:
-                    state.status, state.abort_reason = "aborted", silent
-                    return  # its peer has run on its own clock since its guard time
-            elif now - died_at > GRACE_S:
+                if died_at is None and watch is None:
+                    if (silent := _silent(dog, seen, state, now)) is not None:
+                        state.status, state.abort_reason = "aborted", silent
+                        return  # its peer has run on its own clock since its guard time
+                elif died_at is None and drained and (dead := watch.dead(now)) is not None:
+                    state.status, state.abort_reason = "aborted", dead
+                    died_at = now
+                if died_at is not None and watch is not None:
+                    _peer_lost(state, bus)
+            elif now - died_at > grace:
                 return
         frames = receive(min(0.05, next_period - now) if realtime else 0.05)
+        drained = not frames
         for got in frames:
             if type(got) is not tuple:
                 if unusable(got) is not None:
                     continue
                 got = (got.arbitration_id, got.data)
             seen[got[0]] = now
+            if watch is not None:
+                watch.heard(got[0], now)
             wall_s = time.monotonic() - start if realtime else None
             command.on_frame(got[0], got[1], send, wall_s=wall_s)
             if command.finished:
                 return
         if frames and paced:
             time.sleep(LOCKSTEP_READ_S)
+
+
+class _TurnState:
+    """Whose turn it is in lockstep, as the command node hears the run (the plant's after
+    EcuActuator(k), the ECU's after PlantSensors(k)), and since when that node has been silent;
+    :class:`sil.watchdog.TurnWatch` judges it."""
+
+    def __init__(self, children: dict[str, subprocess.Popen], now: float) -> None:
+        self.watch = TurnWatch({name: proc.pid for name, proc in children.items()})
+        self.node = "plant"  # tick 0 is the plant's
+        self.since = now
+        self._of = {i: "plant" for i in PLANT_IDS} | {i: "ecu" for i in ECU_IDS}
+
+    def heard(self, frame_id: int, now: float) -> None:
+        if frame_id == SENSORS:
+            self.node, self.since = "ecu", now
+        elif frame_id == ACTUATOR:
+            self.node, self.since = "plant", now
+        elif self._of.get(frame_id) == self.node:
+            self.since = now
+
+    def dead(self, now: float) -> str | None:
+        return self.watch.check(self.node, self.since, now)
+
+
+def _peer_lost(state: RunState, bus: RunBus) -> None:
+    """A node is dead: the others are told (they run on their own clocks from now on, and
+    show their reaction to the loss), and the command node's bus stops holding the run to its
+    lockstep sequence."""
+    for proc in state.children.values():
+        if proc.poll() is None:
+            try:
+                proc.send_signal(PEER_LOST_SIGNAL)
+            except ProcessLookupError:
+                pass
+    bus.relax()
 
 
 def _node_exited(state: RunState, now: float) -> float | None:
@@ -913,6 +995,9 @@ def _finish(
     if state.status == "completed" and totals["tick"] < len(command.commands):
         summary["status"] = "aborted"
         summary["abort_reason"] = summary["abort_reason"] or "the run ended early"
+    if state.turn_watch is not None and state.turn_watch.looked:
+        summary["slow_turns"] = state.turn_watch.looked
+    _other_senders(summary)
     for name in ("ecu", "plant"):
         log = opts.out_dir / f"{name}.log"
         if log.exists():
@@ -928,6 +1013,34 @@ def _finish(
     for path in _handshake_files(opts.out_dir):
         path.unlink(missing_ok=True)
     return results.status_first(summary)
+
+
+def _other_senders(summary: dict) -> None:
+    """Another sender's frames on the run's bus (heard by the recorder or a node): a run they
+    disturbed (aborted, or with missed ticks) is aborted saying so first; an undisturbed one
+    warns of them."""
+    counts = [summary.get("other_sender_frames", 0)]
+    ids = set(summary.get("other_sender_ids", {}))
+    for node in summary.get("nodes", {}).values():
+        counts.append(node.get("other_sender_frames", 0))
+        ids |= set(node.get("other_sender_ids", {}))
+    frames = max(counts)
+    if not frames:
+        return
+    listed = sorted(ids, key=lambda i: int(i, 16))
+    shown = ", ".join(listed[:6]) + (", ..." if len(listed) > 6 else "")
+    said = (
+        f"foreign frames on the bus: {frames:,} from another sender (IDs {shown}) — "
+        "the run's bus is shared"
+    )
+    if summary["status"] != "completed" or summary["missed_ticks"]:
+        why = summary["abort_reason"] or f"{summary['missed_ticks']} missed ticks"
+        summary["status"] = "aborted"
+        summary["abort_reason"] = f"{said} ({why})"
+    else:
+        warning = f"{said}; they were left out of the run"
+        summary.setdefault("warnings", []).append(warning)
+        print(f"sil run: warning: {warning}", file=sys.stderr)
 
 
 def _plots(opts: RunOptions, s: Scenario, trace: dict, state: RunState) -> list[str]:

@@ -11,11 +11,18 @@ Before tick 0 a node owes no frames but its start-up: :class:`StartWatch` tells 
 that is slow to start (its CPU time, or its children's, advances) from one that exited, is
 stopped (SIGSTOP) or sleeps without doing anything, from /proc (elsewhere: exits and the overall
 limit only).
+
+In lockstep (without bus faults) the same holds mid-run: :class:`TurnWatch` looks, in /proc, at
+the node whose turn it is (the one that owes the next frame) once it has been silent for
+:data:`LOOK_S`. Stopped, or asleep without using CPU time, it is dead; running or using CPU time
+(a loaded machine), it is slow and waited for, however long, up to :data:`SLOW_LIMIT_S`. The
+silence of :class:`Watchdog` is then left to real-time runs and runs with bus faults, whose
+nodes run on their own clocks.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -176,4 +183,98 @@ class StartWatch:
             seen.cpu_ticks, seen.since = got.cpu_ticks, now
         elif now - seen.since >= self.idle_s:
             return f"no progress for {now - seen.since:.1f} s (asleep, using no CPU time)"
+        return None
+
+
+LOOK_S = 0.5  # a node silent this long in its turn is looked at in /proc
+TURN_STOPPED_S = 0.5  # ... and dead once stopped (state T) this long
+TURN_IDLE_S = 2.0  # ... and dead once asleep this long using no CPU time (nor its children)
+SLOW_LIMIT_S = 300.0  # a node silent this long in its turn is stuck, however busy
+NAMES = {"plant": "plant", "ecu": "ECU"}  # node process -> the name the abort reason gives
+
+
+class TurnWatch:
+    """Lockstep liveness mid-run: why the run must end because the node that owes the next
+    frame is dead, or None. ``pids``: node process name (plant, ecu) -> its PID. Per check,
+    the caller gives the node whose turn it is and when it was last heard (or its turn began,
+    if later):
+
+    - silent less than ``look_s``: fine;
+    - stopped (SIGSTOP, state T) for ``stopped_s``: dead;
+    - asleep (not running, not in disk I/O) with no CPU time used, by it or its children (the
+      PIL image's QEMU), for ``idle_s``: dead (stuck, waiting on nothing the run sends);
+    - otherwise slow, and waited for, up to ``slow_limit_s`` of silence.
+
+    Where /proc does not show the process, ``fallback_s`` of silence ends the run."""
+
+    def __init__(
+        self,
+        pids: Mapping[str, int],
+        *,
+        look_s: float = LOOK_S,
+        stopped_s: float = TURN_STOPPED_S,
+        idle_s: float = TURN_IDLE_S,
+        slow_limit_s: float = SLOW_LIMIT_S,
+        fallback_s: float = SILENCE_S,
+        sample_s: float = SAMPLE_S,
+        sampler: Callable[[Collection[int]], dict[int, ProcSample]] = sample,
+    ) -> None:
+        self.pids = dict(pids)
+        self.look_s, self.stopped_s, self.idle_s = look_s, stopped_s, idle_s
+        self.slow_limit_s, self.fallback_s = slow_limit_s, fallback_s
+        self.sample_s, self.sampler = sample_s, sampler
+        self._next_sample = 0.0
+        self._node: str | None = None
+        self._seen: _Progress | None = None
+        self.looked = 0  # turns in which a silent node was looked at (and found slow, or dead)
+
+    def check(self, node: str, silent_since: float, now: float) -> str | None:
+        """Why ``node``, whose turn it is and which has been silent since ``silent_since``,
+        is dead; None while it is (or may be) alive."""
+        silent = now - silent_since
+        if silent < self.look_s:
+            if self._node == node:
+                self._node, self._seen = None, None
+            return None
+        name = NAMES.get(node, node)
+        if silent > self.slow_limit_s:
+            return (
+                f"the {name} sent no frame for {silent:.1f} s though its process kept running "
+                "(stuck, not slow)"
+            )
+        if now < self._next_sample and self._node == node:
+            return None
+        self._next_sample = now + self.sample_s
+        pid = self.pids.get(node)
+        got = self.sampler([pid]).get(pid) if pid is not None else None
+        if got is None:  # no /proc to tell (or the process is gone: its exit says so)
+            if silent > self.fallback_s:
+                return f"the {name} sent no frame for {silent:.1f} s (stopped or stuck)"
+            return None
+        return self._judge(node, name, got, silent, now)
+
+    def _judge(
+        self, node: str, name: str, got: ProcSample, silent: float, now: float
+    ) -> str | None:
+        if self._node != node or self._seen is None:
+            self._node, self._seen = node, _Progress(got.cpu_ticks, now)
+            self.looked += 1
+        seen = self._seen
+        if got.state in "Tt":
+            if seen.stopped_since is None:
+                seen.stopped_since = now
+            if now - seen.stopped_since >= self.stopped_s:
+                return (
+                    f"the {name} sent no frame for {silent:.1f} s: its process is stopped "
+                    f"(process state {got.state})"
+                )
+            return None
+        seen.stopped_since = None
+        if got.cpu_ticks != seen.cpu_ticks or got.working:
+            seen.cpu_ticks, seen.since = got.cpu_ticks, now
+        elif now - seen.since >= self.idle_s:
+            return (
+                f"the {name} sent no frame for {silent:.1f} s: its process is asleep and used "
+                f"no CPU time for {now - seen.since:.1f} s (stuck)"
+            )
         return None

@@ -9,8 +9,8 @@ import sys
 from pathlib import Path
 
 from ecu.params import CONTROLLERS
-from sil.node_options import add_launcher_options, add_pil_link, xcp_ids
-from sil.parent_death import NodeStop
+from sil.node_options import add_launcher_options, add_pil_link, run_sequence, xcp_ids
+from sil.parent_death import NodeStop, PeerLost
 from sil.validation import option
 
 NAME = "ecu"
@@ -137,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
     from ecu.node import EcuNode
     from ecu.params import ParamError, preset
     from protocol.bus import BusSpecError, open_bus
+    from protocol.codec import Codec
     from protocol.node import listen_for, realtime_scheduling, run_lockstep, run_realtime
     from protocol.run_bus import RunBus
 
@@ -188,7 +189,9 @@ def run(args: argparse.Namespace) -> int:
     except (PortBuildError, PortError) as exc:
         print(f"sil ecu: --impl {args.impl}: {exc}", file=sys.stderr)
         return 2
-    node = EcuNode(ecu=ecu, lockstep=args.mode == "lockstep", max_ticks=args.ticks)
+    codec = Codec()
+    node = EcuNode(ecu=ecu, lockstep=args.mode == "lockstep", max_ticks=args.ticks, codec=codec)
+    sequence = run_sequence(args, codec, "ECU", params.rate_hz)
     if args.serial and booted is not None:
         from ecu.service.port import ServicePort
         from ecu.service.transport import TransportError, open_transport
@@ -202,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     if xcp_on and booted is not None:
         _attach_xcp(node, booted, args)
     try:
-        bus = RunBus(open_bus(args.bus), args.run_tag)
+        bus = RunBus(open_bus(args.bus), args.run_tag, sequence)
     except (BusSpecError, ValueError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
@@ -211,12 +214,14 @@ def run(args: argparse.Namespace) -> int:
         x = node.xcp
         print(f"xcp: CAN IDs 0x{x.cmd_id:03X} (master) 0x{x.res_id:03X} (ECU)", file=sys.stderr,
               flush=True)  # fmt: skip
+    stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
+    lost = PeerLost(on_lost=bus.relax)
     if args.ready_file:
         args.ready_file.write_text("ready\n")
-    stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
     try:
         if args.mode == "lockstep":
-            stats = run_lockstep(node, bus, guard_s=args.guard, should_stop=stop.is_set)
+            guard = lost.guard(args.guard)
+            stats = run_lockstep(node, bus, guard_s=guard, should_stop=stop.is_set)
         else:
             policy = realtime_scheduling()
             stats = run_realtime(node, bus, 1.0 / params.rate_hz, should_stop=stop.is_set)
@@ -277,13 +282,16 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
     codec = Codec()
     frame_ids = [codec[m].frame_id for m in RECEIVED]
     stop = NodeStop()
+    PeerLost()  # (the image keeps its guard: told its peer is gone, the process stays)
     try:
         image = PilImage(block, link=args.pil_link, icount=lockstep)
     except (PortBuildError, PilError) as exc:
         print(f"sil ecu: --impl pil: {exc}", file=sys.stderr)
         return 2
     try:
-        bus = RunBus(open_bus(args.bus), args.run_tag)
+        bus = RunBus(
+            open_bus(args.bus), args.run_tag, run_sequence(args, codec, "ECU", params.rate_hz)
+        )
     except (BusSpecError, ValueError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2

@@ -12,8 +12,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from sil.node_options import add_launcher_options
-from sil.parent_death import NodeStop
+from sil.node_options import add_launcher_options, run_sequence
+from sil.parent_death import NodeStop, PeerLost
 from sil.validation import option
 
 NAME = "plant"
@@ -232,13 +232,15 @@ def run(args: argparse.Namespace) -> int:
             return 2
     stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
     try:
-        bus = RunBus(open_bus(spec), args.run_tag)
+        sequence = run_sequence(args, None, "Plant", args.rate_hz)
+        bus = RunBus(open_bus(spec), args.run_tag, sequence)
     except (BusSpecError, ValueError) as exc:
         print(f"sil plant: error: {exc}", file=sys.stderr)
         return 2
     # on the bus, with its filters, before it says it is ready: the frames sent before tick 0
     # (the FaultInjects and Demands due at tick 0) wait in its queue until it starts
     listen_for(node, bus)
+    lost = PeerLost(on_lost=bus.relax)
     if args.ready_file is not None:
         args.ready_file.write_text("ready\n")
     if args.start_file is not None:
@@ -249,7 +251,8 @@ def run(args: argparse.Namespace) -> int:
             stats = run_realtime(node, bus, node.plant.config.ecu_period_s, should_stop=stop.is_set)
             stats.scheduling = policy
         else:
-            stats = run_lockstep(node, bus, guard_s=args.guard_s, should_stop=stop.is_set)
+            guard = lost.guard(args.guard_s)
+            stats = run_lockstep(node, bus, guard_s=guard, should_stop=stop.is_set)
     except KeyboardInterrupt:
         return 130
     finally:
