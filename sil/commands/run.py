@@ -182,6 +182,8 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
 
     try:
         given = out or run_folder.out_path("--out", args.out)
+        if given is not None:
+            run_folder.check("--out", given)
         scenario = scenarios.load(scenario_ref)
         out = given or Path("out") / scenario.name
         run_folder.check("--out", out)
