@@ -53,6 +53,7 @@ from sil import scenario as scenarios
 from sil.campaign.tomlw import dumps
 
 DISTRIBUTIONS = ("uniform", "normal", "choice")
+MAX_CASES = 100_000  # every case is built and checked before the first runs
 
 
 class CampaignError(ValueError):
@@ -237,6 +238,12 @@ def load(path: Path) -> Campaign:
         if not isinstance(v.get("name"), str):
             raise _fail(source, f"variant[{i}].name", "a string", v.get("name"))
     invariants = _invariants(source, data.get("invariants", {}))
+
+    combinations = math.prod(len(v) for v in sweep.values())
+    total = (n + nominal) * max(1, len(variants)) * combinations
+    if total > MAX_CASES:
+        raise _fail(source, "samples", f"a campaign of at most {MAX_CASES} runs (samples, "
+                    "nominal, variants and sweep combinations multiplied)", total)  # fmt: skip
 
     rng = np.random.Generator(np.random.PCG64(seed))
     draws = {k: _draw(rng, kind, args, n) for k, (kind, args) in dists.items()}

@@ -125,3 +125,13 @@ def test_distributions_too_wide_for_floats_are_refused(write):
     huge = SMALL.replace("uniform = [0.8, 1.2]", "normal = [1.7e308, 1e308]")
     with pytest.raises(CampaignError, match=r"'sample.plant.pump_gain'.*draws are finite"):
         load(write(huge))
+
+
+def test_a_campaign_too_large_to_check_is_refused_before_it_is_built(write):
+    from sil.campaign.spec import MAX_CASES
+
+    huge = SMALL.replace("samples = 2", "samples = 1000000")  # 2,000,002 runs
+    with pytest.raises(
+        CampaignError, match=rf"'samples': expected a campaign of at most {MAX_CASES}"
+    ):
+        load(write(huge))
