@@ -79,6 +79,7 @@ SENT: tuple[tuple[str, dict[str, float]], ...] = (
             "PumpHealth": 97.5,
             "LoopOwner": 1,
             "ReferenceSpeed": 101.25,
+            "SensorsValid": 1,
         },
     ),
     ("EcuTelemetry", {"TelemetryIndex": 5, "Gain_Kx1": -1.25}),
