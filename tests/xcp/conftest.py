@@ -161,3 +161,105 @@ def pyxcp_master(
     app.general = General(config=app.config, parent=app)
     app.transport = Transport(parent=app)
     return Master("CAN", config=app, policy=policy, transport_layer_interface=bus)
+
+
+PYXCP_TYPES = {"UBYTE": "U8", "SBYTE": "I8", "UWORD": "U16", "SWORD": "I16", "SLONG": "I32"}
+
+
+def daq_collector(measurements: list[tuple[str, int, str]], event: int = 0):
+    """A pyXCP DAQ policy that keeps every sample of one DAQ list on ``event`` in memory:
+    ``measurements`` (name, address, A2L type); ``.names`` and ``.rows`` (receive time, the
+    slave's timestamp, the values in ``.names`` order)."""
+    import logging
+
+    from pyxcp.daq_stim import DaqList, DaqOnlinePolicy
+
+    daq_list = DaqList(
+        name="measurements",
+        event_num=event,
+        stim=False,
+        enable_timestamps=True,
+        measurements=[(n, a, 0, PYXCP_TYPES[t]) for n, a, t in measurements],
+        priority=0,
+        prescaler=1,
+    )
+
+    class Collector(DaqOnlinePolicy):
+        def __init__(self) -> None:
+            super().__init__([daq_list], logger=logging.getLogger("pyxcp.daq"))
+            self.pid_off = False  # (pyXCP 0.29 sets it only when it reads its own config)
+            self.rows: list[tuple[int, int, list]] = []
+
+        @property
+        def names(self) -> list[str]:
+            return [h[0] for h in daq_list.headers]
+
+        def initialize(self) -> None:
+            pass
+
+        def finalize(self) -> None:
+            pass
+
+        def on_daq_list(self, daq: int, ts0: int, ts1: int, payload: list) -> None:
+            self.rows.append((ts0, ts1, list(payload)))
+
+    return Collector()
+
+
+class SlcanHub:
+    """The ECU behind its pseudo-terminal (``slcan-device:ECU_TTY``) joined to the loopback bus
+    (where the plant is) and to a second pseudo-terminal (``MASTER_TTY``) that the master opens
+    with python-can's slcan: one bus (tests/xcp/slcan_hub.py, in a process of its own)."""
+
+    def __init__(self, ecu_tty: Path, master_tty: Path, group: str, port: int) -> None:
+        script = Path(__file__).with_name("slcan_hub.py")
+        self.proc = subprocess.Popen(
+            [sys.executable, str(script), str(ecu_tty), str(master_tty), group, str(port)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout.readline().startswith("hub: ready"), self.proc.poll()
+
+    def close(self) -> None:
+        self.proc.terminate()
+        self.proc.communicate(timeout=10)
+
+
+READER = Path(__file__).with_name("read_a2l.py")
+
+
+def read_a2l(path: Path) -> dict:
+    """What pya2ldb reads in ``path`` (tests/xcp/read_a2l.py, in a process of its own); the
+    parser's own complaints fail the test."""
+    import json
+
+    done = subprocess.run(
+        [sys.executable, str(READER), str(path)], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    output = done.stdout + done.stderr
+    complaints = [line for line in output.splitlines() if "[error]" in line or "[warn" in line]
+    assert not complaints, complaints
+    line = next(line for line in done.stdout.splitlines() if line.startswith("JSON "))
+    return json.loads(line[5:])
+
+
+@pytest.fixture(scope="module")
+def a2l(tmp_path_factory) -> dict:
+    """The A2L `sil a2l` writes, as pya2ldb reads it."""
+    path = tmp_path_factory.mktemp("a2l") / "turbojet_ecu.a2l"
+    done = _sil("a2l", "--out", str(path))
+    assert done.returncode == 0, done.stderr
+    return read_a2l(path)
+
+
+@pytest.fixture(scope="session")
+def xcp_tools():
+    """The helpers of the tests that run pyXCP against `sil` processes."""
+
+    class Tools:
+        master = staticmethod(pyxcp_master)
+        daq = staticmethod(daq_collector)
+        hub = SlcanHub
+
+    return Tools

@@ -5,11 +5,7 @@ conversions are the Q formats, the EPK, identifiers and events are the slave's."
 
 from __future__ import annotations
 
-import json
 import struct
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
@@ -17,29 +13,6 @@ from ecu.service.param_table import BY_NAME, TABLE
 from ecu.xcp import codes as C
 from ecu.xcp import memory as MEM
 from ecu.xcp.a2l import SCHEDULES, a2l_name
-
-READER = Path(__file__).with_name("read_a2l.py")
-
-
-def read_a2l(path: Path) -> dict:
-    """What pya2ldb reads in ``path``; the parser's own complaints fail the test."""
-    done = subprocess.run(
-        [sys.executable, str(READER), str(path)], capture_output=True, text=True, timeout=300
-    )
-    assert done.returncode == 0, done.stderr[-3000:]
-    output = done.stdout + done.stderr
-    complaints = [line for line in output.splitlines() if "[error]" in line or "[warn" in line]
-    assert not complaints, complaints
-    line = next(line for line in done.stdout.splitlines() if line.startswith("JSON "))
-    return json.loads(line[5:])
-
-
-@pytest.fixture(scope="module")
-def a2l(tmp_path_factory, sil) -> dict:
-    path = tmp_path_factory.mktemp("a2l") / "turbojet_ecu.a2l"
-    done = sil("a2l", "--out", str(path))
-    assert done.returncode == 0, done.stderr
-    return read_a2l(path)
 
 
 @pytest.mark.slow
