@@ -103,6 +103,7 @@ class Counters:
     events: int = 0  # EV packets sent
     stores: int = 0  # parameter sets stored to flash
     store_failures: int = 0
+    internal_errors: int = 0  # commands that failed inside the slave (ERR_GENERIC)
     ticks: int = 0  # serve + sample cycles
     worst_s: float = 0.0  # the longest serve + sample of a tick
     total_s: float = 0.0
@@ -295,6 +296,7 @@ class XcpSlave:
             "events": c.events,
             "stores": c.stores,
             "store_failures": c.store_failures,
+            "internal_errors": c.internal_errors,
             "daq_samples": self.daq.samples,
             "dtos": self.daq.dtos,
             "ticks": c.ticks,
@@ -349,6 +351,9 @@ class XcpSlave:
             self._error(exc.code, exc.extra)
         except D.DaqError as exc:
             self._error(exc.code)
+        except Exception:  # a fault of the slave's own: the frame is refused, the ECU ticks on
+            self.counters.internal_errors += 1
+            self._error(C.Err.GENERIC)
         else:
             if answer is not None:
                 self._respond(answer)

@@ -66,6 +66,7 @@ def test_random_frames_get_answers_only_and_the_ecu_ticks_as_without_a_master(
     refused = sum(c.errors.values()) - sum(before.values())
     assert refused == len(errors)
     assert c.frames == c.served + c.ignored + c.empty + c.queue_overflow + len(rig.slave._queue)
+    assert c.internal_errors == 0  # every refusal was one the slave meant
 
 
 def test_every_command_at_every_length_is_answered(rig_factory):
@@ -151,3 +152,16 @@ def test_daq_lists_that_do_not_fit_are_refused_and_what_runs_fits(rig, odts, ent
 def test_a_frame_longer_than_a_can_frame_is_served_on_its_command_bytes(rig):
     assert rig.request(bytes((C.Cmd.CONNECT, 0)) + bytes(100))[0] == C.PID_RES
     assert rig.request(bytes((C.Cmd.GET_STATUS,)) + bytes(100))[0] == C.PID_RES
+
+
+def test_a_fault_inside_the_slave_is_an_error_packet_not_a_crash(rig, monkeypatch):
+    rig.connect()
+
+    def broken(frame: bytes) -> bytes:
+        raise IndexError("a slave's own bug")
+
+    code = C.Cmd.GET_STATUS
+    monkeypatch.setitem(rig.slave._handlers, code, (1, 0, broken))
+    assert rig.request(code) == bytes((C.PID_ERR, C.Err.GENERIC))
+    assert rig.slave.counters.internal_errors == 1
+    rig.tick(2)  # the ECU ticks on
