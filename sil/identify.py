@@ -261,6 +261,7 @@ def identify(
     if len(rec.t) < 20:
         raise ValueError(f"{rec.source}: {len(rec.t)} samples are too few to identify a model")
     trim = trim or estimate_trim(rec)
+    _check_trim(rec, trim)
     if window is None or skip_steps is None:
         tried = []
         for w in candidate_windows(rec) if window is None else [window]:
@@ -285,6 +286,8 @@ def identify(
             f"{rec.source}: the voltage changes too often for the smoothing window "
             f"({d.window} samples); give a shorter --window"
         )
+    if not (np.all(np.isfinite(x[keep])) and np.all(np.isfinite(y[keep]))):
+        raise ValueError(f"{rec.source}: the regressors are not finite with this trim point")
     theta = least_squares(x[keep], y[keep])
     return Identification(
         order,
@@ -294,6 +297,19 @@ def identify(
         derived_parameters(theta, order),
         skip_steps,
     )
+
+
+def _check_trim(rec: Recording, trim: Trim) -> None:
+    """Refuse a trim point so far from the data that the model's terms (up to dN^2 dV) are not
+    finite numbers (least squares would then fail in LAPACK)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        dn, dv = rec.n_pct - trim.n_pct, rec.v - trim.v
+        finite = np.all(np.isfinite(dn * dn * dv)) and np.all(np.isfinite(dn * dn))
+    if not (math.isfinite(trim.n_pct) and math.isfinite(trim.v) and finite):
+        raise ValueError(
+            f"{rec.source}: the trim point ({trim.n_pct:g} %N, {trim.v:g} V) is too far from "
+            "the recorded speed and voltage to fit a model around it"
+        )
 
 
 def validate(ident: Identification, rec: Recording) -> float:
@@ -365,7 +381,7 @@ def distrust(ident: Identification, recordings: list[Recording]) -> list[str]:
     lo, hi = running_range()
     if not lo <= ident.trim.n_pct <= hi:
         reasons.append(
-            f"trim point {ident.trim.n_pct:.1f} %N outside the running range {lo:g}..{hi:g} %N"
+            f"trim point {ident.trim.n_pct:.4g} %N outside the running range {lo:g}..{hi:g} %N"
         )
     for rec in recordings:
         outside = int(np.count_nonzero((rec.n_pct < lo) | (rec.n_pct > hi)))

@@ -550,19 +550,26 @@ trims = st.one_of(
           suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
 @given(trim_n=trims, trim_v=trims)
 def test_identify_exports_only_what_the_ecu_loads(
-    engine_trace: Path, tmp_path: Path, capsys, trim_n: float, trim_v: float
+    engine_trace: Path, tmp_path: Path, capfd, trim_n: float, trim_v: float
 ) -> None:
     import json
+    import warnings
 
     from sil.identify import commissioning_refusal
 
     export = tmp_path / "commission.json"
     export.unlink(missing_ok=True)
     argv = ["identify", str(engine_trace), f"--trim-n={trim_n}", f"--trim-v={trim_v}"]
-    code = _code([*argv, "--window", "51", "--export", str(export)])
-    captured = capsys.readouterr()
+    with warnings.catch_warnings(record=True) as warned:  # a user would see them on stderr
+        warnings.simplefilter("always")
+        code = _code([*argv, "--window", "51", "--export", str(export)])
+    assert not [w for w in warned if issubclass(w.category, RuntimeWarning)], warned
+    captured = capfd.readouterr()  # with what C code (LAPACK) prints
     assert "Traceback" not in captured.out + captured.err
     assert code in (0, 1, 2), captured.err
+    said = _split(captured.err)
+    if not (said and ": error: argument --trim-" in said[-1]):  # argparse's usage and its line
+        assert len(said) <= 1, captured.err  # the refusal alone: no numpy warning
     if code == 0:
         assert commissioning_refusal(json.loads(export.read_text())) is None
     else:

@@ -127,8 +127,11 @@ def run(args: argparse.Namespace) -> int:
                 args.trim_n if args.trim_n is not None else guess.n_pct,
                 args.trim_v if args.trim_v is not None else guess.v,
             )
-        result = ident.identify(fit_part, order=args.order, trim=trim, window=args.window)
-        result.nrmse_pct = ident.validate(result, check)
+        # a trim point far from the data overflows the regressors: such fits are refused
+        # below (no window fits, a diverging model), not warned about on stderr
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            result = ident.identify(fit_part, order=args.order, trim=trim, window=args.window)
+            result.nrmse_pct = ident.validate(result, check)
     except (ValueError, OSError, LogReadError) as exc:
         print(f"sil identify: {exc}", file=sys.stderr)
         return 2

@@ -235,3 +235,8 @@ def test_a_large_fit_error_is_not_trusted():
     assert ident.distrust(result, []) == ["fit error (NRMSE) 15.0 %, above 10 %"]
     result.nrmse_pct = float("inf")
     assert "diverging" in ident.distrust(result, [])[0]
+
+
+def test_a_trim_point_too_far_from_the_data_is_refused_before_least_squares():
+    with pytest.raises(ValueError, match="too far from the recorded speed and voltage"):
+        ident.identify(_eq_3_24_record(seconds=20), trim=ident.Trim(1e300, 5.0))
