@@ -14,6 +14,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from ecu.firmware_params import compile_params
 from ecu.params import EcuParams, ParamError
 
 FORMAT = "turbojet-sil commissioning 1"
@@ -53,6 +54,17 @@ def load(path: Path) -> dict:
             f"{path}: field 'Lambda' must be positive (pump gain), got {checked['Lambda']}"
         )
     return checked
+
+
+def commission(params: EcuParams, path: Path) -> EcuParams:
+    """``params`` commissioned from the file at ``path``, checked as the ECU checks it on
+    load; a refusal names the file."""
+    commissioned = apply(params, load(path))
+    try:
+        compile_params(commissioned)
+    except ParamError as exc:
+        raise ParamError(f"{path}: the ECU refuses this commissioning: {exc}") from None
+    return commissioned
 
 
 def apply(params: EcuParams, data: dict) -> EcuParams:

@@ -483,6 +483,8 @@ def validate(p: EcuParams) -> None:
         for x in vals:
             if isinstance(x, float) and not math.isfinite(x):
                 raise ParamError(f"{f.name}={v!r}: not finite")
+        if f.name.endswith("_on") and v not in (0, 1):  # a switch: on or off, nothing else
+            raise ParamError(f"{f.name}={v!r}: a switch is true or false (1 or 0)")
     _check(
         isinstance(p.rate_hz, int) and RATE_MIN_HZ <= p.rate_hz <= RATE_MAX_HZ,
         "rate_hz",

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ecu.firmware_params import _tustin, compile_params
-from ecu.params import PRESETS, EcuParams, ParamError, preset
+from ecu.params import PRESETS, EcuParams, ParamError, preset, validate
 
 REF = Path(__file__).resolve().parents[3] / "shared" / "reference" / "thesis_reference.json"
 
@@ -85,3 +85,21 @@ def test_tustin_matches_the_matrix_formula(rate_hz: int) -> None:
     m, h = _tustin(a[1, 0], a[1, 1], dt)
     assert np.allclose(np.array(m).reshape(2, 2), inv @ (np.eye(2) + dt / 2 * a), atol=1e-14)
     assert np.allclose(h, (inv * dt)[:, 1], atol=1e-14)
+
+
+@pytest.mark.parametrize("value", [1e300, 2, -1, 0.5])
+def test_a_switch_is_on_or_off_and_nothing_else(value):
+    with pytest.raises(ParamError, match=r"fuel_schedules_on=.*: a switch is true or false"):
+        validate(replace(EcuParams(), fuel_schedules_on=value))
+
+
+def test_a_commissioning_the_ecu_refuses_is_refused_naming_the_file(tmp_path):
+    from ecu import commissioning
+
+    path = tmp_path / "engine.json"
+    path.write_text(
+        '{"format": "turbojet-sil commissioning 1", "trim_N_pct": -5, "trim_V": -12,'
+        ' "Ap_row2": [-1.8, -2.3], "Lambda": 4.8, "Theta_row2": [-0.18, 0.0]}'
+    )
+    with pytest.raises(ParamError, match=rf"{path}: the ECU refuses .*trim_n_pct=-5"):
+        commissioning.commission(EcuParams(), path)
