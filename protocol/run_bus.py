@@ -160,13 +160,18 @@ class RunBus(can.BusABC):
         self._ready.extend(self.sequence.relax())
 
     def _checked(self, frame: Frame) -> list[Frame]:
-        """The frames the sequence hands on for one frame of this run (with its DBC ID)."""
+        """The frames the sequence hands on for one frame of this run (with its DBC ID); after
+        a relax() asked for while frames were being read, the held frames first."""
         assert self.sequence is not None
+        out: list[Frame] = []
+        if self._relax:
+            self._relax = False
+            out = self.sequence.relax()
         if type(frame) is tuple:
-            return self.sequence.heard(frame, frame[0], frame[1])
+            return out + self.sequence.heard(frame, frame[0], frame[1])
         if frame.is_error_frame or frame.is_remote_frame or frame.is_fd or frame.is_extended_id:
-            return [frame]  # of no run: the driver counts it (protocol.node)
-        return self.sequence.heard(frame, frame.arbitration_id, frame.data)
+            return [*out, frame]  # of no run: the driver counts it (protocol.node)
+        return out + self.sequence.heard(frame, frame.arbitration_id, frame.data)
 
     def _own(self, got: Frame) -> Frame | None:
         """The frame as this run's node sees it, or None (another run's, or a beacon)."""
@@ -206,8 +211,6 @@ class RunBus(can.BusABC):
             return
         ids = {(f["can_id"] & DBC_ID_MASK, f["can_mask"] & DBC_ID_MASK) for f in filters}
         ids.add((SIMRUN_ID, DBC_ID_MASK))
-        if self.sequence is not None:  # another sender's frames of the node's own IDs: counted
-            ids.update((i, DBC_ID_MASK) for i in self.sequence.own_ids)
         self.bus.set_filters([{"can_id": i, "can_mask": m} for i, m in sorted(ids)])
 
     def fileno(self) -> int:

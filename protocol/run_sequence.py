@@ -14,12 +14,16 @@ every node of the run, and :class:`RunSequence` keeps a node to it (``strict``):
    EcuActuator(k), heard or sent by the node itself.
 3. **Sequence.** Each message of the run has one sender, which starts its alive counter at 0 and
    loses no frame: a frame must carry the next counter of its message, the turn's tick
-   (SensorTick, AnalogTick, ActuatorTick, StarterTick) or the next DemandTick, and come at a tick
-   where its message is due (its DBC cycle at the run's rate).
+   (SensorTick, AnalogTick, ActuatorTick, StarterTick) or the next DemandTick, the next index of
+   a multiplexed message (EcuTelemetry counts through its indexes from the first), and come at a
+   tick where its message is due (its DBC cycle at the run's rate; PlantSensors, EcuActuator and
+   EcuStarter at any tick).
 4. **One per turn.** The frames of a turn are held until the turn's last frame (PlantSensors,
    EcuActuator), which is decided at once. A message with two frames that pass 1-3 in one turn
-   has a second sender: the frame whose values are nearer the message's previous frame is taken
-   (a tie: the later one), the other is foreign.
+   (a tie, counted in ``ties``) has a second sender: the frame whose values are clearly nearer
+   the message's previous frame (of the same multiplexer index) is taken, else the later one (the
+   run's frames come in a burst just before the turn's last frame, another sender's anywhere in
+   the turn); the other is foreign.
 
 Frames that fail are dropped and counted per ID (:attr:`RunSequence.foreign`). The command node's
 frames (Demand, FaultInject) are not turn-bound: they are checked by 1 and 3 and passed at once.
@@ -48,6 +52,9 @@ from protocol.lockstep import TICK_MODULO, every_ticks
 
 PLANT, ECU, COMMAND = "Plant", "ECU", "Command"
 SENSORS_NAME, ACTUATOR_NAME, DEMAND_NAME = "PlantSensors", "EcuActuator", "Demand"
+# sent at every tick (EcuStarter while the ECU starts or stops the engine), whatever the rate;
+# the others at their DBC cycle (protocol.lockstep.every_ticks)
+EVERY_TICK = frozenset((SENSORS_NAME, ACTUATOR_NAME, "EcuStarter"))
 COUNTER_MODULO = 15
 NO_TICK = -1
 
@@ -62,6 +69,16 @@ class _Message:
     tick_shift: int  # where its tick field starts (NO_TICK: none checked)
     ends_turn: bool  # PlantSensors, EcuActuator
     codec: MessageCodec
+    mux: tuple[int, ...] = ()  # a multiplexed message's indexes, in the order they are sent
+
+    def next_mux(self, data: bytes) -> int:
+        """The index the frame after ``data`` (a frame of this message) carries."""
+        index = self.mux.index(self.mux_of(data)) if self.mux_of(data) in self.mux else -1
+        return self.mux[(index + 1) % len(self.mux)]
+
+    def mux_of(self, data: bytes | bytearray) -> int:
+        start, mask, _, _, _ = self.codec.mux_layout.field
+        return (int.from_bytes(data, "little") >> start) & mask
 
 
 def _role(m: MessageCodec) -> str | None:
@@ -110,10 +127,13 @@ class RunSequence:
             if role is None or not m.protected:
                 continue  # (SimRun: the run bus's own)
             every = every_ticks(m.cycle_time_ms, rate_hz) if m.cycle_time_ms else 1
-            if role == COMMAND:
-                every = 1  # checked by its tick (Demand) or only by its counter (FaultInject)
+            if role == COMMAND or m.name in EVERY_TICK:
+                every = 1  # (Demand: checked by its tick; FaultInject: only by its counter)
             ends = m.name in (SENSORS_NAME, ACTUATOR_NAME)
-            self.messages[m.frame_id] = _Message(m.frame_id, role, every, _tick_shift(m), ends, m)
+            mux = tuple(sorted(m.mux_signals)) if m.multiplexed else ()
+            self.messages[m.frame_id] = _Message(
+                m.frame_id, role, every, _tick_shift(m), ends, m, mux
+            )
         self.demand_every = every_ticks(codec[DEMAND_NAME].cycle_time_ms, rate_hz)
         self.turn = PLANT  # the plant's turn of tick 0 comes first
         self.tick = 0
@@ -121,6 +141,7 @@ class RunSequence:
         self._counter: dict[int, int] = dict.fromkeys(self.messages, 0)
         self._held: list[tuple[object, int, bytes]] = []  # this turn's frames, as they came
         self._last: dict[int, bytes] = {}  # each message's last frame taken
+        self._last_of_index: dict[tuple[int, int], bytes] = {}  # ... and per multiplexer index
         self.foreign: Counter[int] = Counter()  # frames of another sender, per ID
         self.ties = 0  # two frames of one message in a turn, told apart by their values
 
@@ -171,6 +192,10 @@ class RunSequence:
             return False
         if data[1] & 0x0F != self._counter[m.frame_id]:
             return False
+        if m.mux:
+            last = self._last.get(m.frame_id)
+            if m.mux_of(data) != (m.mux[0] if last is None else m.next_mux(last)):
+                return False
         if m.tick_shift == NO_TICK:
             return True
         tick = (int.from_bytes(data, "little") >> m.tick_shift) & 0xFFFF
@@ -181,6 +206,8 @@ class RunSequence:
     def _take(self, m: _Message, data: bytes | bytearray) -> None:
         self._counter[m.frame_id] = (self._counter[m.frame_id] + 1) % COUNTER_MODULO
         self._last[m.frame_id] = bytes(data)
+        if m.mux:
+            self._last_of_index[m.frame_id, m.mux_of(data)] = bytes(data)
         if m.role == COMMAND and m.tick_shift != NO_TICK:
             self.next_demand = (self.next_demand + self.demand_every) % TICK_MODULO
 
@@ -204,16 +231,25 @@ class RunSequence:
         return [held[i][0] for i in sorted(taken)]
 
     def _nearest(self, frame_id: int, candidates: list[bytes]) -> int:
-        """The candidate whose values are nearest the message's previous frame (each signal's
-        change as a share of its range); a tie, or no previous frame: the last."""
-        previous = self._last.get(frame_id)
+        """The candidate whose values are nearest the message's previous frame (of the same
+        multiplexer index: the same signal), each signal's change as a share of its range; a
+        tie, or no previous frame: the last."""
+        m = self.messages[frame_id]
+        if m.mux:  # (the candidates carry the same index: rule 3)
+            previous = self._last_of_index.get((frame_id, m.mux_of(candidates[0])))
+        else:
+            previous = self._last.get(frame_id)
         if previous is None:
             return len(candidates) - 1
-        codec = self.messages[frame_id].codec
+        codec = m.codec
         before = _raw(codec, previous)
         scores = [_distance(codec, before, _raw(codec, c)) for c in candidates]
-        best = min(scores)
-        return max(i for i, score in enumerate(scores) if score == best)
+        last = len(candidates) - 1
+        best = min(range(len(scores)), key=lambda i: (scores[i], -i))
+        # the values decide only when they clearly do; else the later frame, which came in the
+        # run's burst before the turn's last frame (another sender's comes anywhere in the turn)
+        others = [s for i, s in enumerate(scores) if i != best]
+        return best if all(scores[best] * 2 < s for s in others) else last
 
     def _next_turn(self) -> None:
         if self.turn == PLANT:

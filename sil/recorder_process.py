@@ -243,6 +243,7 @@ class RecorderProcess(InOrderTicks):
             "wrong_length": {},
         }
         interrupted: list[KeyboardInterrupt] = []
+        self._catch_up()
         try:
             if self._ids:
                 self._send_batch()
@@ -259,6 +260,15 @@ class RecorderProcess(InOrderTicks):
             threading.Thread(target=self._reap, name="sil-recorder-reap", daemon=True).start()
         if interrupted:  # the Ctrl-C that came while the child finished its files, now
             raise interrupted[0]
+
+    def _catch_up(self) -> None:
+        """The run is over (its nodes stopped): the child, which may be behind on a loaded
+        machine, goes back to the run's priority to write what is left, where this process may
+        raise it again (root, or a nice limit that allows it); else it stays where it was."""
+        try:
+            os.setpriority(os.PRIO_PROCESS, self._child.pid, os.getpriority(os.PRIO_PROCESS, 0))
+        except OSError:
+            pass
 
     def _feeder_done(self, seconds: float) -> bool:
         self._feeder.join(seconds)
