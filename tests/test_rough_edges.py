@@ -16,7 +16,7 @@ def test_demo_help_states_its_own_output_folder(capsys) -> None:
     except SystemExit:
         pass
     out = " ".join(capsys.readouterr().out.split())
-    assert "--out OUT output folder (default: out/demo, a folder per controller inside)" in out
+    assert "--out DIR output folder (default: out/demo, a folder per controller inside" in out
 
 
 def test_the_first_c_build_says_what_it_is_doing(tmp_path, monkeypatch, capsys) -> None:
