@@ -5,8 +5,9 @@
   their objects (-Os, a section per function) linked with --gc-sections from their public
   functions, with libgcc and the C library (``ecu.port.build.arm_flash_image``), split by origin
   through the linker's map; the objects' own sizes, unused functions included, are a detail line.
-  RAM is the instance and the parameters as the replayer holds them, plus the stack bound from
-  ``-fstack-usage``;
+  RAM is the instance and the parameters as the replayer holds them, plus the stack bound: the
+  deepest call chain from the core's entry points over GCC's call graph with its frames
+  (``-fcallgraph-info=su``), the library's division helper's frames read from the image;
 - instructions per tick: callgrind on the host build (``--toggle-collect=ecu_tick``) and QEMU on
   the Cortex-M4 build (``-icount shift=0``: SysTick counts the virtual clock, calibrated in the
   same run by a loop of known length), both replaying the MRAC golden vector;
@@ -70,9 +71,38 @@ def _symbol_sizes(elf: Path, names: tuple[str, ...]) -> dict[str, int]:
     return sizes
 
 
-def _stack_bound() -> int:
-    """Sum of the stack frames of every function in ecu_core.c at -Os (a bound on the tick's
-    stack, whatever the call chain)."""
+ROOTS = ("ecu_tick", "ecu_init", "ecu_params_load", "ecu_state_digest")  # the core's entries
+_FRAME = re.compile(
+    r"\t(?:push|stmdb)(?:\.w)?\s+(?:sp!,\s*)?\{([^}]*)\}"  # push {r4, lr}: 4 bytes a register
+    r"|\[sp, #-(\d+)\]!"  # strd ip, lr, [sp, #-16]!
+    r"|\tsub(?:\.w)?\s+sp, (?:sp, )?#(\d+)"  # sub sp, #24
+)
+_CALL = re.compile(r"\tbl\s+[0-9a-f]+ <([^>+]+)>")
+
+
+def _library_frames(image: Path, name: str, seen: tuple[str, ...] = ()) -> int:
+    """The deepest stack a library function of the linked image takes, with what it calls: its
+    frame read from its machine code (pushes, pre-decrements and sp subtractions) plus its
+    deepest callee's."""
+    text = subprocess.run(
+        ["arm-none-eabi-objdump", "-d", f"--disassemble={name}", str(image)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    frame = 0
+    for m in _FRAME.finditer(text):
+        regs, pre, sub = m.groups()
+        frame += 4 * len(regs.split(",")) if regs else int(pre or sub)
+    callees = {c for c in _CALL.findall(text) if c != name and c not in seen}
+    return frame + max((_library_frames(image, c, (*seen, name)) for c in callees), default=0)
+
+
+def _stack_bound(image: Path) -> int:
+    """The deepest stack the core's entry points take at -Os: over GCC's call graph of
+    ecu_core.c (-fcallgraph-info=su: each function's static frame and its calls), the deepest
+    chain from ROOTS, with the frames of the library helpers it calls (the 64-bit division)
+    read from the linked image. The core has no recursion and no dynamic frames."""
     with tempfile.TemporaryDirectory() as tmp:
         obj = Path(tmp) / "ecu_core.o"
         subprocess.run(
@@ -81,6 +111,7 @@ def _stack_bound() -> int:
                 *build.WARNINGS,
                 *build.ARM_FLAGS,
                 "-fstack-usage",
+                "-fcallgraph-info=su",
                 "-c",
                 str(build.PORT_DIR / "ecu_core.c"),
                 "-o",
@@ -88,9 +119,29 @@ def _stack_bound() -> int:
             ],  # fmt: skip
             check=True,
             capture_output=True,
+            cwd=tmp,
         )
-        lines = obj.with_suffix(".su").read_text().splitlines()
-    return sum(int(line.split("\t")[1]) for line in lines)
+        graph = obj.with_suffix(".ci").read_text()
+    frames: dict[str, int] = {}
+    for title, label in re.findall(r'node: \{ title: "([^"]+)" label: "([^"]*)"', graph):
+        own = re.search(r"\\n(\d+) bytes \((static|dynamic[^)]*)\)", label)
+        if own is not None and own.group(2) != "static":
+            raise RuntimeError(f"{title}: a dynamic stack frame has no static bound")
+        frames[title] = int(own.group(1)) if own else -1  # -1: not ours (a library helper)
+    calls: dict[str, set[str]] = {}
+    for src, dst in re.findall(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"', graph):
+        calls.setdefault(src, set()).add(dst)
+
+    def deepest(node: str, path: tuple[str, ...]) -> int:
+        if node in path:
+            raise RuntimeError(f"recursion through {node}: no static stack bound")
+        own = frames.get(node, -1)
+        if own < 0:
+            return _library_frames(image, node.rsplit(":", 1)[-1])
+        return own + max((deepest(c, (*path, node)) for c in calls.get(node, ())), default=0)
+
+    roots = [t for t in frames if t.rsplit(":", 1)[-1] in ROOTS]
+    return max(deepest(r, ()) for r in roots)
 
 
 def _flash_sections(elf: Path) -> set[str]:
@@ -148,7 +199,7 @@ def arm_figures(elf: Path) -> dict:
     unlinked_total = sum(unlinked.values()) + sum(libgcc.values())
     node = sum(_size(objects["ecu_node.c"])[:2])  # the CAN node (not in the flash target)
     ram = _symbol_sizes(elf, ("ecu", "params"))
-    stack = _stack_bound()
+    stack = _stack_bound(image)
     ram_total = sum(ram.values()) + core_data + core_bss + stack
     return {
         # linked with --gc-sections from the public functions: what firmware carries
