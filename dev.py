@@ -4,9 +4,12 @@
     python3 dev.py demo     create .venv, install, run the SIL demo on the default bus (MRAC and
                             PID on the staircase; results and plots in out/demo)
     python3 dev.py test     create .venv, install, lint and run the whole test suite
+    python3 dev.py test --quick
+                            the fast tier for the inner loop: no slow, virtual-machine or
+                            machine-speed tests (a few minutes on 2 cores)
 
 Both are idempotent: the install step runs again only when pyproject.toml changes.
-Extra arguments after `test` go to pytest (for example `python3 dev.py test -m "not vcan"`).
+Extra arguments after `test` go to pytest (for example `python3 dev.py test -k replay`).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".setup-stamp"
 BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
+QUICK = "not slow and not vcan and not machine_speed"  # the fast tier's marker expression
 
 
 def _run(*cmd: str | Path) -> int:
@@ -57,6 +61,9 @@ def main(argv: list[str]) -> int:
     if lint != 0:
         print("dev.py: ruff found problems (see above)", file=sys.stderr)
         return lint
+    if "--quick" in rest:
+        rest = [a for a in rest if a != "--quick"]
+        rest = ["-m", QUICK, *rest]
     # pytest exits 5 when it collected no test: that is a failure here, as any non-zero exit.
     return _run(BIN / "python", "-m", "pytest", *rest)
 

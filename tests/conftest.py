@@ -1,6 +1,7 @@
 """Helpers every test folder may use, as fixtures."""
 
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -18,3 +19,57 @@ def _first_difference(a: bytes, b: bytes) -> str | None:
 @pytest.fixture
 def first_difference() -> Callable[[bytes, bytes], str | None]:
     return _first_difference
+
+
+# The fast tier (`python3 dev.py test --quick`, the marker expression "not slow and not vcan and
+# not machine_speed") leaves out what flies whole runs, starts node processes or QEMU, runs a
+# bench or a long fuzz: every test of these modules is marked slow (a test elsewhere carries its
+# own @pytest.mark.slow). The whole suite (`python3 dev.py test`) runs them all.
+SLOW_MODULES = frozenset(
+    {
+        "campaign/test_bridge.py",
+        "campaign/test_campaign.py",
+        "ecu/test_verify.py",
+        "plant/test_schedules.py",
+        "port/test_node.py",
+        "port/test_pil.py",
+        "port/test_sil.py",
+        "service/test_bench_start.py",
+        "service/test_storage.py",
+        "sil/test_bench.py",
+        "sil/test_compiled_loop.py",
+        "sil/test_control_bench.py",
+        "sil/test_fleet_bench.py",
+        "sil/test_foreign_frames.py",
+        "sil/test_identify.py",
+        "sil/test_identify_sil.py",
+        "sil/test_lockstep_load.py",
+        "sil/test_log_damage.py",
+        "sil/test_mode_equivalence.py",
+        "sil/test_realtime_bench.py",
+        "sil/test_recorder_process.py",
+        "sil/test_recorder_ticks.py",
+        "sil/test_replay.py",
+        "sil/test_results.py",
+        "sil/test_run.py",
+        "sil/test_run_record.py",
+        "sil/test_shared_bus.py",
+        "sil/test_start_runs.py",
+        "sil/test_thesis_claims.py",
+        "sil/test_transient_metrics.py",
+        "sil/test_verify_document.py",
+        "sil/test_watchdog.py",
+        "test_cli.py",
+        "test_cli_robustness.py",
+        "xcp/test_lockstep.py",
+        "xcp/test_pyxcp.py",
+        "xcp/test_calibration_doc.py",
+    }
+)
+TESTS = Path(__file__).resolve().parent
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        if item.path.relative_to(TESTS).as_posix() in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)
