@@ -110,12 +110,16 @@ def test_console_starts_throttles_and_stops_an_engine_on_a_bench(tmp_path):
         idle = _until(frames, port, lambda v: abs(v["speed"] - v["demand"]) < 3.0, 20)
         assert 30.0 < idle["speed"] < 45.0, idle
 
+        t1 = time.monotonic()
         assert _console(port, "throttle", "70") == {"demand_pct": 70.0, "source": "BENCH"}
         at_70 = _until(frames, port, lambda v: abs(v["speed"] - 70.0) < 1.0, 30)
+        throttle_s = time.monotonic() - t1
         assert abs(at_70["speed"] - 70.0) < 1.0 and at_70["egt"] < at_70["egt_start_limit"]
 
+        t2 = time.monotonic()
         assert _console(port, "stop") == {"mode_before": "RUN"}
         cooled = _until(frames, port, lambda v: v["mode"] == M.OFF, 150)
+        stop_s = time.monotonic() - t2
         assert cooled["mode"] == M.OFF and cooled["speed"] < 1.0
         assert cooled["egt"] < 373.15 + 15  # cooled under 100 degC (and its re-arm margin)
         frames.drain()
@@ -136,3 +140,8 @@ def test_console_starts_throttles_and_stops_an_engine_on_a_bench(tmp_path):
     names = [f["name"] for f in faults]
     assert "DEMAND_SOURCE_BENCH" in names and not any(n.startswith("START_ABORT") for n in names)
     assert start_s < 40.0
+    print(
+        f"bench: arm to idle {start_s:.1f} s at {idle['speed']:.1f} %N, throttle 70 in "
+        f"{throttle_s:.1f} s (EGT {at_70['egt']:.0f} K), stop to OFF in {stop_s:.1f} s "
+        f"(EGT {cooled['egt']:.0f} K)"
+    )
