@@ -22,7 +22,15 @@ class InputError(ValueError):
 
     @classmethod
     def at(cls, source: str, field: str, message: str) -> InputError:
-        return cls(f"{source}: {field}: {message}" if field else f"{source}: {message}")
+        return cls(one_line(f"{source}: {field}: {message}" if field else f"{source}: {message}"))
+
+
+def one_line(text: str) -> str:
+    """``text`` as one line: what would break it (a newline or any other line boundary a name
+    or value may carry) written as its escape."""
+    return "".join(
+        c if c.isprintable() or c == " " else c.encode("unicode_escape").decode() for c in text
+    )
 
 
 def number(
