@@ -1,4 +1,5 @@
-"""CAN log files: candump ``-L`` format as can-utils writes it, plus python-can's ASC and BLF.
+"""CAN log files: candump ``-L`` format as can-utils writes it, plus python-can's ASC and BLF,
+and MF4 (ASAM MDF 4 bus logging, :mod:`sil.mdf`).
 
 ``(1.234567) vcan0 100#0011223344556677`` per frame; in lockstep the timestamps are simulated
 time, so two runs of the same scenario and seed give byte-identical files.
@@ -7,9 +8,10 @@ time, so two runs of the same scenario and seed give byte-identical files.
 from __future__ import annotations
 
 import gzip
+import itertools
 import re
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
@@ -18,7 +20,18 @@ import numpy as np
 
 from sil.results import atomic
 
-EXTRA_FORMATS = ("asc", "blf")
+EXTRA_FORMATS = ("asc", "blf", "mf4")
+# what `sil log convert` writes, by the output's suffix
+OUTPUT_FORMATS = {
+    ".log": "candump",
+    ".asc": "asc",
+    ".blf": "blf",
+    ".trc": "trc",
+    ".csv": "csv",
+    ".mf4": "mf4",
+    ".mdf": "mf4",
+}
+_MDF_MAGIC = (b"MDF     ", b"UnFinMF ")  # an MDF file; one its logger did not finish
 _HEX_DIGITS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
 # two upper-case hex digits per byte value
 _HEX_PAIRS = np.stack([_HEX_DIGITS[np.arange(256) >> 4], _HEX_DIGITS[np.arange(256) & 15]], axis=1)
@@ -141,12 +154,16 @@ class CandumpWriter:
             self._file.close()
 
 
-def convert(candump_path: Path, fmt: str) -> Path:
-    """Write a copy of a candump log as ASC or BLF with python-can's writers, atomically
-    (:func:`sil.results.atomic`: a full disk leaves no part of a copy)."""
+def convert(candump_path: Path, fmt: str, start_s: float | None = None) -> Path:
+    """Write a copy of a candump log as ASC or BLF with python-can's writers, or as MF4 starting
+    at ``start_s`` (default: :func:`sil.mdf.log_start`), atomically (:func:`sil.results.atomic`:
+    a full disk leaves no part of a copy)."""
     if fmt not in EXTRA_FORMATS:
         raise ValueError(f"log format '{fmt}' is not one of {', '.join(EXTRA_FORMATS)}")
     target = candump_path.with_suffix(f".{fmt}")
+    if fmt == "mf4":
+        convert_log(candump_path, target, start_s=start_s)
+        return target
     with atomic(target) as tmp, can.Logger(str(tmp)) as writer:
         for message in can.CanutilsLogReader(str(candump_path)):
             writer.on_message_received(message)
@@ -179,6 +196,12 @@ def detect_format(path: Path) -> tuple[str, bool]:
             head = zlib.decompressobj(wbits=31).decompress(head, 4096)
         except zlib.error as exc:
             raise LogReadError(path, "byte 0", f"corrupt gzip data: {exc}", 0) from None
+    if head[:8] in _MDF_MAGIC:
+        version = head[8:16].decode("latin-1").strip()
+        if not version.startswith("4"):
+            reason = f"MDF {version or '(no version)'}: a CAN bus log is MDF 4 (MF4)"
+            raise LogReadError(path, "byte 8", reason, 0)
+        return "mf4", gz
     if head[:4] == b"LOGG":
         return "blf", gz
     text = head.decode("latin-1")
@@ -254,6 +277,8 @@ class _CountingText:
 
 
 _ASC_END = "end triggerblock"
+# an ASC header's dates: "date Sun Dec 06 21:56:41.641 2026", "Begin Triggerblock Sun Dec ..."
+_ASC_DATE = re.compile(r"^(date|begin\s+triggerblock)\s+\w+\s+(.+)$", re.IGNORECASE)
 
 
 # the TRC record types that carry a frame (PEAK's format: data, CAN FD, remote; Rx and Tx in
@@ -372,31 +397,73 @@ def _check_length(message: can.Message) -> None:
 
 
 class LogReader:
-    """Every frame of a log (candump -L, ASC, BLF, TRC or python-can CSV, optionally gzipped),
-    with the position of the last one handed out (:attr:`position`).
+    """Every frame of a log (candump -L, ASC, BLF, TRC, python-can CSV or MF4, optionally
+    gzipped), with the position of the last one handed out (:attr:`position`).
 
     A truncated or corrupt file raises :class:`LogReadError` naming the line (text formats) or
-    byte offset (BLF) where reading failed, once the frames before it have been handed out: a
-    last line cut short (no end of line), a line that is not a record of the format, an ASC file
-    without its closing ``End TriggerBlock``, a gzip stream or BLF file that ends early.
+    byte offset (BLF, MF4) where reading failed, once the frames before it have been handed out:
+    a last line cut short (no end of line), a line that is not a record of the format, an ASC
+    file without its closing ``End TriggerBlock``, a gzip stream or BLF file that ends early, an
+    MF4 whose blocks do not all lie in the file (:class:`sil.mdf.BusLogReader`).
     """
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self.frames = 0
+        self.format: str | None = None  # once reading began
+        self.mf4 = None  # the MF4 reader (its start and time base), once reading began
         self._text: _CountingText | None = None
+        self._gz = False
 
     @property
     def position(self) -> str:
-        """The last frame's line (text formats) or its number in the file (BLF)."""
+        """The last frame's line (text formats) or its number in the file (BLF, MF4)."""
         return f"line {self._text.line}" if self._text is not None else f"frame {self.frames}"
+
+    @property
+    def header_start_s(self) -> float | None:
+        """The wall-clock start an ASC file's header gives (its times count from it: the date
+        of its ``Begin Triggerblock``, else of its ``date`` line), once reading began; None for
+        the other formats or when there is none."""
+        if self.format != "asc":
+            return None
+        opener = gzip.open if self._gz else open
+        dates: dict[str, str] = {}
+        with opener(self.path, "rt", encoding="latin-1") as f:
+            for line in itertools.islice(f, 200):
+                match = _ASC_DATE.match(line.strip())
+                if match:
+                    dates.setdefault(" ".join(match.group(1).lower().split()), match.group(2))
+                if "begin triggerblock" in dates:
+                    break
+        for key in ("begin triggerblock", "date"):
+            if key in dates:
+                try:
+                    return can.ASCReader._datetime_to_timestamp(dates[key])
+                except ValueError:
+                    pass
+        return None
 
     def __iter__(self) -> Iterator[can.Message]:
         fmt, gz = detect_format(self.path)
+        self.format, self._gz = fmt, gz
+        if fmt == "mf4":
+            return self._mf4(gz)
         return self._blf(gz) if fmt == "blf" else self._text_frames(fmt, gz)
 
     def _error(self, position: str, reason: str) -> LogReadError:
         return LogReadError(self.path, position, reason, self.frames)
+
+    def _mf4(self, gz: bool) -> Iterator[can.Message]:
+        from sil.mdf import BusLogReader, MdfUnavailable
+
+        self.mf4 = reader = BusLogReader(self.path, gz)
+        try:
+            for message in reader:
+                self.frames += 1
+                yield message
+        except MdfUnavailable as exc:
+            raise self._error("byte 0", str(exc)) from None
 
     def _blf(self, gz: bool) -> Iterator[can.Message]:
         raw = gzip.open(self.path, "rb") if gz else self.path.open("rb")
@@ -472,3 +539,111 @@ class _KeptOpen:
 def read_frames(path: Path) -> LogReader:
     """Every frame of a log: see :class:`LogReader`."""
     return LogReader(path)
+
+
+# -- writing any format, and converting ----------------------------------------------------
+
+_CAN_ERR_FLAG = 0x20000000  # an error frame's ID in candump (linux/can/error.h)
+
+
+def candump_line(msg: can.Message) -> str:
+    """A frame as ``candump -L`` writes it (a data frame as :class:`CandumpWriter` does; a
+    number for a channel becomes ``canN``)."""
+    channel = msg.channel if msg.channel is not None else "can0"
+    if isinstance(channel, int) or (isinstance(channel, str) and channel.isdigit()):
+        channel = f"can{channel}"
+    head = f"({msg.timestamp:.6f}) {channel} "
+    data = bytes(msg.data or b"").hex().upper()
+    if msg.is_error_frame:
+        return f"{head}{_CAN_ERR_FLAG | msg.arbitration_id:08X}#{data}\n"
+    ident = f"{msg.arbitration_id:08X}" if msg.is_extended_id else f"{msg.arbitration_id:03X}"
+    if msg.is_remote_frame:
+        return f"{head}{ident}#R\n"
+    if msg.is_fd:
+        flags = (1 if msg.bitrate_switch else 0) | (2 if msg.error_state_indicator else 0)
+        return f"{head}{ident}##{flags:X}{data}\n"
+    return f"{head}{ident}#{data}\n"
+
+
+def write_log(path: Path, frames: Iterable[can.Message], fmt: str, shift_s: float = 0.0) -> int:
+    """Write ``frames`` (their times plus ``shift_s``) as a candump, ASC, BLF, TRC or python-can
+    CSV log, atomically; the frames written."""
+    count = 0
+    with atomic(path) as tmp:
+        if fmt == "candump":
+            with tmp.open("w", encoding="ascii", newline="\n") as f:
+                for msg in frames:
+                    msg.timestamp += shift_s
+                    f.write(candump_line(msg))
+                    count += 1
+            return count
+        writers = {"asc": can.ASCWriter, "blf": can.BLFWriter, "trc": can.TRCWriter,
+                   "csv": can.CSVWriter}  # fmt: skip
+        writer = writers[fmt](str(tmp))
+        try:
+            for msg in frames:
+                msg.timestamp += shift_s
+                writer.on_message_received(msg)
+                count += 1
+        finally:
+            writer.stop()
+    return count
+
+
+def output_format(path: Path) -> str:
+    """The format `sil log convert` writes to ``path``, by its suffix; ValueError naming them."""
+    fmt = OUTPUT_FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise ValueError(
+            f"{path}: no log format for the suffix '{path.suffix}' (one of "
+            f"{', '.join(OUTPUT_FORMATS)})"
+        )
+    return fmt
+
+
+def convert_log(source: Path, target: Path, *, start_s: float | None = None) -> dict:
+    """Convert a log of any format :class:`LogReader` reads into the format ``target``'s suffix
+    names (:data:`OUTPUT_FORMATS`), keeping its absolute start (:mod:`sil.mdf`):
+
+    - to MF4: the header holds the start (``start_s``, else the MF4's own, else epoch times'
+      first frame, else :func:`sil.mdf.log_start`) and the time channel counts from it;
+    - to candump or CSV: the source's times (a run's simulated time stays so, epoch times
+      stay epoch times);
+    - to ASC, BLF or TRC, whose headers carry a date: epoch times.
+
+    What the conversion did (frames, formats, start); LogReadError for a source that cannot be
+    read to its end (nothing is written), ValueError for a target of no known format,
+    :class:`sil.mdf.MdfUnavailable` without asammdf, WriteError for a target not written."""
+    from sil import mdf
+
+    fmt = output_format(target)
+    reader = read_frames(source)
+    frames = iter(reader)
+    first = next(frames, None)
+    stream = itertools.chain([first], frames) if first is not None else iter(())
+    first_s = first.timestamp if first is not None else None
+    if reader.format == "mf4":
+        own = reader.mf4
+        start = (start_s, "--start") if start_s is not None else (own.start_us / 1e6, "the MF4")
+        base = mdf.TimeBase(round(start[0] * 1e6), own.relative, start[1])
+    else:
+        base = mdf.time_base(
+            first_s, start_s, lambda: mdf.log_start(source, reader.header_start_s)
+        )
+    if fmt == "mf4":
+        table = mdf.FrameTable.of(stream)
+        mdf.write_bus_log(target, table, base, note=f"from {source.name}")
+        count = len(table)
+    else:
+        shift = base.start_s if fmt in ("asc", "blf", "trc") and base.relative else 0.0
+        count = write_log(target, stream, fmt, shift)
+    return {
+        "source": str(source),
+        "source_format": reader.format,
+        "target": str(target),
+        "target_format": fmt,
+        "frames": count,
+        "start": base.iso(),
+        "start_from": base.origin,
+        "source_times": "from the start" if base.relative else "epoch",
+    }
