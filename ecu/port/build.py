@@ -47,14 +47,17 @@ WARNINGS = (
     "-pedantic",
     "-Werror",
 )
-# the control core, the frame codec and the CAN node (ecu_node.c: the C twin of ecu/node.py)
-CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c", "ecu_node.c")
+# the control core, the frame codec, the CAN node (ecu_node.c: the C twin of ecu/node.py) and
+# its XCP slave (ecu_xcp.c: the twin of ecu/xcp/slave.py)
+CORE_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c", "ecu_node.c", "ecu_xcp.c")
 HEADERS = (
     "ecu_core.h",
     "ecu_frames.h",
     "generated/turbojet.h",
     "generated/ecu_constants.h",
+    "generated/ecu_xcp_map.h",
     "ecu_node.h",
+    "ecu_xcp.h",
     "board.h",
     "ecu_main.h",
     "board_mps2.h",

@@ -1,12 +1,14 @@
 """Generate the C port's generated files into ``ecu/port/generated/``: the ECU's frame pack/unpack
 code from the DBC with cantools (``generate_c_source``, integer-only, the ECU node's messages),
-and ``ecu_constants.h``, the constants shared with the Python firmware and the DBC
-(:mod:`ecu.port.constants`).
+``ecu_constants.h``, the constants shared with the Python firmware and the DBC
+(:mod:`ecu.port.constants`), and ``ecu_xcp_map.h``, what the C XCP slave shares with the Python one
+(:mod:`ecu.port.xcp_map`).
 
 The output is reproducible (cantools' time stamp is removed), so a test can check that the
 committed files are what the current DBC and Python definitions give.
 
-    python -m ecu.port.codegen          rewrite generated/turbojet.[ch] and ecu_constants.h
+    python -m ecu.port.codegen          rewrite generated/turbojet.[ch], ecu_constants.h and
+                                        ecu_xcp_map.h
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from pathlib import Path
 
 from cantools.database.can.c_source import generate
 
-from ecu.port import constants
+from ecu.port import constants, xcp_map
 from protocol.dbc import DBC_PATH, load_database
 
 GENERATED_DIR = Path(__file__).resolve().parent / "generated"
@@ -39,6 +41,7 @@ def generate_sources(dbc_path: Path = DBC_PATH) -> dict[str, str]:
         "turbojet.h": _STAMP.sub(r"\1.", header),
         "turbojet.c": _STAMP.sub(r"\1.", source),
         constants.HEADER_NAME: constants.header_text(dbc_path),
+        xcp_map.HEADER_NAME: xcp_map.header_text(),
     }
 
 

@@ -63,6 +63,7 @@ class _Lib:
                     ("s", self.state_t),
                     ("o", self.outputs_t),
                     ("sat_pending", ctypes.c_int32),
+                    ("rate_q24", ctypes.c_int32),
                 ]
             },
         )

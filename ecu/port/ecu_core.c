@@ -1007,6 +1007,7 @@ void ecu_init(ecu_t *e, const ecu_params_t *p)
     e->s.ncor_k_q24 = p->ncor_k_q24; /* the operator's day (ecu/inlet.py) */
     e->s.seq_target_dk = p->seq_day_target_dk;
     e->sat_pending = 0;
+    e->rate_q24 = 0;
 }
 
 /* ---- one tick, in stages (ecu/firmware.py Ecu.tick: the same stages in the same order) ------ */
@@ -1433,6 +1434,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     }
     stage_pump_driver(e, &t);
     stage_health(e, in, &t);
+    e->rate_q24 = t.rate;
     return &e->o;
 }
 

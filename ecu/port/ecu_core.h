@@ -184,6 +184,7 @@ typedef struct {
     ecu_state_t s;
     ecu_outputs_t o;
     int32_t sat_pending; /* saturation events not yet added to s.sat_events (ARM Q flag) */
+    int32_t rate_q24;    /* the last tick's speed rate, %N/s (TickVars.rate: a measurement) */
 } ecu_t;
 
 /*

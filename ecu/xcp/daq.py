@@ -70,10 +70,21 @@ class DaqList:
 
 
 class Daq:
-    """The DAQ lists of one slave over its memory map."""
+    """The DAQ lists of one slave over its memory map; at most ``max_daq`` lists, ``max_odts``
+    ODTs and ``max_entries`` ODT entries in all (a slave with less memory allocates less)."""
 
-    def __init__(self, memory: MemoryMap) -> None:
+    def __init__(
+        self,
+        memory: MemoryMap,
+        *,
+        max_daq: int = MAX_DAQ,
+        max_odts: int = MAX_ODTS,
+        max_entries: int = MAX_ENTRIES,
+    ) -> None:
         self.memory = memory
+        self.max_daq = max_daq
+        self.max_odts = max_odts
+        self.max_entries = max_entries
         self.lists: list[DaqList] = []
         self.phase = FREED
         self.ptr: tuple[int, int, int] | None = None  # list, ODT, entry of the next WRITE_DAQ
@@ -101,8 +112,8 @@ class Daq:
     def alloc_daq(self, count: int) -> None:
         if self.phase not in (FREED, DAQ_ALLOCATED) or self.lists:
             raise DaqError(C.Err.SEQUENCE, "ALLOC_DAQ: only once after FREE_DAQ")
-        if count > MAX_DAQ:
-            raise DaqError(C.Err.MEMORY_OVERFLOW, f"ALLOC_DAQ {count}: at most {MAX_DAQ} lists")
+        if count > self.max_daq:
+            raise DaqError(C.Err.MEMORY_OVERFLOW, f"ALLOC_DAQ {count}: at most {self.max_daq}")
         self.lists = [DaqList() for _ in range(count)]
         self.phase = DAQ_ALLOCATED
 
@@ -112,8 +123,8 @@ class Daq:
         daq = self._list(number)
         if daq.odts:
             raise DaqError(C.Err.SEQUENCE, f"ALLOC_ODT: DAQ list {number} has its ODTs")
-        if self.odts + count > MAX_ODTS:
-            raise DaqError(C.Err.MEMORY_OVERFLOW, f"ALLOC_ODT: at most {MAX_ODTS} ODTs in all")
+        if self.odts + count > self.max_odts:
+            raise DaqError(C.Err.MEMORY_OVERFLOW, f"ALLOC_ODT: at most {self.max_odts} ODTs")
         daq.odts = [[] for _ in range(count)]
         self.odts += count
         first = 0
@@ -132,8 +143,8 @@ class Daq:
             raise DaqError(C.Err.SEQUENCE, f"ALLOC_ODT_ENTRY: ODT {odt} has its entries")
         if count > MAX_ODT_BYTES:
             raise DaqError(C.Err.MEMORY_OVERFLOW, f"ALLOC_ODT_ENTRY {count}: at most 7 per ODT")
-        if self.entries + count > MAX_ENTRIES:
-            raise DaqError(C.Err.MEMORY_OVERFLOW, f"at most {MAX_ENTRIES} ODT entries in all")
+        if self.entries + count > self.max_entries:
+            raise DaqError(C.Err.MEMORY_OVERFLOW, f"at most {self.max_entries} ODT entries")
         daq.odts[odt] = [Entry() for _ in range(count)]
         self.entries += count
         self.phase = ENTRY_ALLOCATED

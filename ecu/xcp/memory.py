@@ -24,6 +24,7 @@ costs a slice.
 
 from __future__ import annotations
 
+import operator
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -162,20 +163,45 @@ _MEAS = struct.Struct(_MEAS_FORMAT)
 _BOUNDS = tuple((TYPES[m.datatype][2], TYPES[m.datatype][3]) for m in MEASUREMENTS)
 
 
-def measure(ecu: Ecu, demand_source: int) -> tuple[int, ...]:
+# where each measurement comes from after the tick: an attribute of the firmware (``s``: its
+# state, ``out``: its outputs, ``t``: the tick's variables), or the two that are computed: the
+# sequencer's time in ms and the bench's demand source. The C slave reads the same fields of
+# its ecu_t (ecu/port/xcp_map.py generates its table from this one).
+SEQ_TIME = "s.seq_timer ms"  # s.seq_timer * 1000 // rate_hz
+DEMAND_SOURCE = "bench.source"
+SOURCES: dict[str, str] = {
+    "ticks": "s.ticks", "mode": "out.mode", "fault_word": "out.fault_word", "speed": "out.n_cpct",
+    "speed_rpm": "s.speed_rpm", "speed_ref": "out.nref_cpct", "speed_rate": "t.rate",
+    "egt": "s.egt_dk", "egt_gas": "s.egt_lead_q12", "pump_voltage": "out.pump_mv",
+    "pump_duty": "out.duty_cpct", "pump_enable": "out.pump_enable", "supply": "s.supply_mv",
+    "pump_current": "s.pump_ma", "pump_health": "out.pump_health_pm", "owner": "out.owner",
+    "seq_state": "out.seq_state", "seq_reason": "out.seq_reason", "seq_time": SEQ_TIME,
+    "starter": "out.starter_cpct", "igniter": "out.igniter", "ap21": "out.ap21_q24",
+    "ap22": "out.ap22_q24", "lambda": "out.lambda_q24", "theta21": "out.theta21_q24",
+    "theta22": "out.theta22_q24", "kx1": "out.kx1_q24", "kx2": "out.kx2_q24", "kr": "out.kr_q24",
+    "kf1": "out.kf1_q24", "kf2": "out.kf2_q24", "obs_speed_dev": "s.obs_n_q24",
+    "obs_speed_rate": "s.obs_v_q24", "sat_events": "out.sat_events",
+    "inputs_valid": "out.inputs_valid", "demand": "s.demand_q24",
+    "demand_source": DEMAND_SOURCE, "egt_start_target": "s.seq_target_dk",
+}  # fmt: skip
+if tuple(SOURCES) != tuple(m.name for m in MEASUREMENTS):
+    raise RuntimeError("ecu.xcp.memory: SOURCES must name every measurement, in order")
+_PATHS = tuple(
+    "s.seq_timer" if src == SEQ_TIME else "s.ticks" if src == DEMAND_SOURCE else src
+    for src in SOURCES.values()
+)
+_READ = operator.attrgetter(*_PATHS)
+_SEQ_TIME = tuple(SOURCES.values()).index(SEQ_TIME)
+_DEMAND_SOURCE = tuple(SOURCES.values()).index(DEMAND_SOURCE)
+
+
+def measure(ecu: Ecu, demand_source: int) -> list[int]:
     """The measurement region's values after the ECU's last tick, in :data:`MEASUREMENTS`
-    order."""
-    o = ecu.out
-    s = ecu.s
-    return (
-        s.ticks, o.mode, o.fault_word, o.n_cpct, s.speed_rpm, o.nref_cpct, ecu.t.rate, s.egt_dk,
-        s.egt_lead_q12, o.pump_mv, o.duty_cpct, o.pump_enable, s.supply_mv, s.pump_ma,
-        o.pump_health_pm, o.owner, o.seq_state, o.seq_reason,
-        s.seq_timer * 1000 // ecu.p.rate_hz, o.starter_cpct, o.igniter,
-        o.ap21_q24, o.ap22_q24, o.lambda_q24, o.theta21_q24, o.theta22_q24,
-        o.kx1_q24, o.kx2_q24, o.kr_q24, o.kf1_q24, o.kf2_q24, s.obs_n_q24, s.obs_v_q24,
-        o.sat_events, o.inputs_valid, s.demand_q24, demand_source, s.seq_target_dk,
-    )  # fmt: skip
+    order (from :data:`SOURCES`)."""
+    values = list(_READ(ecu))
+    values[_SEQ_TIME] = values[_SEQ_TIME] * 1000 // ecu.p.rate_hz
+    values[_DEMAND_SOURCE] = demand_source
+    return values
 
 
 @dataclass(frozen=True)

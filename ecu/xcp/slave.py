@@ -81,6 +81,43 @@ EVENT_100MS = 100  # event 1's cycle, ms
 SendFn = Callable[[bytes], None]
 
 
+# the commands served: command -> (minimum length, the resource it needs, its handler)
+COMMANDS: dict[int, tuple[int, int, str]] = {
+    C.Cmd.CONNECT: (2, 0, "_connect"),
+    C.Cmd.DISCONNECT: (1, 0, "_disconnect"),
+    C.Cmd.GET_STATUS: (1, 0, "_get_status"),
+    C.Cmd.SYNCH: (1, 0, "_synch"),
+    C.Cmd.GET_COMM_MODE_INFO: (1, 0, "_get_comm_mode_info"),
+    C.Cmd.GET_ID: (2, 0, "_get_id"),
+    C.Cmd.SET_REQUEST: (4, C.RES_CAL_PAG, "_set_request"),
+    C.Cmd.GET_SEED: (3, 0, "_get_seed"),
+    C.Cmd.UNLOCK: (2, 0, "_unlock"),
+    C.Cmd.SET_MTA: (8, 0, "_set_mta"),
+    C.Cmd.UPLOAD: (2, 0, "_upload"),
+    C.Cmd.SHORT_UPLOAD: (8, 0, "_short_upload"),
+    C.Cmd.BUILD_CHECKSUM: (8, 0, "_build_checksum"),
+    C.Cmd.DOWNLOAD: (2, 0, "_download"),
+    C.Cmd.DOWNLOAD_NEXT: (2, 0, "_download_next"),
+    C.Cmd.CLEAR_DAQ_LIST: (4, C.RES_DAQ, "_clear_daq_list"),
+    C.Cmd.SET_DAQ_PTR: (6, C.RES_DAQ, "_set_daq_ptr"),
+    C.Cmd.WRITE_DAQ: (8, C.RES_DAQ, "_write_daq"),
+    C.Cmd.SET_DAQ_LIST_MODE: (8, C.RES_DAQ, "_set_daq_list_mode"),
+    C.Cmd.GET_DAQ_LIST_MODE: (4, 0, "_get_daq_list_mode"),
+    C.Cmd.START_STOP_DAQ_LIST: (4, C.RES_DAQ, "_start_stop_daq_list"),
+    C.Cmd.START_STOP_SYNCH: (2, C.RES_DAQ, "_start_stop_synch"),
+    C.Cmd.GET_DAQ_CLOCK: (1, 0, "_get_daq_clock"),
+    C.Cmd.READ_DAQ: (1, 0, "_read_daq"),
+    C.Cmd.GET_DAQ_PROCESSOR_INFO: (1, 0, "_get_daq_processor_info"),
+    C.Cmd.GET_DAQ_RESOLUTION_INFO: (1, 0, "_get_daq_resolution_info"),
+    C.Cmd.GET_DAQ_LIST_INFO: (4, 0, "_get_daq_list_info"),
+    C.Cmd.GET_DAQ_EVENT_INFO: (4, 0, "_get_daq_event_info"),
+    C.Cmd.FREE_DAQ: (1, C.RES_DAQ, "_free_daq"),
+    C.Cmd.ALLOC_DAQ: (4, C.RES_DAQ, "_alloc_daq"),
+    C.Cmd.ALLOC_ODT: (5, C.RES_DAQ, "_alloc_odt"),
+    C.Cmd.ALLOC_ODT_ENTRY: (6, C.RES_DAQ, "_alloc_odt_entry"),
+}
+
+
 class XcpError(Exception):
     """A command refused with an XCP error (``extra``: the error packet's further bytes)."""
 
@@ -121,6 +158,19 @@ def _u32(data: bytes, at: int) -> int:
     return struct.unpack_from("<I", data, at)[0]
 
 
+@dataclass(frozen=True)
+class Limits:
+    """How much the slave holds: frames waiting, a master block's frames, DAQ lists, ODTs and
+    ODT entries. The defaults are this slave's; the C slave (ecu/port/ecu_xcp.c) holds less,
+    and a Python slave given its limits answers as it does."""
+
+    max_queue: int = MAX_QUEUE
+    max_bs: int = MAX_BS
+    max_daq: int = D.MAX_DAQ
+    max_odts: int = D.MAX_ODTS
+    max_entries: int = D.MAX_ENTRIES
+
+
 @dataclass
 class _Block:
     """A master block download under way: where, how many bytes in all, those received."""
@@ -146,6 +196,7 @@ class XcpSlave:
         clock_us: Callable[[], int] | None = None,
         seed: int | None = None,
         timer: Callable[[], float] = time.perf_counter,
+        limits: Limits | None = None,
     ) -> None:
         self.ecu = ecu
         self.boot = boot
@@ -166,7 +217,11 @@ class XcpSlave:
             "event1": "100 ms",
         }
         self.memory = MEM.MemoryMap(ecu, self.table, self.bench, texts)
-        self.daq = D.Daq(self.memory)
+        self.limits = limits = limits or Limits()
+        self.daq = D.Daq(
+            self.memory, max_daq=limits.max_daq, max_odts=limits.max_odts,
+            max_entries=limits.max_entries,
+        )  # fmt: skip
         self.every_100ms = max(1, round(self.rate_hz * EVENT_100MS / 1000))
         self.counters = Counters()
         self._queue: deque[bytes] = deque()
@@ -183,39 +238,8 @@ class XcpSlave:
         self._heavy = False  # a parameter set was checked this tick
         self._tick_s = 0.0  # time served so far in this tick
         self._handlers: dict[int, tuple[int, int, Callable[[bytes], bytes | None]]] = {
-            # command: (minimum length, resource it needs, handler)
-            C.Cmd.CONNECT: (2, 0, self._connect),
-            C.Cmd.DISCONNECT: (1, 0, self._disconnect),
-            C.Cmd.GET_STATUS: (1, 0, self._get_status),
-            C.Cmd.SYNCH: (1, 0, self._synch),
-            C.Cmd.GET_COMM_MODE_INFO: (1, 0, self._get_comm_mode_info),
-            C.Cmd.GET_ID: (2, 0, self._get_id),
-            C.Cmd.SET_REQUEST: (4, C.RES_CAL_PAG, self._set_request),
-            C.Cmd.GET_SEED: (3, 0, self._get_seed),
-            C.Cmd.UNLOCK: (2, 0, self._unlock),
-            C.Cmd.SET_MTA: (8, 0, self._set_mta),
-            C.Cmd.UPLOAD: (2, 0, self._upload),
-            C.Cmd.SHORT_UPLOAD: (8, 0, self._short_upload),
-            C.Cmd.BUILD_CHECKSUM: (8, 0, self._build_checksum),
-            C.Cmd.DOWNLOAD: (2, 0, self._download),
-            C.Cmd.DOWNLOAD_NEXT: (2, 0, self._download_next),
-            C.Cmd.CLEAR_DAQ_LIST: (4, C.RES_DAQ, self._clear_daq_list),
-            C.Cmd.SET_DAQ_PTR: (6, C.RES_DAQ, self._set_daq_ptr),
-            C.Cmd.WRITE_DAQ: (8, C.RES_DAQ, self._write_daq),
-            C.Cmd.SET_DAQ_LIST_MODE: (8, C.RES_DAQ, self._set_daq_list_mode),
-            C.Cmd.GET_DAQ_LIST_MODE: (4, 0, self._get_daq_list_mode),
-            C.Cmd.START_STOP_DAQ_LIST: (4, C.RES_DAQ, self._start_stop_daq_list),
-            C.Cmd.START_STOP_SYNCH: (2, C.RES_DAQ, self._start_stop_synch),
-            C.Cmd.GET_DAQ_CLOCK: (1, 0, self._get_daq_clock),
-            C.Cmd.READ_DAQ: (1, 0, self._read_daq),
-            C.Cmd.GET_DAQ_PROCESSOR_INFO: (1, 0, self._get_daq_processor_info),
-            C.Cmd.GET_DAQ_RESOLUTION_INFO: (1, 0, self._get_daq_resolution_info),
-            C.Cmd.GET_DAQ_LIST_INFO: (4, 0, self._get_daq_list_info),
-            C.Cmd.GET_DAQ_EVENT_INFO: (4, 0, self._get_daq_event_info),
-            C.Cmd.FREE_DAQ: (1, C.RES_DAQ, self._free_daq),
-            C.Cmd.ALLOC_DAQ: (4, C.RES_DAQ, self._alloc_daq),
-            C.Cmd.ALLOC_ODT: (5, C.RES_DAQ, self._alloc_odt),
-            C.Cmd.ALLOC_ODT_ENTRY: (6, C.RES_DAQ, self._alloc_odt_entry),
+            command: (minimum, resource, getattr(self, name))
+            for command, (minimum, resource, name) in COMMANDS.items()
         }
 
     # -- the tick boundary ---------------------------------------------------------------------
@@ -223,7 +247,7 @@ class XcpSlave:
         """A command frame from the bus: queued for the next tick (bounded)."""
         c = self.counters
         c.frames += 1
-        if len(self._queue) >= MAX_QUEUE:
+        if len(self._queue) >= self.limits.max_queue:
             c.queue_overflow += 1
         else:
             self._queue.append(bytes(data))
@@ -392,7 +416,8 @@ class XcpSlave:
         raise XcpError(C.Err.CMD_SYNCH)
 
     def _get_comm_mode_info(self, frame: bytes) -> bytes:
-        return bytes((0, C.COMM_MODE_OPTIONAL_MASTER_BLOCK, 0, MAX_BS, 0, 0, DRIVER_VERSION))
+        max_bs = self.limits.max_bs
+        return bytes((0, C.COMM_MODE_OPTIONAL_MASTER_BLOCK, 0, max_bs, 0, 0, DRIVER_VERSION))
 
     def _get_id(self, frame: bytes) -> bytes:
         """Types 0 (ASCII identification), 1 (the A2L's name), 2 (its file name): uploaded
@@ -479,7 +504,7 @@ class XcpSlave:
     # -- writes --------------------------------------------------------------------------------
     def _download(self, frame: bytes) -> bytes | None:
         size = frame[1]
-        if size == 0 or size > MAX_BS * (MAX_CTO - 2):
+        if size == 0 or size > self.limits.max_bs * (MAX_CTO - 2):
             raise XcpError(C.Err.OUT_OF_RANGE, "DOWNLOAD: 1..252 bytes")
         part = min(size, MAX_CTO - 2)
         if len(frame) < 2 + part:
@@ -607,7 +632,7 @@ class XcpSlave:
     # -- DAQ -----------------------------------------------------------------------------------
     def _get_daq_processor_info(self, frame: bytes) -> bytes:
         properties = C.DAQ_PROPERTY_DYNAMIC | C.DAQ_PROPERTY_PRESCALER | C.DAQ_PROPERTY_TIMESTAMP
-        return struct.pack("<BHHBB", properties, D.MAX_DAQ, D.EVENTS, 0, 0)
+        return struct.pack("<BHHBB", properties, self.daq.max_daq, D.EVENTS, 0, 0)
 
     def _get_daq_resolution_info(self, frame: bytes) -> bytes:
         return struct.pack("<BBBBBH", 1, D.MAX_ENTRY_SIZE, 1, 0, C.TIMESTAMP_MODE, 1)
