@@ -307,7 +307,7 @@ def _check_inputs(opts: RunOptions, s: Scenario, state: RunState) -> None:
     }
     params = preset(s.controller.preset or "default", **nominal)
     if opts.commission is not None:
-        params = commissioning.apply(params, commissioning.load(opts.commission))
+        params = commissioning.commission(params, opts.commission)
     compile_params(params)
     if opts.mode == "inproc":
         return
@@ -400,7 +400,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     plant = build_plant(s, seed)
     params = ecu_params(s, plant)
     if opts.commission is not None:
-        params = commissioning.apply(params, commissioning.load(opts.commission))
+        params = commissioning.commission(params, opts.commission)
     compile_params(params)  # refuse bad overrides before anything starts
     if ecu_spec is not None:
         ecu_args = _ecu_args(opts, s, params, ecu_spec, state.claims[-1].tag)

@@ -93,3 +93,17 @@ def test_bridge_checks_its_events_file_before_it_starts(tmp_path, events):
     result = _sil(*argv, "--duration", "60", "--events", events.format(tmp=tmp_path))
     assert result.returncode == 2 and "argument --events" in result.stderr
     assert time.monotonic() - t0 < 30  # refused at once, not after the 60 s bridge
+
+
+def test_a_commissioning_the_ecu_refuses_is_named_before_anything_runs(tmp_path, capsys):
+    bad = tmp_path / "engine.json"
+    bad.write_text(
+        '{"format": "turbojet-sil commissioning 1", "trim_N_pct": -5, "trim_V": -12,'
+        ' "Ap_row2": [-1.8, -2.3], "Lambda": 4.8, "Theta_row2": [-0.18, 0.0]}'
+    )
+    out = tmp_path / "run"
+    argv = ["run", "thesis-5.4-staircase", "--mode", "inproc", "--commission", str(bad)]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"sil run: {bad}: the ECU refuses this commissioning: trim_n_pct=-5.0: "
+                   "must be in (0, 110)"]  # fmt: skip

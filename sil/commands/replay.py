@@ -182,7 +182,7 @@ def _ecu_for(s, record, param_texts: list[str]):  # noqa: ANN001, ANN202 (Scenar
     params = ecu_params(s, build_plant(s, s.seed))
     commissioned = record.commissioning if record is not None else None
     if commissioned is not None:
-        params = commissioning.apply(params, commissioning.load(commissioned))
+        params = commissioning.commission(params, commissioned)
     changes = dict(_param(p) for p in param_texts)
     params = compile_params(replace(params, **changes))
     impl = "python" if record is None else record.ecu_impl
