@@ -64,6 +64,12 @@ void ecu_node_init(ecu_node_t *n, ecu_t *e, const ecu_node_config_t *c)
     n->status_phase = n->telemetry_phase = 0u;
     n->demand_pending = 0u;
     n->ticked_demands = n->waiting = n->sensor_seen = n->own_clock = n->ran = 0u;
+    n->xcp = NULL;
+}
+
+void ecu_node_attach_xcp(ecu_node_t *n, ecu_xcp_t *x)
+{
+    n->xcp = x;
 }
 
 /* _hold_demand: keep a valid Demand until its DemandTick (at once when unticked); two are held,
@@ -136,19 +142,28 @@ static void apply_demand(ecu_node_t *n)
 static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
 {
     const ecu_outputs_t *o;
+    const ecu_inputs_t *in = &n->in;
+    ecu_inputs_t bench;
     int count = 0;
     n->waiting = 0u;
     if (n->demand_pending) {
         apply_demand(n);
     }
     n->in.tick = n->tick;
+    if (n->xcp != NULL) {
+        ecu_xcp_serve(n->xcp); /* the master's requests, at the tick boundary */
+        in = ecu_xcp_inputs(n->xcp, &n->in, &bench); /* the bench may be the demand source */
+    }
 #ifdef ECU_NODE_PROFILE
     ecu_node_profile_begin();
-    o = ecu_tick(n->ecu, &n->in);
+    o = ecu_tick(n->ecu, in);
     ecu_node_profile_end();
 #else
-    o = ecu_tick(n->ecu, &n->in);
+    o = ecu_tick(n->ecu, in);
 #endif
+    if (n->xcp != NULL) {
+        ecu_xcp_sample(n->xcp); /* the DAQ lists of this tick's events */
+    }
     n->in.sensor_status = n->in.analog_status = n->in.demand_status = ECU_E2E_NONEWDATA;
     if (n->status_phase == 0u) { /* ticks % every_status == 0 */
         out[count].id = ECU_FRAME_STATUS;
@@ -235,8 +250,23 @@ int ecu_node_frame(ecu_node_t *n, uint32_t frame_id, const uint8_t data[8],
         if (n->waiting && !demand_due(n)) {
             return run_tick(n, out);
         }
+    } else if (n->xcp != NULL && frame_id == n->xcp->c.cmd_id) {
+        return ecu_node_receive(n, frame_id, data, 8u, out);
     }
     return 0;
+}
+
+int ecu_node_receive(ecu_node_t *n, uint32_t frame_id, const uint8_t *data, uint8_t dlc,
+                     ecu_can_frame_t out[ECU_NODE_MAX_OUT])
+{
+    if (n->xcp != NULL && frame_id == n->xcp->c.cmd_id) {
+        ecu_xcp_receive(n->xcp, data, dlc);
+        if (n->c.lockstep && !n->sensor_seen) { /* no tick yet: served as it comes */
+            ecu_xcp_serve(n->xcp);
+        }
+        return 0;
+    }
+    return dlc == 8u ? ecu_node_frame(n, frame_id, data, out) : 0;
 }
 
 /* on_timeout */
@@ -250,6 +280,9 @@ int ecu_node_timeout(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
         n->own_clock = 1u; /* timeout_s = 1 / rate_hz */
         n->tick = (uint16_t)(n->tick + 1u);
         return run_tick(n, out);
+    }
+    if (n->xcp != NULL) { /* no plant heard yet: the slave, with the engine stopped */
+        ecu_xcp_serve(n->xcp);
     }
     return 0;
 }
@@ -289,6 +322,11 @@ uint32_t ecu_node_demand_waits(const ecu_node_t *n)
 int ecu_node_own_clock(const ecu_node_t *n)
 {
     return n->own_clock;
+}
+
+int ecu_node_sensor_seen(const ecu_node_t *n)
+{
+    return n->sensor_seen;
 }
 
 int ecu_node_waiting(const ecu_node_t *n)

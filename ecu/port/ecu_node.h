@@ -59,6 +59,7 @@
 
 #include "ecu_core.h"
 #include "ecu_frames.h"
+#include "ecu_xcp.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -122,6 +123,7 @@ typedef struct {
     uint8_t sensor_seen;       /* a sensor frame has come */
     uint8_t own_clock;         /* lockstep, plant silent: ticking on ecu_node_timeout() */
     uint8_t ran;               /* a tick has run (EcuNode.ticks > 0) */
+    ecu_xcp_t *xcp;            /* the XCP slave (ecu_node_attach_xcp), or NULL */
 } ecu_node_t;
 
 /*
@@ -154,6 +156,23 @@ int ecu_node_timeout(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT]);
 /* Real time: one tick of the node's own clock, tick = ticks % 65536 (EcuNode.on_period). */
 int ecu_node_period(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT]);
 
+/*
+ * The XCP slave on the node (EcuNode.attach_xcp), initialised on the node's core
+ * (ecu_xcp_init); NULL: none. From then on its command frames (ID x->c.cmd_id) are taken, served
+ * at the tick boundary before ecu_tick (in lockstep before the first sensor frame: as they
+ * come, and on ecu_node_timeout), the bench's demand goes to the tick, and the DAQ lists are
+ * sampled after it. The slave's packets go out through its send callback during the call, so
+ * before the frames the call returns: a tick's DTOs precede its own frames.
+ */
+void ecu_node_attach_xcp(ecu_node_t *n, ecu_xcp_t *x);
+
+/*
+ * A received frame of dlc data bytes (0..8): the XCP slave's command frames at any length, the
+ * contract's frames (ecu_node_frame) at 8 bytes only; any other is ignored.
+ */
+int ecu_node_receive(ecu_node_t *n, uint32_t frame_id, const uint8_t *data, uint8_t dlc,
+                     ecu_can_frame_t out[ECU_NODE_MAX_OUT]);
+
 /* sizeof(ecu_node_t), for hosts that allocate it (the Python wrapper). */
 size_t ecu_node_size(void);
 
@@ -163,6 +182,7 @@ uint16_t ecu_node_tick(const ecu_node_t *n);               /* the tick answered 
 uint32_t ecu_node_late_sensor_frames(const ecu_node_t *n); /* lockstep: of a tick already run */
 uint32_t ecu_node_demand_waits(const ecu_node_t *n);       /* ticks run without their Demand */
 int ecu_node_own_clock(const ecu_node_t *n);   /* 1: plant silent, ticking on timeouts */
+int ecu_node_sensor_seen(const ecu_node_t *n); /* 1: a sensor frame has come */
 int ecu_node_waiting(const ecu_node_t *n);     /* 1: a tick waits for its Demand */
 /* the inputs the next tick gets so far (EcuNode.i) */
 const ecu_inputs_t *ecu_node_inputs(const ecu_node_t *n);

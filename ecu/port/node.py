@@ -1,9 +1,10 @@
 """The C CAN node (``ecu_node.c``) through ctypes, with the node interface of
 :class:`ecu.node.EcuNode`, so a driver or the in-process bus runs either: ``start``,
-``on_frame``, ``on_timeout``, ``on_period``, ``finished``, ``timeout_s``, ``frame_ids`` and the
-counters. It runs a :class:`ecu.port.core.CEcu` (the C core) and sends the same frames, byte for
-byte and in the same order, as ``EcuNode(ecu=CEcu(...))`` without a service port and with
-``max_ticks=None`` (tests/port/test_node.py).
+``on_frame``, ``on_timeout``, ``on_period``, ``finished``, ``timeout_s``, ``frame_ids``,
+``attach_xcp`` and the counters. It runs a :class:`ecu.port.core.CEcu` (the C core) and sends the
+same frames, byte for byte and in the same order, as ``EcuNode(ecu=CEcu(...))`` without a service
+port and with ``max_ticks=None`` (tests/port/test_node.py); with the C XCP slave
+(:class:`ecu.port.xcp.CXcpSlave`, ``attach_xcp``) as EcuNode with its Python slave.
 
 The two records the wrapper shares with C (``ecu_can_frame_t``, ``ecu_node_config_t``) are read
 from the library's field strings, as :mod:`ecu.port.core` reads the core's; the node itself is an
@@ -19,8 +20,9 @@ import ctypes
 import re
 from functools import cache
 
-from ecu.node import RECEIVED
+from ecu.node import RECEIVED, SERVICE_IDLE_POLL_S
 from ecu.port.core import CEcu, PortError, library
+from ecu.port.xcp import CXcpSlave
 from protocol.codec import Codec
 from protocol.lockstep import every_ticks
 from protocol.node import SendFn
@@ -76,6 +78,13 @@ class _NodeLib:
             ("ecu_node_own_clock", [vp], ctypes.c_int),
             ("ecu_node_waiting", [vp], ctypes.c_int),
             ("ecu_node_inputs", [vp], ctypes.POINTER(library().inputs_t)),
+            ("ecu_node_attach_xcp", [vp, vp], None),
+            (
+                "ecu_node_receive",
+                [vp, ctypes.c_uint32, ctypes.c_char_p, ctypes.c_uint8, vp],
+                ctypes.c_int,
+            ),  # fmt: skip
+            ("ecu_node_sensor_seen", [vp], ctypes.c_int),
         ):
             fn = getattr(lib, name)
             fn.argtypes = args
@@ -102,13 +111,20 @@ def frame_fn_address() -> int:
 
 class CEcuNode:
     """The C node on a C core: ``EcuNode``'s interface (see the module docstring). ``lockstep``
-    selects the clocking as in EcuNode; the node never finishes (``max_ticks=None``).
+    selects the clocking as in EcuNode; ``max_ticks`` as EcuNode's (None: never finishes).
 
     Received frames of the node's IDs must have 8 data bytes, the contract's length (a
     ValueError otherwise); frames of other IDs are ignored, as EcuNode ignores them.
     """
 
-    def __init__(self, ecu: CEcu, *, lockstep: bool = True, codec: Codec | None = None) -> None:
+    def __init__(
+        self,
+        ecu: CEcu,
+        *,
+        lockstep: bool = True,
+        codec: Codec | None = None,
+        max_ticks: int | None = None,
+    ) -> None:
         if not isinstance(ecu, CEcu):
             raise TypeError(f"CEcuNode runs a C core (ecu.port.core.CEcu), not {type(ecu)}")
         nl = node_library()
@@ -139,18 +155,48 @@ class CEcuNode:
         self.finished = False
         # the inputs the next tick gets (EcuNode.i), a view into the node
         self.i = nl.lib.ecu_node_inputs(self._ref).contents
+        self.max_ticks = max_ticks  # finished once this many ticks have run (None: never)
+        self.service = None  # (EcuNode's service port: the C node has none)
+        self.xcp: CXcpSlave | None = None  # the C XCP slave (attach_xcp), or None
+        self._xcp_send_for: SendFn | None = None
+        self._receive = nl.lib.ecu_node_receive
+
+    def attach_xcp(self, slave: CXcpSlave) -> None:
+        """Put the C XCP slave on the node (``ecu_node_attach_xcp``): its command frames are
+        heard from now on, at any length; its packets go out during the node's calls, before
+        the frames a call returns."""
+        if slave.ecu is not self.ecu:
+            raise ValueError("the XCP slave runs on another core than the node's")
+        self._lib.ecu_node_attach_xcp(self._ref, slave.address)
+        self.xcp = slave
+        self.frame_ids = (*self.frame_ids, slave.cmd_id)
+
+    def _xcp_to(self, send: SendFn) -> None:
+        """The slave's packets to ``send`` on its response ID (set once per driver)."""
+        if self.xcp is not None and self._xcp_send_for is not send:
+            res_id = self.xcp.res_id
+            self.xcp._sink = lambda data: send(res_id, data)
+            self._xcp_send_for = send
 
     def _send(self, count: int, send: SendFn) -> None:
         out = self._out
         for k in range(count):
             frame = out[k]
             send(frame.id, bytes(frame.data))
+        if count and self.max_ticks is not None and self.ticks >= self.max_ticks:
+            self.finished = True
 
     # -- the node interface (protocol/node.py) -----------------------------------------------
     def start(self, send: SendFn) -> None:
         pass
 
     def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        if self.xcp is not None:
+            self._xcp_to(send)
+            if frame_id == self.xcp.cmd_id:
+                data = bytes(data)[:8]
+                self._receive(self._ref, frame_id, data, len(data), self._out)
+                return
         if len(data) != 8:
             if frame_id in self.frame_ids:
                 raise ValueError(f"frame {frame_id:#x} with {len(data)} data bytes: expected 8")
@@ -160,16 +206,23 @@ class CEcuNode:
             self._send(count, send)
 
     def on_timeout(self, send: SendFn) -> None:
+        self._xcp_to(send)
         self._send(self._timeout(self._ref, self._out), send)
 
     def on_period(self, send: SendFn) -> None:
+        self._xcp_to(send)
         self._send(self._period(self._ref, self._out), send)
 
     # -- EcuNode's counters ------------------------------------------------------------------
     @property
     def timeout_s(self) -> float | None:
-        """1 / rate_hz while the plant is silent (the node ticks on its own clock), else None."""
-        return 1.0 / self.rate_hz if self._lib.ecu_node_own_clock(self._ref) else None
+        """1 / rate_hz while the plant is silent (the node ticks on its own clock); with an XCP
+        slave and no plant heard yet, EcuNode's poll period (a store goes on); else None."""
+        if self._lib.ecu_node_own_clock(self._ref):
+            return 1.0 / self.rate_hz
+        if self.xcp is not None and not self._lib.ecu_node_sensor_seen(self._ref):
+            return SERVICE_IDLE_POLL_S
+        return None
 
     @property
     def ticks(self) -> int:

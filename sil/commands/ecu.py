@@ -102,10 +102,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=xcp_ids,
         metavar="MASTER,ECU",
         help="the XCP slave's CAN IDs, master to ECU and ECU to master (default: the DBC's "
-        "XcpCommand and XcpResponse, 0x700,0x701); --impl python",
+        "XcpCommand and XcpResponse, 0x700,0x701)",
     )
     parser.add_argument(
-        "--no-xcp", action="store_true", help="no XCP slave (default: one, with --impl python)"
+        "--no-xcp",
+        action="store_true",
+        help="no XCP slave (default: one; --impl c and pil run the C slave, ecu/port/ecu_xcp.c; "
+        "--impl c with --serial has none)",
     )
     add_launcher_options(parser)
     parser.add_argument("--json", action="store_true", help="print the run summary as JSON")
@@ -146,9 +149,11 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
-    xcp_on = args.impl == "python" and not args.no_xcp
+    # the C node (--impl c) carries the C slave; with --serial the Python node runs the C core
+    # with its service port, and no slave
+    xcp_on = not args.no_xcp and not (args.impl == "c" and args.serial)
     if args.xcp_ids is not None and not xcp_on:
-        print("sil ecu: --xcp-ids: the XCP slave runs with --impl python (and no --no-xcp)",
+        print("sil ecu: --xcp-ids: no XCP slave runs (--no-xcp, or --impl c with --serial)",
               file=sys.stderr)  # fmt: skip
         return 2
     if args.controller:
@@ -186,11 +191,15 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         ecu = make_ecu(args.impl, params)
-    except (PortBuildError, PortError) as exc:
+        codec = Codec()
+        lockstep = args.mode == "lockstep"
+        if args.impl == "c" and not args.serial:  # the C node, with the C XCP slave
+            node = _c_node(ecu, booted if xcp_on else None, args, codec)
+        else:
+            node = EcuNode(ecu=ecu, lockstep=lockstep, max_ticks=args.ticks, codec=codec)
+    except (PortBuildError, PortError, ValueError) as exc:
         print(f"sil ecu: --impl {args.impl}: {exc}", file=sys.stderr)
         return 2
-    codec = Codec()
-    node = EcuNode(ecu=ecu, lockstep=args.mode == "lockstep", max_ticks=args.ticks, codec=codec)
     sequence = run_sequence(args, codec, "ECU", params.rate_hz)
     if args.serial and booted is not None:
         from ecu.service.port import ServicePort
@@ -202,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"sil ecu: {exc}", file=sys.stderr)
             return 2
         print(f"service port: {node.service.transport.name}", file=sys.stderr, flush=True)
-    if xcp_on and booted is not None:
+    if xcp_on and booted is not None and args.impl == "python":
         _attach_xcp(node, booted, args)
     try:
         bus = RunBus(open_bus(args.bus), args.run_tag, sequence)
@@ -265,6 +274,34 @@ def _attach_xcp(node, booted, args: argparse.Namespace) -> None:  # noqa: ANN001
 
     bench = node.service.bench_control if node.service is not None else None
     node.attach_xcp(XcpSlave(node.ecu, booted, bench, ids=ids, clock_us=clock_us))
+
+
+def _wall_clock_us():  # noqa: ANN202
+    """The ECU's clock in real time: microseconds of the wall clock since start-up."""
+    import time
+
+    start_ns = time.monotonic_ns()
+    return lambda: (time.monotonic_ns() - start_ns) // 1000
+
+
+def _c_node(ecu, booted, args: argparse.Namespace, codec):  # noqa: ANN001, ANN202
+    """The C node (ecu/port/ecu_node.c) on the C core; with ``booted`` (the set it runs and the
+    flash image) the C XCP slave on it, on the DBC's IDs or --xcp-ids."""
+    import os
+
+    from ecu.port.node import CEcuNode
+    from ecu.port.xcp import CXcpSlave
+    from protocol.dbc import xcp_frame_ids
+
+    node = CEcuNode(ecu, lockstep=args.mode == "lockstep", codec=codec, max_ticks=args.ticks)
+    if booted is not None:
+        slave = CXcpSlave(
+            ecu, booted.table, ids=args.xcp_ids or xcp_frame_ids(),
+            seed=int.from_bytes(os.urandom(4), "little") or 1,
+            clock_us=_wall_clock_us() if args.mode == "realtime" else None, flash=args.flash,
+        )  # fmt: skip
+        node.attach_xcp(slave)
+    return node
 
 
 def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)

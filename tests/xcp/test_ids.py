@@ -47,6 +47,18 @@ def test_ecu_refuses_xcp_ids_that_clash_or_are_not_ids(sil, ids, why):
     assert result.returncode == 2 and why in result.stderr
 
 
-def test_xcp_ids_need_the_python_tick(sil):
-    result = sil("ecu", "--bus", "virtual:ids", "--impl", "c", "--xcp-ids", "0x600,0x601")
-    assert result.returncode == 2 and "--impl python" in result.stderr
+def test_xcp_ids_need_a_slave(sil):
+    result = sil("ecu", "--bus", "virtual:ids", "--no-xcp", "--xcp-ids", "0x600,0x601")
+    assert result.returncode == 2 and "no XCP slave runs" in result.stderr
+    serial = ("--impl", "c", "--serial", "pty", "--xcp-ids", "0x600,0x601")
+    result = sil("ecu", "--bus", "virtual:ids", *serial, "--ticks", "1")
+    assert result.returncode == 2 and "--impl c with --serial" in result.stderr
+
+
+def test_the_c_node_takes_xcp_ids(sil):
+    result = sil(
+        "ecu", "--bus", "virtual:ids", "--impl", "c", "--xcp-ids", "0x600,0x601", "--ticks", "1",
+        "--mode", "realtime",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "xcp: CAN IDs 0x600 (master) 0x601 (ECU)" in result.stderr
