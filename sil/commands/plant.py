@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import math
 import sys
 import time
@@ -12,6 +11,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from protocol import strict_json
 from sil.node_options import add_launcher_options, run_sequence
 from sil.parent_death import NodeStop, PeerLost
 from sil.validation import option
@@ -272,5 +272,5 @@ def run(args: argparse.Namespace) -> int:
             **stats.summary(),
             **bus.stats(),
         }
-        args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
+        args.stats_file.write_text(strict_json.dumps(summary, indent=2) + "\n")
     return 0

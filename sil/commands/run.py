@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import threading
 from pathlib import Path
 
+from protocol import strict_json
 from protocol.bus import BusSpecError
 from sil import results, run_folder
 from sil import scenario as scenarios
@@ -220,7 +220,7 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         print(f"sil run: aborted: {interrupt_reason(exc)}", file=sys.stderr)
         return 1
     if args.json:
-        print(json.dumps(summary, indent=2, default=float))
+        print(strict_json.dumps(summary, indent=2, default=float))
     else:
         print_summary(summary, out)
     if summary["status"] != "completed":
