@@ -107,3 +107,12 @@ def test_a_commissioning_the_ecu_refuses_is_named_before_anything_runs(tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"sil run: {bad}: the ECU refuses this commissioning: trim_n_pct=-5.0: "
                    "must be in (0, 110)"]  # fmt: skip
+
+
+def test_demo_help_states_its_own_output_folder(capsys) -> None:
+    try:
+        main(["demo", "--help"])
+    except SystemExit:
+        pass
+    out = " ".join(capsys.readouterr().out.split())
+    assert "--out DIR output folder (default: out/demo, a folder per controller inside" in out

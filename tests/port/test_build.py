@@ -70,3 +70,12 @@ def test_no_heap_and_no_float_types_in_the_core_source():
 def test_compilers_present(toolchains):
     for tool in ("gcc", "clang", build.ARM_CC, "qemu-system-arm"):
         assert shutil.which(tool), tool
+
+
+def test_the_first_c_build_says_what_it_is_doing(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.setattr(build, "BUILD_DIR", tmp_path)
+    library = build.host_library()
+    err = capsys.readouterr().err
+    assert "ecu.port: compiling libecu_port.so with" in err and str(tmp_path) in err
+    assert build.host_library() == library  # built once: the second call says nothing
+    assert capsys.readouterr().err == ""
