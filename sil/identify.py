@@ -515,6 +515,6 @@ def read_recording(
         fmt, _ = detect_format(path)
     except LogReadError:
         fmt = "other"
-    if fmt in ("candump", "asc", "blf", "trc", "csv"):  # csv: python-can's CSV log
+    if fmt in ("candump", "asc", "blf", "trc", "csv", "mf4"):  # csv: python-can's CSV log
         return read_can_log(path)
     return read_csv(path, time_column, speed_column, voltage_column, speed_unit)

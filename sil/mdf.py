@@ -84,8 +84,20 @@ def quiet() -> Iterator[None]:
             warnings.simplefilter("ignore")
             yield
     finally:
-        gc.collect()  # a half-built reader is freed while its complaints are still ignored
         log.disabled, sys.unraisablehook = disabled, hook
+
+
+def _attempt(action: Callable[[], object]) -> tuple[object, str | None]:
+    """``action()``'s result, or None and what it raised in one line; the exception and what it
+    held (a half-built reader) freed while asammdf is :func:`quiet`."""
+    failure = None
+    with quiet():
+        try:
+            return action(), None
+        except Exception as exc:  # asammdf raises what its parser meets: a corrupt file
+            failure = _one_line(exc)
+        gc.collect()
+    return None, failure
 
 
 # -- the frames of a log, as columns -------------------------------------------------------
@@ -307,32 +319,113 @@ _BLOCK = struct.Struct("<4s4xQQ")  # id, length, links
 
 
 def check_blocks(f: BinaryIO, size: int) -> tuple[int, str] | None:
-    """Where an MDF 4 file's block structure breaks (the byte and what is wrong), or None:
-    every block reachable from the header's links must be a whole block inside the file. A file
-    cut short loses the blocks written last (asammdf writes the groups' and channels' blocks
-    after the data)."""
-    seen: set[int] = set()
-    todo = [64]
+    """Where an MDF 4 file's structure breaks (the byte and what is wrong), or None. Every block
+    reachable from the header's links must be a whole block inside the file (a file cut short
+    loses the blocks written last: asammdf writes the groups' and channels' blocks after the
+    data; that is named at the file's end, with the block that links past it), and every
+    channel must lie in its group's records, which the data must hold (asammdf's compiled
+    reader trusts these: a corrupt offset would crash it rather than fail)."""
+    blocks: dict[int, tuple[bytes, tuple[int, ...], int]] = {}  # byte -> (kind, links, length)
+    todo = [(64, b"ID")]  # (a block's byte, the kind of block that links to it)
     while todo:
-        at = todo.pop()
-        if at in seen or at == 0:
+        at, parent = todo.pop()
+        if at in blocks or at == 0:
             continue
-        seen.add(at)
+        via = f"the {parent.decode('latin-1')} block's link to byte {at}"
         if at + _BLOCK.size > size:
-            return at, f"a link points at byte {at}, past the file's end ({size} bytes): truncated"
+            return size, f"truncated MF4: {via} lies past the file's end ({size} bytes)"
         f.seek(at)
-        ident, length, links = _BLOCK.unpack(f.read(_BLOCK.size))
+        ident, length, count = _BLOCK.unpack(f.read(_BLOCK.size))
         if not ident.startswith(b"##"):
-            return at, f"no block at byte {at} (found {ident!r}): corrupt"
-        if at + length > size or length < _BLOCK.size + 8 * links:
-            return at, (
-                f"the {ident[2:].decode('latin-1')} block at byte {at} ({length} bytes) ends "
-                f"past the file's end ({size} bytes): truncated"
+            return at, f"corrupt MF4: no block at byte {at} ({via}; found {ident!r})"
+        kind = ident[2:]
+        if at + length > size:
+            return size, (
+                f"truncated MF4: the {kind.decode('latin-1')} block at byte {at} ({length} "
+                f"bytes) ends past the file's end ({size} bytes)"
             )
-        if len(seen) > 10_000_000:
-            return at, "too many blocks: corrupt"
-        todo += struct.unpack(f"<{links}Q", f.read(8 * links))
+        if length < _BLOCK.size + 8 * count or len(blocks) > 10_000_000:
+            return at, f"corrupt MF4: the {kind.decode('latin-1')} block at byte {at} is malformed"
+        links = struct.unpack(f"<{count}Q", f.read(8 * count))
+        blocks[at] = (kind, links, length)
+        todo += [(link, kind) for link in links]
+    return _check_groups(f, blocks)
+
+
+def _check_groups(f: BinaryIO, blocks: dict) -> tuple[int, str] | None:
+    """Each channel group's channels inside its records, and its records inside its data."""
+
+    def data(at: int, fmt: str) -> tuple:
+        kind, links, length = blocks[at]
+        f.seek(at + _BLOCK.size + 8 * len(links))
+        raw = f.read(struct.calcsize(fmt))
+        if len(raw) < struct.calcsize(fmt):
+            raise _Malformed(at, kind)
+        return struct.unpack(fmt, raw)
+
+    def chain(at: int, kind: bytes, nxt: int = 0) -> Iterator[int]:
+        hops = 0
+        while at and hops < 1_000_000:
+            if blocks.get(at, (b"",))[0] != kind:
+                raise _Malformed(at, kind)
+            yield at
+            at, hops = blocks[at][1][nxt], hops + 1
+
+    def held(at: int) -> int:  # the bytes a data link holds (DT, DZ, DL, HL, or none)
+        if not at:
+            return 0
+        kind, links, length = blocks[at]
+        if kind in (b"DT", b"DV", b"RD"):
+            return length - _BLOCK.size - 8 * len(links)
+        if kind == b"DZ":
+            return data(at, "<2sBxIQQ")[3]
+        if kind == b"HL":
+            return held(links[0])
+        if kind == b"DL":
+            return sum(held(link) for dl in chain(at, b"DL") for link in blocks[dl][1][1:])
+        return 0
+
+    try:
+        header = next(at for at, block in blocks.items() if block[0] == b"HD")
+        for dg in chain(blocks[header][1][0], b"DG"):
+            record_id = data(dg, "<B")[0]
+            groups = list(chain(blocks[dg][1][1], b"CG"))
+            for cg in groups:
+                _, cycles, _, _, size, invalid = data(cg, "<QQHH4xII")
+                channels = list(blocks[cg][1][1:2])
+                while channels:
+                    for cn in chain(channels.pop(), b"CN"):
+                        cn_type, _, dtype, bit, byte, bits, flags, ipos = data(cn, "<BBBBIIII")
+                        if blocks[cn][1][1] and blocks[blocks[cn][1][1]][0] == b"CN":
+                            channels.append(blocks[cn][1][1])  # a structure's members
+                        width = 64 if cn_type == 1 else bit + bits  # VLSD: its offset
+                        if cn_type in (3, 6):  # virtual: no bytes in the record
+                            continue
+                        if byte + (width + 7) // 8 > size or dtype > 30:
+                            raise _Malformed(cn, b"CN")
+                        if flags & 2 and ipos >= 8 * invalid:
+                            raise _Malformed(cn, b"CN")
+            if len(groups) == 1:  # (sorted: every record of the one group, back to back)
+                _, cycles, _, _, size, invalid = data(groups[0], "<QQHH4xII")
+                need = cycles * (record_id + size + invalid)
+                have = held(blocks[dg][1][2])
+                if need > have:
+                    return dg, (
+                        f"corrupt MF4: the data group at byte {dg} holds {have} bytes for "
+                        f"{cycles} records of {record_id + size + invalid} bytes"
+                    )
+    except _Malformed as exc:
+        kind = exc.kind.decode("latin-1")
+        return exc.at, f"corrupt MF4: the {kind} block at byte {exc.at} is malformed"
+    except (KeyError, IndexError, StopIteration):
+        return 64, "corrupt MF4: its blocks do not link as MDF 4's do"
     return None
+
+
+class _Malformed(Exception):
+    def __init__(self, at: int, kind: bytes) -> None:
+        super().__init__(at, kind)
+        self.at, self.kind = at, kind
 
 
 class BusLogReader:
@@ -370,12 +463,10 @@ class BusLogReader:
                 broken = check_blocks(f, size)
         if broken is not None:
             at, reason = broken
-            raise self._error(f"byte {at}", f"{reason} MF4")
-        try:
-            with quiet():
-                mdf = module.MDF(source)
-        except Exception as exc:  # asammdf raises what its parser meets: a corrupt file
-            raise self._error("byte 0", f"corrupt MF4: {_one_line(exc)}") from None
+            raise self._error(f"byte {at}", reason)
+        mdf, failure = _attempt(lambda: module.MDF(source))
+        if failure is not None:
+            raise self._error("byte 0", f"corrupt MF4: {failure}")
         if not mdf.version.startswith("4"):
             mdf.close()
             raise self._error("byte 0", f"MDF {mdf.version}: a CAN bus log is MDF 4")
@@ -421,14 +512,14 @@ class BusLogReader:
         label = source.name or None  # the log's channel: vcan0, or a number (ASC, BLF, TRC)
         channel = int(label) if label is not None and label.isdigit() else label
         for first in range(0, records, _CHUNK):
-            try:
-                with quiet():
-                    signal = mdf.get(name, index, record_offset=first, record_count=_CHUNK,
-                                     raw=True)  # fmt: skip
-            except Exception as exc:  # a data block that does not decompress or parse
-                raise self._error(
-                    f"frame {self.frames + 1}", f"corrupt MF4 data ({name}): {_one_line(exc)}"
-                ) from None
+            signal, failure = _attempt(
+                lambda first=first: mdf.get(
+                    name, index, record_offset=first, record_count=_CHUNK, raw=True
+                )
+            )
+            if failure is not None:  # a data block that does not decompress or parse
+                where = f"frame {self.frames + 1}"
+                raise self._error(where, f"corrupt MF4 data ({name}): {failure}")
             yield from _messages(signal, kind, offset, channel)
 
 
