@@ -15,7 +15,7 @@ from sil.results import REPLAY_FILES, WriteError, named, write_atomically, write
 
 NAME = "replay"
 HELP = (
-    "decode a CAN log (candump, ASC, BLF, TRC, CSV), play it onto a bus in real time, or "
+    "decode a CAN log (candump, ASC, BLF, TRC, CSV, MF4), play it onto a bus in real time, or "
     "into the ECU emulator"
 )
 
