@@ -95,7 +95,7 @@ def _attempt(action: Callable[[], object]) -> tuple[object, str | None]:
         try:
             return action(), None
         except Exception as exc:  # asammdf raises what its parser meets: a corrupt file
-            failure = _one_line(exc)
+            failure = one_line(exc)
         gc.collect()
     return None, failure
 
@@ -579,7 +579,7 @@ def _start_us(header) -> int:  # noqa: ANN001 (asammdf's HeaderBlock)
     return round(header.abs_time / 1000)
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return text if len(text) <= 200 else text[:197] + "..."
 
