@@ -7,6 +7,7 @@ time, so two runs of the same scenario and seed give byte-identical files.
 
 from __future__ import annotations
 
+import errno
 import gzip
 import itertools
 import re
@@ -18,7 +19,7 @@ from typing import BinaryIO, TextIO
 import can
 import numpy as np
 
-from sil.results import atomic
+from sil.results import WriteError, atomic
 
 EXTRA_FORMATS = ("asc", "blf", "mf4")
 # what `sil log convert` writes, by the output's suffix
@@ -162,7 +163,12 @@ def convert(candump_path: Path, fmt: str, start_s: float | None = None) -> Path:
         raise ValueError(f"log format '{fmt}' is not one of {', '.join(EXTRA_FORMATS)}")
     target = candump_path.with_suffix(f".{fmt}")
     if fmt == "mf4":
-        convert_log(candump_path, target, start_s=start_s)
+        from sil.mdf import MdfUnavailable
+
+        try:
+            convert_log(candump_path, target, start_s=start_s)
+        except (LogReadError, MdfUnavailable) as exc:  # (nothing written): as a write error
+            raise WriteError(target, OSError(errno.EIO, str(exc))) from None
         return target
     with atomic(target) as tmp, can.Logger(str(tmp)) as writer:
         for message in can.CanutilsLogReader(str(candump_path)):

@@ -72,6 +72,14 @@ def asammdf():  # noqa: ANN201 (the module)
     return module
 
 
+def require(what: str) -> None:
+    """ValueError naming ``what`` (an option) when asammdf cannot be imported here."""
+    try:
+        asammdf()
+    except MdfUnavailable as exc:
+        raise ValueError(f"{what}: {exc}") from None
+
+
 @contextlib.contextmanager
 def quiet() -> Iterator[None]:
     """asammdf logs what it finds wrong (and a half-read file's ``__del__`` fails on its way

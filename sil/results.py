@@ -42,6 +42,7 @@ RESULTS = (
     "can.log",
     "can.asc",
     "can.blf",
+    "can.mf4",
     "trace.csv",
     "scenario.toml",
     *("run.json", "commissioning.json"),  # what shaped the run (sil.run_record)

@@ -125,6 +125,7 @@ class RunState:
     recorder: RecorderProcess | None = None  # the recorder's process, made before the set-up
     ecu_heard: dict[int, float] | None = None  # the fault bridge's ECU side: ID -> when heard
     started: float = 0.0  # perf_counter when the run began
+    started_wall: float = 0.0  # time.time() then (the start of the log's MF4 copy)
     nodes_up: float | None = None  # perf_counter when the node processes were up, at tick 0
     run_id: int | None = None  # on a bus: this run's RunId (its SimRun beacons carry it)
     claims: list[TagClaim] = field(default_factory=list)  # the run's tags: run bus, ECU bus
@@ -448,6 +449,7 @@ def _run(opts: RunOptions, s: Scenario, seed: int, state: RunState) -> dict:
     # skipped by the collector's full passes, each of which would stall the run for 0.1 s.
     gc.freeze()
     state.started = time.perf_counter()
+    state.started_wall = time.time()
     try:
         if opts.mode == "inproc":
             nodes = [command, *built]  # started in this order: the plant's tick 0 last
@@ -1002,9 +1004,10 @@ def _finish(
         log = opts.out_dir / f"{name}.log"
         if log.exists():
             summary[f"{name}_log"] = log.name
+    tick0 = state.started_wall + (state.nodes_up - state.started if state.nodes_up else 0.0)
     for fmt in opts.log_formats:
         try:
-            convert(opts.out_dir / "can.log", fmt)
+            convert(opts.out_dir / "can.log", fmt, start_s=tick0)
         except results.WriteError as exc:
             state.write_errors.append(str(exc))
     if opts.plots and trace is not None:

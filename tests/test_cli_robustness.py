@@ -200,12 +200,14 @@ def test_identify_refuses_time_that_does_not_increase(tmp_path: Path, capsys) ->
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory) -> Path:
-    """A short in-process run of the valid scenario: its can.log (and .asc, .blf) and summary."""
+    """A short in-process run of the valid scenario: its can.log (and .asc, .blf, .mf4) and
+    summary."""
     out = tmp_path_factory.mktemp("recorded")
     scenario = out / "s.toml"
     scenario.write_text(VALID.replace("duration_s = 1", "duration_s = 2"))
     argv = ["run", str(scenario), "--mode", "inproc", "--out", str(out / "run"), "--no-plots"]
-    assert cli.main([*argv, "--log-format", "asc", "--log-format", "blf"]) == 0
+    formats = ["--log-format", "asc", "--log-format", "blf", "--log-format", "mf4"]
+    assert cli.main([*argv, *formats]) == 0
     return out / "run"
 
 
@@ -234,7 +236,7 @@ def _damage_bytes(data: st.DataObject, raw: bytes) -> bytes:
 def test_damaged_logs_are_read_or_refused_in_one_line(
     recorded: Path, tmp_path: Path, capsys, data
 ) -> None:
-    name = data.draw(st.sampled_from(["can.log", "can.asc", "can.blf"]))
+    name = data.draw(st.sampled_from(["can.log", "can.asc", "can.blf", "can.mf4"]))
     log = tmp_path / name
     log.write_bytes(_damage_bytes(data, (recorded / name).read_bytes()))
     export = tmp_path / "commission.json"

@@ -13,6 +13,7 @@ from protocol.bus import BusSpecError
 from sil import results, run_folder
 from sil import scenario as scenarios
 from sil.canlog import EXTRA_FORMATS
+from sil.mdf import require as require_mdf
 from sil.node_options import add_pil_link
 from sil.run_record import Overrides
 from sil.watchdog import Terminated, interrupt_reason
@@ -88,7 +89,7 @@ def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCE
         action="append",
         choices=EXTRA_FORMATS,
         default=[],
-        help="also write can.log as .asc or .blf (repeatable)",
+        help="also write can.log as .asc, .blf or .mf4 (MF4 with the run's start; repeatable)",
     )
     parser.add_argument(
         "--commission",
@@ -188,6 +189,8 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         out = given or Path("out") / scenario.name
         run_folder.check("--out", out)
         changes = overrides(args)
+        if "mf4" in args.log_format:
+            require_mdf("--log-format mf4")  # ValueError without asammdf
     except (scenarios.ScenarioError, run_folder.FolderError, ValueError) as exc:
         print(f"sil run: {exc}", file=sys.stderr)
         return 2

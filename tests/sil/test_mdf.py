@@ -12,6 +12,7 @@ import random
 import re
 import subprocess
 import sys
+import time
 from contextlib import redirect_stderr
 from datetime import UTC, datetime
 from pathlib import Path
@@ -276,15 +277,25 @@ def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path):
 
 
 @pytest.mark.slow
-def test_sil_replay_reads_an_mf4_as_the_log_it_came_from(tmp_path):
-    """--dry-run reports what the can.log gives; --into-ecu of the MF4 in the run's folder finds
-    no difference; damaged, `sil replay`, `sil identify` and `sil log convert` name the file
-    and the byte in one line (replay after the report of what it read: exit 1, as for the other
-    formats; identify and convert refuse it: exit 2)."""
+def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
+    """`sil run --log-format mf4` writes can.mf4 beside can.log, starting at the run's
+    wall-clock start (and a run into the folder without it clears it). --dry-run of it reports
+    what the can.log gives; --into-ecu of it finds no difference; back to candump it is can.log.
+    Damaged, `sil replay`, `sil identify` and `sil log convert` name the file and the byte in
+    one line (replay after the report of what it read: exit 1, as for the other formats;
+    identify and convert refuse it: exit 2)."""
     out = tmp_path / "run"
-    done = _sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots")
+    before = time.time()
+    done = _sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots",
+                "--log-format", "mf4")  # fmt: skip
     assert done.returncode == 0, done.stderr
-    assert _sil("log", "convert", str(out / "can.log"), str(out / "can.mf4")).returncode == 0
+    m = asammdf.MDF(out / "can.mf4")
+    start = m.header.start_time.timestamp()
+    m.close()
+    assert (out / "run.json").stat().st_mtime <= start <= (out / "summary.json").stat().st_mtime
+    assert before < start
+    assert _sil("log", "convert", str(out / "can.mf4"), str(tmp_path / "back.log")).returncode == 0
+    assert (tmp_path / "back.log").read_bytes() == (out / "can.log").read_bytes()
     dry_log = _sil("replay", "--dry-run", "--json", str(out / "can.log"))
     dry_mf4 = _sil("replay", "--dry-run", "--json", str(out / "can.mf4"))
     assert dry_mf4.returncode == 0, dry_mf4.stderr
@@ -315,6 +326,11 @@ def test_sil_replay_reads_an_mf4_as_the_log_it_came_from(tmp_path):
         assert result.stderr.startswith(f"sil {name}: {where}"), result.stderr
         assert len(result.stderr.splitlines()) == 1, result.stderr
     assert not (tmp_path / "x.log").exists()
+
+    # the next run into the folder, without --log-format mf4, leaves no MF4 of the last one
+    done = _sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots")
+    assert done.returncode == 0, done.stderr
+    assert not (out / "can.mf4").exists()
 
 
 def test_no_asammdf_noise_reaches_stderr_on_a_file_that_is_no_mf4(tmp_path):
