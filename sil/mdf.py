@@ -96,16 +96,17 @@ def quiet() -> Iterator[None]:
         log.disabled, sys.unraisablehook = disabled, hook
 
 
-def _attempt(action: Callable[[], object]) -> tuple[object, str | None]:
+def _attempt(action: Callable[[], object], collect: bool = False) -> tuple[object, str | None]:
     """``action()``'s result, or None and what it raised in one line; the exception and what it
-    held (a half-built reader) freed while asammdf is :func:`quiet`."""
+    held freed while asammdf is :func:`quiet` (``collect``: a half-built reader, in a cycle)."""
     failure = None
     with quiet():
         try:
             return action(), None
         except Exception as exc:  # asammdf raises what its parser meets: a corrupt file
             failure = one_line(exc)
-        gc.collect()
+        if collect:
+            gc.collect()
     return None, failure
 
 
@@ -477,7 +478,7 @@ class BusLogReader:
         if broken is not None:
             at, reason = broken
             raise self._error(f"byte {at}", reason)
-        mdf, failure = _attempt(lambda: module.MDF(source))
+        mdf, failure = _attempt(lambda: module.MDF(source), collect=True)
         if failure is not None:
             raise self._error("byte 0", f"corrupt MF4: {failure}")
         if not mdf.version.startswith("4"):
