@@ -222,10 +222,14 @@ class EcuNode:
         """Lockstep silence before ``on_timeout`` (None: the driver's guard). Before the first
         sensor frame a node with a service port or an XCP slave polls it every
         SERVICE_IDLE_POLL_S."""
+        return SERVICE_IDLE_POLL_S if self.polling else self._timeout_s
+
+    @property
+    def polling(self) -> bool:
+        """Lockstep, no plant heard yet: the node polls its service port or XCP slave (idle
+        polls, not guard timeouts)."""
         idle = self.service is not None or self.xcp is not None
-        if self._timeout_s is None and idle and not self.sensor_seen:
-            return SERVICE_IDLE_POLL_S
-        return self._timeout_s
+        return self._timeout_s is None and idle and not self.sensor_seen
 
     @timeout_s.setter
     def timeout_s(self, value: float | None) -> None:

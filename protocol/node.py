@@ -63,6 +63,7 @@ class DriverStats:
     sent: int = 0
     ignored: dict[str, int] = field(default_factory=dict)  # reason -> count
     timeouts: int = 0
+    polls: int = 0  # lockstep: waits the node itself asked for while idle (no peer yet)
     periods: int = 0
     overruns: int = 0  # real time: periods that started later than one period after their time
     jitter_s: list[float] = field(default_factory=list)  # real time: lateness of each period
@@ -78,6 +79,7 @@ class DriverStats:
             "frames_sent": self.sent,
             "frames_ignored": dict(self.ignored),
             "guard_timeouts": self.timeouts,
+            "idle_polls": self.polls,
         }
         if self.periods:
             late = sorted(self.jitter_s)
@@ -216,7 +218,10 @@ def run_lockstep(
         elif got is None:
             if should_stop():  # the wait was cut short: no timeout
                 break
-            stats.timeouts += 1
+            if getattr(node, "polling", False):  # its idle poll, not a guard
+                stats.polls += 1
+            else:
+                stats.timeouts += 1
             node.on_timeout(send)
         else:
             _deliver(node, got, send, stats)

@@ -220,9 +220,18 @@ class CEcuNode:
         slave and no plant heard yet, EcuNode's poll period (a store goes on); else None."""
         if self._lib.ecu_node_own_clock(self._ref):
             return 1.0 / self.rate_hz
-        if self.xcp is not None and not self._lib.ecu_node_sensor_seen(self._ref):
+        if self.polling:
             return SERVICE_IDLE_POLL_S
         return None
+
+    @property
+    def polling(self) -> bool:
+        """No plant heard yet, an XCP slave to serve: idle polls, not guard timeouts."""
+        return (
+            self.xcp is not None
+            and not self._lib.ecu_node_own_clock(self._ref)
+            and not self._lib.ecu_node_sensor_seen(self._ref)
+        )
 
     @property
     def ticks(self) -> int:
