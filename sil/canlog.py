@@ -628,10 +628,11 @@ def convert_log(source: Path, target: Path, *, start_s: float | None = None) -> 
     first = next(frames, None)
     stream = itertools.chain([first], frames) if first is not None else iter(())
     first_s = first.timestamp if first is not None else None
-    if reader.format == "mf4":
-        own = reader.mf4
+    if reader.format == "mf4":  # its own start; frames before 1973 count from it (python-can's
+        own = reader.mf4  # logconvert of a run's log: its axis near -1.8e9 s, which this undoes)
+        relative = own.relative or (first_s is not None and first_s < mdf.EPOCH_FROM_S)
         start = (start_s, "--start") if start_s is not None else (own.start_us / 1e6, "the MF4")
-        base = mdf.TimeBase(round(start[0] * 1e6), own.relative, start[1])
+        base = mdf.TimeBase(round(start[0] * 1e6), relative, start[1])
     else:
         base = mdf.time_base(
             first_s, start_s, lambda: mdf.log_start(source, reader.header_start_s)

@@ -150,6 +150,27 @@ def test_epoch_times_start_at_their_first_frame_and_come_back_as_they_were(tmp_p
     assert (tmp_path / "back.log").read_bytes() == log.read_bytes()
 
 
+def test_python_cans_mf4_of_a_runs_log_gets_its_axis_from_0(tmp_path):
+    """python-can's MF4Writer (`python -m can.logconvert can.log x.mf4`) puts a run's times
+    against the time of the conversion: an axis near -1.8e9 s. Converted again, the frames
+    count from the file's start, the axis from 0."""
+    theirs = tmp_path / "theirs.mf4"
+    writer = can.MF4Writer(str(theirs))
+    for m in read_frames(_our_log(tmp_path / "can.log", ticks=20)):
+        writer.on_message_received(m)
+    writer.stop()
+    m = asammdf.MDF(theirs)
+    assert m.get("CAN_DataFrame", 0).timestamps[0] < -1e9
+    m.close()
+    done = convert_log(theirs, tmp_path / "ours.mf4")
+    assert done["source_times"] == "from the start" and done["start_from"] == "the MF4"
+    m = asammdf.MDF(tmp_path / "ours.mf4")
+    t = m.get("CAN_DataFrame", 0).timestamps
+    assert t[0] == pytest.approx(0.0, abs=1e-6) and t[-1] == pytest.approx(0.019, abs=1e-6)
+    assert abs(m.header.start_time.timestamp() - time.time()) < 600
+    m.close()
+
+
 def test_a_relative_log_takes_its_start_from_the_run_folder_or_start(tmp_path):
     log = _our_log(tmp_path / "can.log")
     (tmp_path / "run.json").write_text("{}")
