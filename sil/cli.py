@@ -19,12 +19,19 @@ from types import ModuleType
 from sil import commands
 from sil.validation import InputError
 
+NODE_COMMANDS = ("ecu", "plant")  # node processes: they start fast
+
 
 def _command_modules(argv: list[str]) -> list[ModuleType]:
     names = sorted(m.name for m in pkgutil.iter_modules(commands.__path__))
     wanted = next((a.replace("-", "_") for a in argv if not a.startswith("-")), None)
     if wanted in names:
         names = [wanted]
+    if names[0] in NODE_COMMANDS and len(names) == 1:
+        # python-can imports asammdf (and pandas) for its MF4 support when it is installed:
+        # 1.2 s of a node's start, for a format no node reads or writes. An entry of None
+        # makes that import fail, and python-can goes on without MF4.
+        sys.modules.setdefault("asammdf", None)  # type: ignore[arg-type]
     return [importlib.import_module(f"sil.commands.{name}") for name in names]
 
 

@@ -64,6 +64,9 @@ SLOW_MODULES = frozenset(
         "xcp/test_lockstep.py",
         "xcp/test_pyxcp.py",
         "xcp/test_calibration_doc.py",
+        "xcp/test_daq_mf4.py",
+        "xcp/test_c_node.py",
+        "sil/test_mdf.py",
     }
 )
 TESTS = Path(__file__).resolve().parent
