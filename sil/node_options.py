@@ -49,8 +49,8 @@ def run_sequence(  # noqa: ANN201 (RunSequence | None: protocol imported when ne
     from protocol.codec import Codec
     from protocol.run_sequence import RunSequence, sent_by
 
-    if args.foreign_frames is None:
-        return None
+    if args.foreign_frames is None or getattr(args, "impl", None) == "pil":
+        return None  # (the image in the loop paces its own turns: its bridge takes them all)
     codec = codec or Codec()
     strict = args.foreign_frames == "sequence"
     return RunSequence(codec, rate_hz, sent_by(codec, role), strict=strict)
