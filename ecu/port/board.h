@@ -27,7 +27,7 @@
 
 #include "ecu_node.h"
 
-/* a received CAN frame: the node takes standard-ID data frames of 8 bytes */
+/* a received CAN frame: the node takes standard-ID data frames (of 8 bytes but XCP's) */
 typedef struct {
     uint32_t id;
     uint8_t extended; /* 1: 29-bit ID */
@@ -52,8 +52,9 @@ int board_can_receive(board_can_rx_t *f);
    disabled, right before the main loop sleeps. */
 int board_can_pending(void);
 
-/* Queue a frame for sending, in call order; waits only while the transmit queue is full. */
-void board_can_send(const ecu_can_frame_t *f);
+/* Queue a standard-ID data frame of dlc bytes (0..8) for sending, in call order; waits only
+   while the transmit queue is full. */
+void board_can_send(uint32_t id, const uint8_t *data, uint8_t dlc);
 
 /* The pump driver: PWM duty in 0.01 % (0..10000) and its enable, after every tick. */
 void board_pump_output(int32_t duty_cpct, int32_t enable);

@@ -181,7 +181,7 @@ int board_can_pending(void)
     return rx.head != rx.tail;
 }
 
-void board_can_send(const ecu_can_frame_t *f)
+void board_can_send(uint32_t id, const uint8_t *data, uint8_t dlc)
 {
     uint32_t words[FRAME_BYTES / 4u] = {0u};
     uint8_t *b = (uint8_t *)words;
@@ -192,11 +192,11 @@ void board_can_send(const ecu_can_frame_t *f)
     }
     b[12] = (uint8_t)(ETHERTYPE_CAN >> 8);
     b[13] = (uint8_t)ETHERTYPE_CAN;
-    b[14] = (uint8_t)f->id;
-    b[15] = (uint8_t)(f->id >> 8); /* standard 11-bit IDs: the upper bytes stay 0 */
-    b[18] = 8u;
-    for (k = 0; k < 8u; k++) {
-        b[22u + k] = f->data[k];
+    b[14] = (uint8_t)id;
+    b[15] = (uint8_t)(id >> 8); /* standard 11-bit IDs: the upper bytes stay 0 */
+    b[18] = dlc > 8u ? 8u : dlc;
+    for (k = 0; k < b[18]; k++) {
+        b[22u + k] = data[k];
     }
     while ((TX_FIFO_INF & 0xFFFFu) < FRAME_BYTES + 8u) {
         /* full: the controller drains it */

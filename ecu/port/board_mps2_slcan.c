@@ -191,20 +191,20 @@ int board_can_pending(void)
     return can_uart.rx.head != can_uart.rx.tail || line_len != 0u;
 }
 
-void board_can_send(const ecu_can_frame_t *f)
+void board_can_send(uint32_t id, const uint8_t *data, uint8_t dlc)
 {
     static const char digits[] = "0123456789ABCDEF";
-    char s[22]; /* "tIIIL" + 16 digits + CR */
-    size_t k;
+    char s[22]; /* "tIIIL" + up to 16 digits + CR */
+    size_t k, n = dlc > 8u ? 8u : dlc;
     s[0] = 't';
-    s[1] = digits[(f->id >> 8) & 0x7u];
-    s[2] = digits[(f->id >> 4) & 0xFu];
-    s[3] = digits[f->id & 0xFu];
-    s[4] = '8';
-    for (k = 0; k < 8u; k++) {
-        s[5 + 2 * k] = digits[f->data[k] >> 4];
-        s[6 + 2 * k] = digits[f->data[k] & 0xFu];
+    s[1] = digits[(id >> 8) & 0x7u];
+    s[2] = digits[(id >> 4) & 0xFu];
+    s[3] = digits[id & 0xFu];
+    s[4] = digits[n];
+    for (k = 0; k < n; k++) {
+        s[5 + 2 * k] = digits[data[k] >> 4];
+        s[6 + 2 * k] = digits[data[k] & 0xFu];
     }
-    s[21] = '\r';
-    uart_write(&can_uart, s, sizeof s);
+    s[5 + 2 * n] = '\r';
+    uart_write(&can_uart, s, 6 + 2 * n);
 }

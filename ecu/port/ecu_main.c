@@ -1,12 +1,14 @@
 /*
  * ecu_main.c - the ECU firmware's main loop on a Cortex-M (see ecu_main.h, board.h).
  *
- * Start-up: board, calibration block (checked), SysTick calibration, control core and CAN node,
- * watchdog, SysTick at the ECU rate. Then forever: every received frame goes to the node (in
- * lockstep a sensor frame runs a tick), the node's frames go out in its order, the pump output
- * follows each tick; in lockstep a guard time of silence runs ecu_node_timeout(), in real time
- * every SysTick period runs ecu_node_period(); the watchdog is kicked once per loop and the core
- * sleeps (WFI) until an interrupt. All memory is static; nothing is allocated.
+ * Start-up: board, calibration block (checked), SysTick calibration, control core, CAN node and
+ * its XCP slave, watchdog, SysTick at the ECU rate. Then forever: every received frame goes to
+ * the node (in lockstep a sensor frame runs a tick; an XCP command waits for the tick boundary,
+ * or is served at once before the first sensor frame), the slave's packets go out as it makes
+ * them and the node's frames after them in its order, the pump output follows each tick; in
+ * lockstep a guard time of silence runs ecu_node_timeout(), in real time every SysTick period
+ * runs ecu_node_period(); the watchdog is kicked once per loop and the core sleeps (WFI) until
+ * an interrupt. All memory is static; nothing is allocated.
  */
 #include "ecu_main.h"
 
@@ -30,6 +32,8 @@ static calibration_t cal;
 static ecu_params_t params;
 static ecu_t ecu;
 static ecu_node_t node;
+static ecu_xcp_t xcp;
+static ecu_xcp_config_t xcp_config;
 static volatile uint32_t periods; /* SysTick interrupts since start */
 static uint32_t reload = 0xFFFFFFu;
 static uint32_t core_start, core_counts;
@@ -98,7 +102,8 @@ static uint32_t crc32(const uint8_t *b, size_t n)
 /* Check and take the calibration block; NULL when accepted, else why not. */
 static const char *load_calibration(const uint8_t *b, size_t len)
 {
-    const size_t size = ECU_CAL_HEADER_BYTES + 4u * (size_t)ECU_PARAM_WORDS + 4u;
+    const size_t xcp_at = ECU_CAL_HEADER_BYTES + 4u * (size_t)ECU_PARAM_WORDS;
+    const size_t size = xcp_at + ECU_CAL_XCP_BYTES + 4u * ECU_XCP_RUN_WORDS + 4u;
     size_t k;
     if (b == NULL || len < size) {
         return "block too short";
@@ -133,7 +138,37 @@ static const char *load_calibration(const uint8_t *b, size_t len)
     if (params.rate_hz < 10 || (uint32_t)params.rate_hz > board_core_hz() / 16u) {
         return "rate out of the SysTick's range";
     }
+    xcp_config.cmd_id = le32(b + xcp_at);
+    xcp_config.res_id = le32(b + xcp_at + 4u);
+    xcp_config.seed = le32(b + xcp_at + 8u);
+    /* the run record, read in place (the block is word aligned in flash) */
+    xcp_config.run = (const int32_t *)(const void *)(b + xcp_at + ECU_CAL_XCP_BYTES);
+    if ((cal.flags & ECU_CAL_XCP) &&
+        (xcp_config.cmd_id > 0x7FFu || xcp_config.res_id > 0x7FFu ||
+         xcp_config.cmd_id == xcp_config.res_id || xcp_config.seed == 0u)) {
+        return "XCP identifiers or seed out of range";
+    }
     return NULL;
+}
+
+/* the XCP slave's packets: on the CAN link at once */
+static void xcp_send(void *ctx, uint32_t id, const uint8_t *data, uint8_t len)
+{
+    (void)ctx;
+    board_can_send(id, data, len);
+}
+
+/* the ECU's clock in real time: SysTick periods and the current period's counts, in us */
+static uint32_t xcp_clock_us(void *ctx)
+{
+    uint32_t p, cvr;
+    (void)ctx;
+    do {
+        p = periods;
+        cvr = SYST_CVR;
+    } while (p != periods);
+    return (uint32_t)(((uint64_t)p * (reload + 1u) + (reload - cvr)) * 1000000u /
+                      ((uint64_t)(reload + 1u) * (uint32_t)params.rate_hz));
 }
 
 /* SysTick counts of a loop of 2 * CALIBRATION_LOOPS instructions (on QEMU with -icount, the
@@ -194,7 +229,7 @@ static void after_node_call(int n, const ecu_can_frame_t *out, uint32_t t0, uint
     int k;
     uint32_t node_counts = counts_since(t0);
     for (k = 0; k < n; k++) {
-        board_can_send(&out[k]);
+        board_can_send(out[k].id, out[k].data, 8u);
     }
     if (ecu_node_ticks(&node) == ticks) {
         return;
@@ -252,6 +287,17 @@ int main(void)
     c.every_telemetry = ecu_node_every(10u, (uint32_t)params.rate_hz);
     c.every_demand = ecu_node_every(50u, (uint32_t)params.rate_hz);
     ecu_node_init(&node, &ecu, &c);
+    if (cal.flags & ECU_CAL_XCP) {
+        xcp_config.params = &params;
+        xcp_config.send = xcp_send;
+        xcp_config.clock_us = c.lockstep ? NULL : xcp_clock_us; /* lockstep: simulated time */
+        xcp_config.store = NULL; /* no flash for stores on this board */
+        xcp_config.ctx = NULL;
+        if (ecu_xcp_init(&xcp, &ecu, &xcp_config) != 0) {
+            refused("XCP run record refused");
+        }
+        ecu_node_attach_xcp(&node, &xcp);
+    }
     guard_periods = (uint32_t)(((uint64_t)cal.guard_ms * (uint32_t)params.rate_hz + 999u) / 1000u);
     console("READY ");
     console_u32((uint32_t)params.rate_hz);
@@ -267,12 +313,12 @@ int main(void)
         uint32_t p, t0, ticks;
         int n;
         while (board_can_receive(&f)) {
-            if (f.extended || f.remote || f.dlc != 8u) {
+            if (f.extended || f.remote) {
                 continue; /* not of the contract: never reaches the node */
             }
             t0 = SYST_CVR;
             ticks = ecu_node_ticks(&node);
-            n = ecu_node_frame(&node, f.id, f.data, out);
+            n = ecu_node_receive(&node, f.id, f.data, f.dlc, out); /* (8 bytes but XCP's) */
             after_node_call(n, out, t0, ticks);
             last_event = periods;
         }

@@ -8,12 +8,18 @@
  *        0     4  magic "ECUC"
  *        4     4  version (ECU_CAL_VERSION)
  *        8     4  flags: bit 0 lockstep (1: one tick per sensor frame, 0: the SysTick clock),
- *                 bit 1 profile (a console line per tick with its SysTick counts)
+ *                 bit 1 profile (a console line per tick with its SysTick counts),
+ *                 bit 2 XCP (the XCP slave, ecu_xcp.h, runs on the node)
  *       12     4  lockstep guard, ms: silence before ecu_node_timeout()
  *       16     4  watchdog timeout, ms (10..10000)
  *       20     4  n: parameter words (ECU_PARAM_WORDS)
  *       24    4n  the parameter words (ecu_params_load order)
- *    24+4n     4  CRC-32 (IEEE 802.3, as zlib.crc32) of the bytes before it
+ *    24+4n     4  XCP: the master's CAN ID (standard), master to ECU
+ *    28+4n     4  XCP: the ECU's CAN ID, ECU to master
+ *    32+4n     4  XCP: the seeds' generator start (non-zero)
+ *    36+4n    4m  XCP: the run record (m = ECU_XCP_RUN_WORDS; ecu.port.xcp_run.run_record),
+ *                 read in place by the slave
+ * 36+4n+4m     4  CRC-32 (IEEE 802.3, as zlib.crc32) of the bytes before it
  *
  * A block that fails a check is refused: the image stays with the pump off, ticks nothing and
  * says why on the console ("CONFIG BAD <reason>").
@@ -36,10 +42,12 @@
 #include <stdint.h>
 
 #define ECU_CAL_MAGIC 0x43554345u /* "ECUC" little-endian */
-#define ECU_CAL_VERSION 1u
+#define ECU_CAL_VERSION 2u
 #define ECU_CAL_LOCKSTEP 1u
 #define ECU_CAL_PROFILE 2u
+#define ECU_CAL_XCP 4u
 #define ECU_CAL_HEADER_BYTES 24u
+#define ECU_CAL_XCP_BYTES 12u /* the XCP IDs and seed before the run record */
 
 /* SysTick_Handler of the board's vector table calls this once per period. */
 void ecu_main_systick(void);

@@ -8,9 +8,10 @@ opens as ``socket://127.0.0.1:PORT``, as it would a USB-CAN adapter). The serial
 a round of its event loop per byte, some 22 bytes a frame; the Ethernet link one per frame.
 
 :func:`calibration_block` writes the block the image reads from its flash sector (layout in
-ecu_main.h); :class:`PilImage` starts QEMU with the image and the block, opens the link as a
-python-can bus and reads the console: the SysTick calibration, the per-tick profile lines and
-any refusal or watchdog reset.
+ecu_main.h: the parameter words, the XCP slave's identifiers and run record); :class:`PilImage`
+starts QEMU with the image and the block, opens the link as a python-can bus and reads the
+console: the SysTick calibration, the per-tick profile lines and any refusal or watchdog
+reset.
 
 In lockstep QEMU runs with ``-icount shift=0``: its virtual clock advances one nanosecond per
 instruction while the CPU runs (and with the wall clock while it sleeps), so SysTick counts around
@@ -41,10 +42,11 @@ from ecu.port import build, qemu
 from ecu.port.core import param_words
 from ecu.port.eth_can import EthCanBus
 from ecu.port.qemu import QEMU, QEMU_NOT_FOUND
+from ecu.port.xcp_run import RUN_WORDS
 
 MAGIC = b"ECUC"
-VERSION = 1
-LOCKSTEP, PROFILE = 1, 2
+VERSION = 2
+LOCKSTEP, PROFILE, XCP = 1, 2, 4
 CALIB_ADDRESS = 0x000F0000  # mps2_an386_pil.ld: the calibration sector
 CORE_HZ = 168e6  # the Cortex-M4 the load is reported for (STM32F4 class)
 START_TIMEOUT_S = 30.0  # QEMU up, image ready
@@ -61,15 +63,31 @@ def calibration_block(
     guard_s: float = 1.0,
     watchdog_ms: int = 250,
     profile: bool = True,
+    xcp: XcpBlock | None = None,
 ) -> bytes:
-    """The calibration block (ecu_main.h) for ``params``, with its CRC-32."""
+    """The calibration block (ecu_main.h) for ``params``, with its CRC-32; ``xcp``: the XCP
+    slave's identifiers, seed and run record (None: no slave)."""
     words = param_words(params)
-    flags = (LOCKSTEP if lockstep else 0) | (PROFILE if profile else 0)
+    flags = (LOCKSTEP if lockstep else 0) | (PROFILE if profile else 0) | (XCP if xcp else 0)
     guard_ms = max(1, round(guard_s * 1e3))
     body = MAGIC + struct.pack(
         f"<5I{len(words)}i", VERSION, flags, guard_ms, watchdog_ms, len(words), *words
     )
+    x = xcp or XcpBlock((0, 0), 1, [0] * RUN_WORDS)
+    if len(x.run) != RUN_WORDS:
+        raise PilError(f"XCP run record of {len(x.run)} words: {RUN_WORDS} expected")
+    body += struct.pack(f"<3I{RUN_WORDS}i", *x.ids, x.seed or 1, *x.run)
     return body + struct.pack("<I", zlib.crc32(body))
+
+
+@dataclass(frozen=True)
+class XcpBlock:
+    """The XCP slave's part of the calibration block: its CAN IDs (master to ECU, ECU to
+    master), the seeds' generator start, the run record (ecu.port.xcp_run.run_record)."""
+
+    ids: tuple[int, int]
+    seed: int
+    run: list[int]
 
 
 @dataclass

@@ -185,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
             print("sil ecu: --impl pil: the image has no service port (--serial, --flash)",
                   file=sys.stderr)  # fmt: skip
             return 2
-        return _run_pil(args, params)
+        return _run_pil(args, params, booted if xcp_on else None)
     from ecu.port.build import PortBuildError
     from ecu.port.core import PortError, make_ecu
 
@@ -304,20 +304,31 @@ def _c_node(ecu, booted, args: argparse.Namespace, codec):  # noqa: ANN001, ANN2
     return node
 
 
-def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (FirmwareParams)
-    """The firmware image on QEMU, its CAN link bridged to the bus (ecu/port/pil.py)."""
+def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
+    """The firmware image on QEMU, its CAN link bridged to the bus (ecu/port/pil.py); with
+    ``booted`` (the set it runs) the image's XCP slave on the DBC's IDs or --xcp-ids."""
+    import os
+
     from ecu.node import RECEIVED
     from ecu.port.build import PortBuildError
-    from ecu.port.pil import PilError, PilImage, calibration_block, image_sizes
+    from ecu.port.pil import PilError, PilImage, XcpBlock, calibration_block, image_sizes
     from ecu.port.pil_bridge import PilBridge
+    from ecu.port.xcp_run import run_record
     from protocol.bus import BusSpecError, open_bus
     from protocol.codec import Codec
+    from protocol.dbc import xcp_frame_ids
     from protocol.run_bus import RunBus
 
     lockstep = args.mode == "lockstep"  # profiled by instruction counting (ecu/port/pil.py)
-    block = calibration_block(params, lockstep=lockstep, guard_s=args.guard, profile=lockstep)
+    xcp = None
+    if booted is not None:
+        seed = int.from_bytes(os.urandom(4), "little") or 1
+        xcp = XcpBlock(args.xcp_ids or xcp_frame_ids(), seed, run_record(booted.table))
+    block = calibration_block(
+        params, lockstep=lockstep, guard_s=args.guard, profile=lockstep, xcp=xcp
+    )
     codec = Codec()
-    frame_ids = [codec[m].frame_id for m in RECEIVED]
+    frame_ids = [codec[m].frame_id for m in RECEIVED] + ([xcp.ids[0]] if xcp else [])
     stop = NodeStop()
     PeerLost()  # (the image keeps its guard: told its peer is gone, the process stays)
     try:
@@ -339,9 +350,12 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
         try:
             image.wait_ready()
             print(f"pil: image {image.elf.name} on {image.url}", file=sys.stderr, flush=True)
+            bridge = PilBridge(bus, image_bus, frame_ids)
+            if xcp is not None:  # said once the bridge listens: a master may connect
+                print(f"xcp: CAN IDs 0x{xcp.ids[0]:03X} (master) 0x{xcp.ids[1]:03X} (ECU)",
+                      file=sys.stderr, flush=True)  # fmt: skip
             if args.ready_file:
                 args.ready_file.write_text("ready\n")
-            bridge = PilBridge(bus, image_bus, frame_ids)
             limit = args.ticks
 
             def should_stop() -> bool:
@@ -362,6 +376,7 @@ def _run_pil(args: argparse.Namespace, params) -> int:  # noqa: ANN001 (Firmware
         **(bridge.stats() if bridge is not None else {}),
         **bus.stats(),
         "pil": {**image.profile.summary(), "image": image_sizes(image.elf)},
+        **({"xcp": {"impl": "pil", "ids": list(xcp.ids)}} if xcp is not None else {}),
     }
     return _report(summary, args)
 

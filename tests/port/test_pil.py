@@ -125,7 +125,7 @@ def test_image_answers_on_its_ethernet_link_as_the_c_node_does(image, params):
     [
         (lambda b: b[:-1] + bytes([b[-1] ^ 1]), "CRC mismatch"),
         (lambda b: b"XXXX" + b[4:], "no ECUC magic"),
-        (lambda b: b[:4] + struct.pack("<I", 2) + b[8:], "version not supported"),
+        (lambda b: b[:4] + struct.pack("<I", 99) + b[8:], "version not supported"),
         (lambda b: b[:40], "CRC mismatch"),  # a half-written block: the flash reads 0 beyond
     ],
 )
@@ -200,5 +200,96 @@ def test_watchdog_resets_a_stuck_image(image, params):
             assert pil.profile.resets == 1, pil.profile.lines
             pil.wait_ready(10.0)  # it boots again, checks its block and flies from tick 0
             assert _exchange(bus, frames, len(expected)) == expected
+        finally:
+            bus.shutdown()
+
+
+def test_image_answers_xcp_as_the_c_node_does(image):
+    """The image's XCP slave (its calibration block's IDs, seed and run record) and the C node's,
+    fed the same master frames (before the plant: answered at once; then at the tick boundary) and
+    plant frames: the same frames out, XCP answers and DTOs before each tick's own frames."""
+    from ecu.params import EcuParams
+    from ecu.port.pil import XcpBlock
+    from ecu.port.xcp import CXcpSlave
+    from ecu.port.xcp_run import run_record
+    from ecu.service.port import boot
+    from ecu.xcp import codes as C
+    from ecu.xcp import memory as MEM
+    from ecu.xcp.seed_key import key_for
+    from protocol.codec import Codec
+
+    booted = boot(EcuParams(), None)
+    seed = 0x1234567
+    block = calibration_block(
+        booted.table.firmware,
+        lockstep=True,
+        xcp=XcpBlock((0x700, 0x701), seed, run_record(booted.table)),
+    )
+    ecu = make_ecu("c", booted.table.firmware)
+    node = CEcuNode(ecu, lockstep=True)
+    node.attach_xcp(CXcpSlave(ecu, booted.table, seed=seed))
+    codec = Codec()
+    sensors, analog = codec["PlantSensors"], codec["PlantAnalog"]
+
+    def plant(tick: int) -> list[tuple[int, bytes]]:
+        out = []
+        if tick % 5 == 0:
+            analog.pack_raw((tick, 22_200, 1_500))
+            out.append((analog.frame_id, bytes(analog.data)))
+        sensors.pack_raw((tick, 100_890 + (tick * 37) % 200, 10_480))
+        return [*out, (sensors.frame_id, bytes(sensors.data))]
+
+    def c_answers(frames: list[tuple[int, bytes]]) -> list[tuple[int, bytes]]:
+        got: list[tuple[int, bytes]] = []
+        for frame_id, data in frames:
+            node.on_frame(frame_id, data, lambda i, d: got.append((i, bytes(d))))
+        return got
+
+    daq = [bytes((C.Cmd.FREE_DAQ,)), bytes((C.Cmd.ALLOC_DAQ, 0, 1, 0)),
+           bytes((C.Cmd.ALLOC_ODT, 0, 0, 0, 2)), bytes((C.Cmd.ALLOC_ODT_ENTRY, 0, 0, 0, 0, 1)),
+           bytes((C.Cmd.ALLOC_ODT_ENTRY, 0, 0, 0, 1, 3)), bytes((C.Cmd.SET_DAQ_PTR, 0, 0, 0, 0, 0)),
+           struct.pack("<BBBBI", C.Cmd.WRITE_DAQ, 0xFF, 1, 0, MEM.measurement_address(1)),
+           bytes((C.Cmd.SET_DAQ_PTR, 0, 0, 0, 1, 0))]  # fmt: skip
+    for name in ("ticks", "egt", "pump_enable"):  # 7 bytes
+        k = MEM.MEAS_INDEX[name]
+        size = MEM.MEASUREMENTS[k].size
+        daq.append(
+            struct.pack("<BBBBI", C.Cmd.WRITE_DAQ, 0xFF, size, 0, MEM.measurement_address(k))
+        )
+    daq += [struct.pack("<BBHHBB", C.Cmd.SET_DAQ_LIST_MODE, 0x10, 0, 0, 1, 0),
+            bytes((C.Cmd.START_STOP_DAQ_LIST, 1, 0, 0))]  # fmt: skip
+    with PilImage(block, elf=image) as pil:
+        bus = pil.open_bus()
+        try:
+            pil.wait_ready()
+
+            def exchange(frames: list[tuple[int, bytes]], until_tick: bool) -> list:
+                for frame_id, data in frames:
+                    bus.send(can.Message(arbitration_id=frame_id, is_extended_id=False, data=data))
+                got = []
+                while (msg := bus.recv(5.0)) is not None:
+                    got.append((msg.arbitration_id, bytes(msg.data)))
+                    if not until_tick or msg.arbitration_id == 0x110:
+                        break
+                return got
+
+            before = [bytes((C.Cmd.CONNECT, 0)), bytes((C.Cmd.GET_SEED, 0, C.RES_DAQ))]
+            for frame in before:
+                answer = exchange([(0x700, frame)], until_tick=False)
+                assert answer == c_answers([(0x700, frame)]), frame.hex()
+            key = key_for(answer[0][1][2:6])
+            master = {
+                0: [bytes((C.Cmd.UNLOCK, 2)) + key],
+                **{1 + k: [f] for k, f in enumerate(daq)},
+            }
+            master[30] = [struct.pack("<BBBBI", C.Cmd.SHORT_UPLOAD, 4, 0, 0, MEM.CAL_BASE + 60)]
+            master[31] = [bytes((C.Cmd.GET_STATUS,)), bytes((C.Cmd.GET_DAQ_CLOCK,))]
+            seen = 0
+            for tick in range(40):
+                frames = [(0x700, f) for f in master.get(tick, [])] + plant(tick)
+                got = exchange(frames, until_tick=True)
+                assert got == c_answers(frames), tick
+                seen += sum(1 for i, d in got if i == 0x701 and d[0] < C.PID_SERV)
+            assert seen > 40  # DTOs of two ODTs on every tick since the list started
         finally:
             bus.shutdown()
