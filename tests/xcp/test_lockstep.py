@@ -1,7 +1,8 @@
-"""pyXCP attached to a lockstep `sil run`: a DAQ list of 20 measurements on the control tick for
-more than 60 s of simulated time loses no sample and gives, tick for tick, the values of the
-run's trace.csv; and the run's engine frames (every frame but XCP's, in its tick and order) and
-its trace.csv are those of the same run with no master.
+"""pyXCP attached to a lockstep `sil run`, the Python ECU and the C node with the C slave: a DAQ
+list of 20 measurements on the control tick for more than 60 s of simulated time loses no sample
+and gives, tick for tick, the values of the run's trace.csv; and the run's engine frames (every
+frame but XCP's, in its tick and order) and its trace.csv are those of the same run with no
+master.
 
 A lockstep run goes as fast as its nodes: 40 times real time and more, far more DTOs a second
 than any CAN bus carries. The master therefore joins with a loopback bus of its own whose socket
@@ -77,7 +78,7 @@ def _bus_spec() -> tuple[str, int]:
     return f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", rng.randrange(20000, 60000)
 
 
-def _run(tmp: Path, name: str, master=None) -> tuple[dict, Path]:  # noqa: ANN001
+def _run(tmp: Path, name: str, master=None, impl: str = "python") -> tuple[dict, Path]:  # noqa: ANN001
     path = tmp / "staircase.toml"
     path.write_text(SCENARIO)
     group, port = _bus_spec()
@@ -87,8 +88,9 @@ def _run(tmp: Path, name: str, master=None) -> tuple[dict, Path]:  # noqa: ANN00
         thread = threading.Thread(target=master, args=(out, group, port), daemon=True)
         thread.start()
     options = RunOptions(
-        scenario.load(path), out, bus=f"udp:{group}@{port}", plots=False, progress=False
-    )
+        scenario.load(path), out, bus=f"udp:{group}@{port}", plots=False, progress=False,
+        ecu_impl=impl,
+    )  # fmt: skip
     try:
         summary = run_scenario(options)
     finally:
@@ -154,12 +156,13 @@ def _trace(path: Path) -> tuple[dict[str, int], dict[int, list[str]]]:
     return column, rows
 
 
+@pytest.mark.parametrize("impl", ["python", "c"])
 def test_daq_over_a_lockstep_run_is_its_trace_and_its_engine_frames_are_unchanged(
-    tmp_path, a2l, xcp_tools
+    impl, tmp_path, a2l, xcp_tools
 ):
-    plain, out_a = _run(tmp_path, "plain")
+    plain, out_a = _run(tmp_path, "plain", impl=impl)
     master = Master(xcp_tools, a2l)
-    measured, out_b = _run(tmp_path, "measured", master)
+    measured, out_b = _run(tmp_path, "measured", master, impl=impl)
     assert master.error is None, master.error
     for summary in (plain, measured):
         assert summary["status"] == "completed" and summary["missed_ticks"] == 0, summary
