@@ -11,6 +11,12 @@
 - instructions per tick: callgrind on the host build (``--toggle-collect=ecu_tick``) and QEMU on
   the Cortex-M4 build (``-icount shift=0``: SysTick counts the virtual clock, calibrated in the
   same run by a loop of known length), both replaying the MRAC golden vector;
+- the CAN node with its XCP slave: flash (linked with the core and the frame code, split by
+  origin; the whole image stated too) and RAM (its instances and the deepest stack from its entry
+  points) against 20 KiB and 3 KiB, the slave's ODT entries (>= 16), and in the loop (the
+  firmware image on QEMU -icount, lockstep on the fast plant) the node's instructions per tick
+  without the slave, with it and no master (its share against 10 %) and with a master's DAQ list
+  of 20 measurements;
 - microseconds per tick called from Python (the C core through ctypes, the Python firmware);
 - the SIL in process on the aero-thermal MRAC scenario (real-time factors): with the C ECU in
   the compiled loop (sil/compiled_loop.py) and, for the ratio, in the Python loop it replaces,
@@ -42,11 +48,20 @@ RAM_TARGET = 2 * 1024
 INSTRUCTIONS_TARGET = 5000
 REPEATS = 3  # SIL runs per case
 SIL_TARGET = 500.0  # in process with the C ECU, real-time factor
+NODE_FLASH_TARGET = 20 * 1024  # the CAN node with its XCP slave
+NODE_RAM_TARGET = 3 * 1024
+ODT_ENTRIES_TARGET = 16
+XCP_SHARE_TARGET = 10.0  # % of the node's instructions per tick, no master attached
+PIL_TICKS = 300
 TARGET_TEXT = {
     "flash": "control core and frame codec <= 16 KiB of Cortex-M4 flash",
     "ram": "<= 2 KiB of RAM with the CAN node (data, bss, stack bound)",
     "instructions": "< 5,000 instructions per tick (host and Cortex-M4)",
     "sil_inproc": ">= 500x real time in process with the C ECU",
+    "node_xcp_flash": "the CAN node with its XCP slave <= 20 KiB of Cortex-M4 flash",
+    "node_xcp_ram": "the CAN node with its XCP slave <= 3 KiB of RAM (data, bss, stack bound), "
+    "with >= 16 ODT entries",
+    "xcp_share": "the XCP slave <= 10 % of the node's instructions per tick in the loop, no master",
 }
 
 
@@ -144,6 +159,44 @@ def _stack_bound(image: Path) -> int:
     return max(deepest(r, ()) for r in roots)
 
 
+def _call_graph_depth(image: Path, sources: tuple[str, ...], roots: tuple[str, ...]) -> int:
+    """The deepest stack from ``roots`` over GCC's call graphs of ``sources``
+    (-fcallgraph-info=su, as _stack_bound for the core), with the library helpers' frames read
+    from the linked ``image``. Calls through the integrator's callbacks (function pointers) are
+    not in the graph: their frames come on top."""
+    frames: dict[str, int] = {}
+    calls: dict[str, set[str]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, source in enumerate(sources):
+            obj = Path(tmp) / f"{k}.o"
+            subprocess.run(
+                [build.ARM_CC, *build.WARNINGS, *build.ARM_FLAGS, f"-I{build.PORT_DIR}",
+                 "-fstack-usage", "-fcallgraph-info=su", "-c", str(build.PORT_DIR / source),
+                 "-o", str(obj)],
+                check=True, capture_output=True, cwd=tmp,
+            )  # fmt: skip
+            graph = obj.with_suffix(".ci").read_text()
+            for title, label in re.findall(r'node: \{ title: "([^"]+)" label: "([^"]*)"', graph):
+                own = re.search(r"\\n(\d+) bytes \((static|dynamic[^)]*)\)", label)
+                if own is not None and own.group(2) != "static":
+                    raise RuntimeError(f"{title}: a dynamic stack frame has no static bound")
+                if own is not None:
+                    frames[title] = int(own.group(1))
+            pairs = re.findall(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"', graph)
+            for src, dst in pairs:
+                calls.setdefault(src, set()).add(dst)
+
+    def deepest(node: str, path: tuple[str, ...]) -> int:
+        if node in path:
+            raise RuntimeError(f"recursion through {node}: no static stack bound")
+        if node not in frames:
+            return _library_frames(image, node.rsplit(":", 1)[-1])
+        return frames[node] + max((deepest(c, (*path, node)) for c in calls.get(node, ())),
+                                  default=0)  # fmt: skip
+
+    return max(deepest(r, ()) for r in roots)
+
+
 def _flash_sections(elf: Path) -> set[str]:
     """The sections of an image that take flash: allocated with contents (code, constants, the
     initial values of .data)."""
@@ -220,6 +273,180 @@ def arm_figures(elf: Path) -> dict:
         f"+ stack bound {stack}",
         "flash_target_met": flash <= FLASH_TARGET,
         "ram_target_met": ram_total <= RAM_TARGET,
+    }
+
+
+def _type_sizes(names: tuple[str, ...]) -> dict[str, int]:
+    """sizeof of the port's types on the Cortex-M4 (objects of their size, read by nm)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(tmp) / "sizes.c"
+        source.write_text(
+            '#include "ecu_node.h"\n' + "".join(f"char size_of_{n}[sizeof({n})];\n" for n in names)
+        )
+        obj = Path(tmp) / "sizes.o"
+        subprocess.run(
+            [build.ARM_CC, *build.ARM_FLAGS, f"-I{build.PORT_DIR}", "-c", str(source), "-o",
+             str(obj)],
+            check=True, capture_output=True,
+        )  # fmt: skip
+        found = _symbol_sizes(obj, tuple(f"size_of_{n}" for n in names))
+    return {n: found[f"size_of_{n}"] for n in names}
+
+
+NODE_ROOTS = ("ecu_node_frame", "ecu_node_receive", "ecu_node_timeout", "ecu_node_period",
+              "ecu_node_init", "ecu_xcp_init")  # fmt: skip
+
+
+def node_xcp_figures() -> dict:
+    """Flash and RAM of the CAN node with its XCP slave on the Cortex-M4: the image of the core,
+    the frame code, the node and the slave linked from their public functions
+    (``build.arm_flash_image`` with NODE_XCP_SOURCES), split by origin; RAM: the ecu_node_t and
+    ecu_xcp_t instances (the slave's queue, block and DAQ tables among them) and the deepest
+    stack from the node's entry points (the core's tick and the slave's serving and sampling
+    in it). The core's own figures (its flash, ecu_t and parameters) are arm_figures'; the
+    whole image is stated beside."""
+    from ecu.port.xcp import c_limits
+
+    image = build.arm_flash_image(build.NODE_XCP_SOURCES, build.NODE_XCP_HEADERS,
+                                  "ecu-node-xcp.elf")  # fmt: skip
+    parts = linked_bytes(image)
+    total = sum(_size(image)[:2])
+    node, slave = parts.get("ecu_node.o", 0), parts.get("ecu_xcp.o", 0)
+    sizes = _type_sizes(("ecu_node_t", "ecu_xcp_t", "ecu_t", "ecu_params_t"))
+    stack = _call_graph_depth(image, build.NODE_XCP_SOURCES, NODE_ROOTS)
+    objects = build.arm_objects()
+    static = sum(sum(_size(objects[s])[1:]) for s in ("ecu_node.c", "ecu_xcp.c"))
+    ram = sizes["ecu_node_t"] + sizes["ecu_xcp_t"] + stack + static
+    entries = c_limits().max_entries
+    return {
+        "cm4_node_xcp_flash_bytes": node + slave,
+        "cm4_node_xcp_flash_detail": f"ecu_node.o {node} + ecu_xcp.o {slave}",
+        "cm4_image_flash_bytes": total,
+        "cm4_image_flash_detail": " + ".join(f"{k} {v}" for k, v in parts.items()),
+        "cm4_node_xcp_ram_bytes": ram,
+        "cm4_node_xcp_ram_detail": f"ecu_node_t {sizes['ecu_node_t']} + ecu_xcp_t "
+        f"{sizes['ecu_xcp_t']} + stack bound {stack} (the tick's within it)"
+        + (f" + static {static}" if static else ""),
+        "cm4_image_ram_bytes": ram + sizes["ecu_t"] + sizes["ecu_params_t"],
+        "xcp_odt_entries": entries,
+        "xcp_limits": str(c_limits()),
+        "node_xcp_flash_target_met": node + slave <= NODE_FLASH_TARGET,
+        "node_xcp_ram_target_met": ram <= NODE_RAM_TARGET and entries >= ODT_ENTRIES_TARGET,
+    }
+
+
+def _daq_frames(names: tuple[str, ...]) -> list[bytes]:
+    """A DAQ list of these measurements on the control tick, packed as pyXCP packs it (ODTs of
+    at most 7 bytes, 3 in the first beside the timestamp), as command frames."""
+    import struct
+
+    from ecu.xcp import codes as C
+    from ecu.xcp import memory as MEM
+
+    odts: list[list[tuple[int, int]]] = [[]]
+    room = 3
+    for name in names:
+        k = MEM.MEAS_INDEX[name]
+        size = MEM.MEASUREMENTS[k].size
+        if size > room:
+            odts.append([])
+            room = 7
+        odts[-1].append((MEM.measurement_address(k), size))
+        room -= size
+    frames = [bytes((C.Cmd.FREE_DAQ,)), bytes((C.Cmd.ALLOC_DAQ, 0, 1, 0)),
+              bytes((C.Cmd.ALLOC_ODT, 0, 0, 0, len(odts)))]  # fmt: skip
+    frames += [bytes((C.Cmd.ALLOC_ODT_ENTRY, 0, 0, 0, j, len(o))) for j, o in enumerate(odts)]
+    for j, odt in enumerate(odts):
+        if odt:
+            frames.append(bytes((C.Cmd.SET_DAQ_PTR, 0, 0, 0, j, 0)))
+            frames += [struct.pack("<BBBBI", C.Cmd.WRITE_DAQ, 0xFF, n, 0, a) for a, n in odt]
+    frames.append(struct.pack("<BBHHBB", C.Cmd.SET_DAQ_LIST_MODE, 0x10, 0, 0, 1, 0))
+    return [*frames, bytes((C.Cmd.START_STOP_DAQ_LIST, 1, 0, 0))]
+
+
+DAQ_NAMES = (
+    "ticks", "mode", "fault_word", "speed_rpm", "speed_ref", "egt", "pump_voltage", "pump_duty",
+    "pump_enable", "supply", "pump_current", "pump_health", "owner", "inputs_valid", "ap21",
+    "ap22", "lambda", "theta21", "kx1", "kr",
+)  # fmt: skip
+
+
+def pil_node_instructions(xcp: bool, daq: bool = False, ticks: int = PIL_TICKS) -> dict:
+    """The image in the loop in lockstep (QEMU -icount, its per-tick profile), closed on the
+    fast plant from rest (the start, then idle): instructions per tick of the node call that
+    runs a tick (its frames, the slave's serving and sampling, the core) and of the core alone;
+    ``xcp``: the slave on the node; ``daq``: a master with a DAQ list of 20 measurements on the
+    control tick, set up before the plant's first frame."""
+    import can
+
+    from ecu.params import EcuParams
+    from ecu.port.pil import PilImage, XcpBlock, calibration_block
+    from ecu.port.xcp_run import run_record
+    from ecu.service.port import boot
+    from ecu.xcp import codes as C
+    from ecu.xcp.seed_key import key_for
+    from plant.fast_plant import FastPlant
+    from plant.interface import PlantConfig
+    from plant.node import PlantNode
+
+    booted = boot(EcuParams(), None)
+    block = calibration_block(
+        booted.table.firmware, lockstep=True,
+        xcp=XcpBlock((0x700, 0x701), 7, run_record(booted.table)) if xcp else None,
+    )  # fmt: skip
+    plant = PlantNode(FastPlant(PlantConfig(ecu_period_s=0.01)))
+    frames: list[tuple[int, bytes]] = []
+    plant.start(lambda i, d: frames.append((i, bytes(d))))
+    with PilImage(block, link="eth") as image:
+        bus = image.open_bus()
+        try:
+            image.wait_ready()
+
+            def request(data: bytes) -> bytes:
+                bus.send(can.Message(arbitration_id=0x700, is_extended_id=False, data=data))
+                msg = bus.recv(5.0)
+                if msg is None:
+                    raise RuntimeError(f"the image did not answer XCP {data.hex()}")
+                return bytes(msg.data)
+
+            if daq:
+                request(bytes((C.Cmd.CONNECT, 0)))
+                seed = request(bytes((C.Cmd.GET_SEED, 0, C.RES_DAQ)))[2:6]
+                request(bytes((C.Cmd.UNLOCK, 2)) + key_for(seed))
+                for frame in _daq_frames(DAQ_NAMES):
+                    if request(frame)[0] != C.PID_RES:
+                        raise RuntimeError(f"the image refused the DAQ set-up at {frame.hex()}")
+            for _ in range(ticks):
+                for frame_id, data in frames:
+                    bus.send(can.Message(arbitration_id=frame_id, is_extended_id=False, data=data))
+                frames.clear()
+                while (msg := bus.recv(5.0)) is not None:
+                    if msg.arbitration_id != 0x701:
+                        plant.on_frame(msg.arbitration_id, bytes(msg.data),
+                                       lambda i, d: frames.append((i, bytes(d))))  # fmt: skip
+                    if msg.arbitration_id == 0x110:  # EcuActuator closes the tick
+                        break
+                else:
+                    raise RuntimeError("the image stopped answering its ticks")
+        finally:
+            bus.shutdown()
+    return image.profile.summary()["instructions_per_tick"]
+
+
+def xcp_instruction_figures(ticks: int = PIL_TICKS) -> dict:
+    """What the XCP slave costs in the loop: the node's instructions per tick without it, with
+    it and no master, and with a master's DAQ list of 20 measurements."""
+    without = pil_node_instructions(False, ticks=ticks)
+    idle = pil_node_instructions(True, ticks=ticks)
+    measured = pil_node_instructions(True, daq=True, ticks=ticks)
+    share = 100.0 * (idle["node_mean"] - without["node_mean"]) / without["node_mean"]
+    return {
+        "pil_node_instructions_per_tick_without_xcp": without["node_mean"],
+        "pil_node_instructions_per_tick_xcp_no_master": idle["node_mean"],
+        "pil_node_instructions_per_tick_xcp_daq_20": measured["node_mean"],
+        "pil_core_instructions_per_tick": without["core_mean"],
+        "xcp_share_no_master_pct": round(share, 2),
+        "xcp_share_target_met": share <= XCP_SHARE_TARGET,
     }
 
 
@@ -367,8 +594,13 @@ def run(quick: bool = False) -> dict:
         figures["vector"] = f"{VECTOR} ({g.ticks} ticks)"
         try:
             figures.update(arm_figures(build.arm_replayer()))
+            figures.update(node_xcp_figures())
         except (build.PortBuildError, FileNotFoundError, subprocess.CalledProcessError) as exc:
             figures["cm4"] = f"not measured: {exc}"
+        try:
+            figures.update(xcp_instruction_figures(100 if quick else PIL_TICKS))
+        except Exception as exc:  # (QEMU missing, the image stopped: said, not raised)
+            figures["pil_xcp"] = f"not measured: {exc}"
         replayer = build.host_replayer()
         figures["host_instructions_per_tick"] = callgrind_instructions(replayer, vectors, g.ticks)
         figures["cm4_qemu_instructions_per_tick"] = qemu_instructions(vectors, g.ticks)

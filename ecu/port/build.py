@@ -196,22 +196,37 @@ FLASH_SOURCES = ("ecu_core.c", "ecu_frames.c", "generated/turbojet.c")
 FLASH_HEADERS = ("ecu_core.h", "ecu_frames.h")
 
 
+# the CAN node with its XCP slave, on the core and the frame code: what the node's flash figure
+# links (sil bench port)
+NODE_XCP_SOURCES = (*FLASH_SOURCES, "ecu_node.c", "ecu_xcp.c")
+NODE_XCP_HEADERS = (*FLASH_HEADERS, "ecu_node.h", "ecu_xcp.h")
+
+
 def public_functions(header: str) -> tuple[str, ...]:
-    """The functions a header of the port declares, in order (its ``ecu_*`` prototypes)."""
+    """The functions a header of the port declares, in order (its ``ecu_*`` prototypes), but
+    those of its conditional parts (host builds' names, the integrator's profile hooks)."""
     text = re.sub(r"/\*.*?\*/", "", (PORT_DIR / header).read_text(), flags=re.S)
+    text = re.sub(
+        r"^#ifdef (ECU_WITH_NAMES|ECU_NODE_PROFILE)\b.*?^#endif", "", text, flags=re.M | re.S
+    )
     return tuple(re.findall(r"^[a-z][\w \t*]*?\b(ecu_\w+)\s*\(", text, re.M))
 
 
-def arm_flash_image() -> Path:
+def arm_flash_image(
+    sources: tuple[str, ...] = FLASH_SOURCES,
+    headers: tuple[str, ...] = FLASH_HEADERS,
+    name: str = "ecu-flash.elf",
+) -> Path:
     """The control core, the frame codec and E2E as firmware links them, for their flash figure:
-    the Cortex-M4 objects of FLASH_SOURCES (``arm_objects``: a section per function and per
+    the Cortex-M4 objects of ``sources`` (``arm_objects``: a section per function and per
     object) linked with -Wl,--gc-sections, libgcc and newlib-nano, with the public functions of
-    FLASH_HEADERS as the only references from outside (-Wl,--undefined). It holds what those
+    ``headers`` as the only references from outside (-Wl,--undefined); with NODE_XCP_SOURCES and
+    NODE_XCP_HEADERS, the same with the CAN node and its XCP slave. It holds what those
     functions need and nothing else: the generated per-signal helpers no code calls are dropped,
     as from any image linked with --gc-sections. Not for running (no vector table, no start-up
     code). The linker's map lies next to it (``.map``): where each byte comes from."""
     objects = arm_objects()
-    roots = tuple(name for header in FLASH_HEADERS for name in public_functions(header))
+    roots = tuple(root for header in headers for root in public_functions(header))
     flags = (
         *ARM_FLAGS,
         "-nostartfiles",
@@ -220,15 +235,15 @@ def arm_flash_image() -> Path:
         f"-Wl,--entry={roots[0]}",
         *(f"-Wl,--undefined={name}" for name in roots),
     )
-    paths = [objects[s] for s in FLASH_SOURCES]
+    paths = [objects[s] for s in sources]
     h = hashlib.sha256(" ".join((ARM_CC, *flags)).encode())
     for path in paths:
         h.update(path.read_bytes())
-    out = BUILD_DIR / h.hexdigest()[:16] / "ecu-flash.elf"
+    out = BUILD_DIR / h.hexdigest()[:16] / name
     if out.exists():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".ecu-flash.")
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{name}.")
     os.close(fd)
     cmd = [ARM_CC, *flags, *map(str, paths), "-lc", "-lgcc", f"-Wl,-Map={tmp}.map", "-o", tmp]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)

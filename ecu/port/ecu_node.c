@@ -192,6 +192,15 @@ static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
     return count;
 }
 
+/* an XCP command frame: queued for the tick boundary (no tick yet in lockstep: served at once) */
+static void xcp_command(ecu_node_t *n, const uint8_t *data, uint8_t dlc)
+{
+    ecu_xcp_receive(n->xcp, data, dlc);
+    if (n->c.lockstep && !n->sensor_seen) {
+        ecu_xcp_serve(n->xcp);
+    }
+}
+
 /* on_frame */
 int ecu_node_frame(ecu_node_t *n, uint32_t frame_id, const uint8_t data[8],
                    ecu_can_frame_t out[ECU_NODE_MAX_OUT])
@@ -251,7 +260,7 @@ int ecu_node_frame(ecu_node_t *n, uint32_t frame_id, const uint8_t data[8],
             return run_tick(n, out);
         }
     } else if (n->xcp != NULL && frame_id == n->xcp->c.cmd_id) {
-        return ecu_node_receive(n, frame_id, data, 8u, out);
+        xcp_command(n, data, 8u);
     }
     return 0;
 }
@@ -260,10 +269,7 @@ int ecu_node_receive(ecu_node_t *n, uint32_t frame_id, const uint8_t *data, uint
                      ecu_can_frame_t out[ECU_NODE_MAX_OUT])
 {
     if (n->xcp != NULL && frame_id == n->xcp->c.cmd_id) {
-        ecu_xcp_receive(n->xcp, data, dlc);
-        if (n->c.lockstep && !n->sensor_seen) { /* no tick yet: served as it comes */
-            ecu_xcp_serve(n->xcp);
-        }
+        xcp_command(n, data, dlc);
         return 0;
     }
     return dlc == 8u ? ecu_node_frame(n, frame_id, data, out) : 0;

@@ -7,6 +7,14 @@
 
 #include <string.h>
 
+/* a function kept out of its callers: its frame (a measurement image, a write's working set) is
+   on the stack only on its own path (the stack bound adds frames along call chains) */
+#ifdef __GNUC__
+#define NOINLINE __attribute__((noinline))
+#else
+#define NOINLINE
+#endif
+
 #ifdef ECU_WITH_NAMES
 #define ECU_XCP_X_NAME(type, name) #type " " #name " "
 const char ecu_xcp_counter_names[] = ECU_XCP_COUNTER_FIELDS(ECU_XCP_X_NAME);
@@ -343,7 +351,7 @@ static int32_t cand(const view_t *v, int k)
                                                  : ecu_xcp_raw(v->x, k);
 }
 
-static int rule_holds(const view_t *v, int kind, int a, int b, int c)
+static NOINLINE int rule_holds(const view_t *v, int kind, int a, int b, int c)
 {
     int64_t A = cand(v, a), B = kind == ECU_XCP_RULE_NONDECREASING ? 0 : cand(v, b);
     int j;
@@ -380,7 +388,7 @@ static int rule_holds(const view_t *v, int kind, int a, int b, int c)
 }
 
 /* recipe r of the run record for raw value `raw`: its word into *out (0: it does not fit) */
-static int recipe(const ecu_xcp_t *x, int r, int32_t raw, int32_t *out)
+static NOINLINE int recipe(const ecu_xcp_t *x, int r, int32_t raw, int32_t *out)
 {
     const int32_t *w = x->c.run + ECU_XCP_RUN_RECIPES + 1 + 2 * r;
     uint32_t head = (uint32_t)w[0], ops = (uint32_t)w[1];
@@ -397,41 +405,48 @@ static int recipe(const ecu_xcp_t *x, int r, int32_t raw, int32_t *out)
     return fl_to_int(v, (int8_t)(head >> 16 & 0xFFu), (int)(head >> 29 & 1u), out);
 }
 
-/* the words of several parameters (ecu/port/xcp_run.py DERIVED_WORDS), from the view */
-enum { D_PUMP_V0, D_LAM_V0, D_KB, D_CAP, D_DAY, D_NCOR, D_STARTER, DERIVED };
-static int derive(const view_t *v, int32_t d[DERIVED])
+/* round(fl(a * 2^ea * b) * 2^k) half to even: a product's word (0: it does not fit) */
+static NOINLINE int product(int64_t a, int ea, fl_t b, int k, int32_t *out)
 {
-    const ecu_params_t *p = v->x->c.params;
-    int32_t v0 = cand(v, ECU_XCP_P_TRIM_V) - cand(v, ECU_XCP_P_PUMP_DEAD_V), ticks;
+    return fl_to_int(fl_mul(fl_int(a, ea), b), k, 0, out);
+}
+
+/* max(1, round(fl(a * 2^ea / den))): a quotient's word (0: it does not fit) */
+static NOINLINE int quotient(int64_t a, int ea, int32_t den, int32_t *out)
+{
+    return fl_to_int(fl_div(fl_int(a, ea), fl_int(den, 0)), 0, 1, out);
+}
+
+/* the words of several parameters (ecu/port/xcp_run.py DERIVED_WORDS), from the view: checked,
+   and with `commit` written into the parameters; 0: one does not fit */
+static NOINLINE int derive(const view_t *v, int commit)
+{
+    ecu_params_t *p = v->x->c.params;
+    int32_t v0 = cand(v, ECU_XCP_P_TRIM_V) - cand(v, ECU_XCP_P_PUMP_DEAD_V);
+    int32_t lam_v0, kb, cap, starter, ticks;
     int64_t target_dk, inlet_ck, day;
-    fl_t f = fl_int(v0, -24);
-    d[D_PUMP_V0] = v0;
-    if (!fl_to_int(fl_mul(fl_int(cand(v, ECU_XCP_P_LAMBDA_COMMISSIONED), -24), f), 16, 0,
-                   &d[D_LAM_V0]) ||
-        !fl_to_int(fl_mul(f, fl_pool(v->x, ECU_XCP_POOL_KBQ)), 24, 0, &d[D_KB])) {
-        return 0;
-    }
-    d[D_CAP] = (int32_t)rne(((int64_t)cand(v, ECU_XCP_P_START_EGT_LIMIT_K) -
-                             cand(v, ECU_XCP_P_START_EGT_MARGIN_K)) * 10, 16);
+    cap = (int32_t)rne(((int64_t)cand(v, ECU_XCP_P_START_EGT_LIMIT_K) -
+                        cand(v, ECU_XCP_P_START_EGT_MARGIN_K)) * 10, 16);
     target_dk = rne((int64_t)cand(v, ECU_XCP_P_START_EGT_TARGET_K) * 10, 16);
     inlet_ck = rne((int64_t)cand(v, ECU_XCP_P_INLET_TEMP_K) * 100, 16);
     day = target_dk * inlet_ck / ECU_T_STD_CK;
-    d[D_DAY] = (int32_t)(day < d[D_CAP] ? day : d[D_CAP]);
-    d[D_NCOR] = (int32_t)isqrt(((uint64_t)ECU_T_STD_CK << 48) / (uint64_t)inlet_ck);
     ticks = (int32_t)rne((int64_t)cand(v, ECU_XCP_P_START_STARTER_RAMP_S) * p->rate_hz, 16);
-    f = fl_int(((1L << 24) - cand(v, ECU_XCP_P_START_DUTY)) * 10000LL, -24);
-    return fl_to_int(fl_div(f, fl_int(ticks < 1 ? 1 : ticks, 0)), 0, 1, &d[D_STARTER]);
-}
-
-static void commit_derived(ecu_params_t *p, const int32_t d[DERIVED])
-{
-    p->pump_v0_q24 = d[D_PUMP_V0];
-    p->lam_comm_v0_q16 = d[D_LAM_V0];
-    p->init_theta_q24[ECU_KB] = d[D_KB];
-    p->seq_egt_cap_dk = d[D_CAP];
-    p->seq_day_target_dk = d[D_DAY];
-    p->ncor_k_q24 = d[D_NCOR];
-    p->seq_starter_step_cpct = d[D_STARTER];
+    if (!product(cand(v, ECU_XCP_P_LAMBDA_COMMISSIONED), -48, fl_int(v0, 0), 16, &lam_v0) ||
+        !product(v0, -24, fl_pool(v->x, ECU_XCP_POOL_KBQ), 24, &kb) ||
+        !quotient(((1L << 24) - cand(v, ECU_XCP_P_START_DUTY)) * 10000LL, -24,
+                  ticks < 1 ? 1 : ticks, &starter)) {
+        return 0;
+    }
+    if (commit) {
+        p->pump_v0_q24 = v0;
+        p->lam_comm_v0_q16 = lam_v0;
+        p->init_theta_q24[ECU_KB] = kb;
+        p->seq_egt_cap_dk = cap;
+        p->seq_day_target_dk = (int32_t)(day < cap ? day : cap);
+        p->ncor_k_q24 = (int32_t)isqrt(((uint64_t)ECU_T_STD_CK << 48) / (uint64_t)inlet_ck);
+        p->seq_starter_step_cpct = starter;
+    }
+    return 1;
 }
 
 /* the recipes of the changed parameters: checked (commit 0) or applied (1); 0: one does not fit */
@@ -457,11 +472,10 @@ static int recipes(ecu_xcp_t *x, const view_t *v, int commit)
 
 /* _write_parameters: words n from parameter `first` (XcpSlave._write_parameters and
    ParamTable.check_writes): 0, or the error */
-static int write_params(ecu_xcp_t *x, int first, int n, const uint8_t *data)
+static NOINLINE int write_params(ecu_xcp_t *x, int first, int n, const uint8_t *data)
 {
     view_t v;
     int k, changed = 0, running = x->ecu->o.mode == ECU_RUN;
-    int32_t d[DERIVED];
     const int32_t *bound = x->c.run + ECU_XCP_RUN_BOUNDS;
     if (x->locked & ECU_XCP_RES_CAL_PAG) {
         return ERR(ECU_XCP_ERR_ACCESS_LOCKED);
@@ -505,11 +519,11 @@ static int write_params(ecu_xcp_t *x, int first, int n, const uint8_t *data)
             return ERR(ECU_XCP_ERR_VERIFY);
         }
     }
-    if (!recipes(x, &v, 0) || !derive(&v, d)) {
+    if (!recipes(x, &v, 0) || !derive(&v, 0)) {
         return ERR(ECU_XCP_ERR_VERIFY);
     }
     (void)recipes(x, &v, 1); /* accepted: from the next tick */
-    commit_derived(x->c.params, d);
+    (void)derive(&v, 1);
     for (k = first; k < first + n; k++) {
         int32_t raw = cand(&v, k);
         if (param_limit[k] & ECU_XCP_IDENTITY) {
@@ -560,7 +574,7 @@ static int take_demand(ecu_xcp_t *x)
 }
 
 /* _write_bench: words n from bench word `first` */
-static int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *data)
+static NOINLINE int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *data)
 {
     int k, r;
     for (k = first; k < first + n; k++, data += 4) {
@@ -726,7 +740,7 @@ static uint8_t byte_at(const ecu_xcp_t *x, int region, uint32_t off, const uint8
 }
 
 /* _read for UPLOAD: size (<= 7) bytes from address into out (0: not in the map) */
-static int read_memory(ecu_xcp_t *x, uint32_t address, uint32_t size,
+static NOINLINE int read_memory(ecu_xcp_t *x, uint32_t address, uint32_t size,
                        uint8_t out[ECU_XCP_MAX_CTO - 1])
 {
     uint8_t img[ECU_XCP_MEAS_SIZE];
@@ -1168,12 +1182,39 @@ static int text(ecu_xcp_t *x, uint32_t at, int length)
     return length;
 }
 
+/* BUILD_CHECKSUM: CRC-16 CCITT over size bytes from the MTA, which moves past them */
+static NOINLINE int checksum(ecu_xcp_t *x, uint32_t size, uint8_t *r)
+{
+    uint8_t img[ECU_XCP_MEAS_SIZE];
+    uint32_t off, k;
+    uint16_t crc = 0xFFFFu;
+    int region;
+    r[2] = r[3] = 0u;
+    if (size < 1u || size > ECU_XCP_MAX_CHECKSUM) {
+        put32(r + 4, ECU_XCP_MAX_CHECKSUM);
+        return ERRX(ECU_XCP_ERR_OUT_OF_RANGE, 6);
+    }
+    region = locate(x->mta, size, &off);
+    if (region == REGIONS) {
+        return ERR(ECU_XCP_ERR_OUT_OF_RANGE);
+    }
+    if (region == MEAS) {
+        meas_image(x, img);
+    }
+    for (k = 0; k < size; k++) {
+        crc = crc16(crc, byte_at(x, region, off + k, img));
+    }
+    x->mta += size;
+    r[1] = ECU_XCP_CHECKSUM_CRC_16_CITT;
+    put32(r + 4, crc);
+    return 7;
+}
+
 /* one command: its answer in r[1..] (the result's length), NONE, or ERR/ERRX */
 static int command(ecu_xcp_t *x, const uint8_t *f, uint8_t len, uint8_t *r)
 {
     ecu_xcp_daq_t *d;
     uint32_t size, k;
-    uint16_t crc;
     int n;
     switch (f[0]) {
     case ECU_XCP_CMD_CONNECT:
@@ -1289,31 +1330,7 @@ static int command(ecu_xcp_t *x, const uint8_t *f, uint8_t len, uint8_t *r)
         x->mta = k + size;
         return (int)size;
     case ECU_XCP_CMD_BUILD_CHECKSUM:
-        size = le32(f + 4);
-        if (size < 1u || size > ECU_XCP_MAX_CHECKSUM) {
-            r[2] = r[3] = 0u;
-            put32(r + 4, ECU_XCP_MAX_CHECKSUM);
-            return ERRX(ECU_XCP_ERR_OUT_OF_RANGE, 6);
-        } else {
-            uint8_t img[ECU_XCP_MEAS_SIZE];
-            uint32_t off;
-            int region = locate(x->mta, size, &off);
-            if (region == REGIONS) {
-                return ERR(ECU_XCP_ERR_OUT_OF_RANGE);
-            }
-            if (region == MEAS) {
-                meas_image(x, img);
-            }
-            crc = 0xFFFFu;
-            for (k = 0; k < size; k++) {
-                crc = crc16(crc, byte_at(x, region, off + k, img));
-            }
-        }
-        x->mta += size;
-        r[1] = ECU_XCP_CHECKSUM_CRC_16_CITT;
-        r[2] = r[3] = 0u;
-        put32(r + 4, crc);
-        return 7;
+        return checksum(x, le32(f + 4), r);
     case ECU_XCP_CMD_DOWNLOAD:
         size = f[1];
         n = size < ECU_XCP_MAX_CTO - 2u ? (int)size : ECU_XCP_MAX_CTO - 2;

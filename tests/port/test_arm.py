@@ -63,3 +63,27 @@ def test_flash_ram_and_instructions_per_tick_meet_the_targets(elf, vectors):
     arm = bench.qemu_instructions(path, g.ticks)
     assert isinstance(host, float) and isinstance(arm, float), (host, arm)
     assert 200 < host < 5000 and 200 < arm < 5000
+
+
+def test_the_node_with_its_xcp_slave_meets_its_flash_and_ram_budgets(toolchains):
+    """The CAN node with the XCP slave: <= 20 KiB of flash as linked with the core and the frame
+    code, <= 3 KiB of RAM (its instances and the deepest stack from its entry points, the tick's
+    within it), with at least 16 ODT entries; the whole image's bytes add up by origin."""
+    figures = bench.node_xcp_figures()
+    assert 0 < figures["cm4_node_xcp_flash_bytes"] <= 20 * 1024, figures
+    assert 0 < figures["cm4_node_xcp_ram_bytes"] <= 3 * 1024, figures
+    assert figures["xcp_odt_entries"] >= 16
+    assert figures["node_xcp_flash_target_met"] and figures["node_xcp_ram_target_met"]
+    parts = figures["cm4_image_flash_detail"].split(" + ")
+    assert sum(int(p.rsplit(" ", 1)[1]) for p in parts) == figures["cm4_image_flash_bytes"]
+
+
+def test_the_xcp_slave_costs_under_a_tenth_of_the_tick_in_the_loop(toolchains):
+    """The image in the loop (QEMU -icount): the node's instructions per tick with the slave and
+    no master within 10 % of those without it; a master's DAQ list of 20 measurements costs
+    more, and the core's own instructions are the same."""
+    figures = bench.xcp_instruction_figures(ticks=150)
+    assert figures["xcp_share_target_met"], figures
+    assert 0 <= figures["xcp_share_no_master_pct"] <= 10.0
+    daq = figures["pil_node_instructions_per_tick_xcp_daq_20"]
+    assert daq > figures["pil_node_instructions_per_tick_xcp_no_master"]
