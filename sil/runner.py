@@ -547,7 +547,7 @@ def _guard_s(opts: RunOptions, s: Scenario) -> float:
 def _foreign_frames(opts: RunOptions, s: Scenario) -> str:
     """The nodes' --foreign-frames: the run's sequence in lockstep without bus faults, else
     only their own IDs (protocol.run_sequence)."""
-    return "sequence" if _strict(opts, s) else "ids"
+    return "ids"
 
 
 def _plant_args(
