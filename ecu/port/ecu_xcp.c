@@ -246,8 +246,10 @@ static int fl_to_int(fl_t v, int k, int at_least_1, int32_t *out)
 {
     uint64_t q = v.m;
     int s = v.e + k;
-    if (s >= 0) {
-        if (q != 0u && bitlen(q) + s > 32) {
+    if (q == 0u) {
+        /* 0 */
+    } else if (s >= 0) {
+        if (bitlen(q) + s > 32) {
             return 0;
         }
         q <<= s;
@@ -274,8 +276,11 @@ static int fl_to_int(fl_t v, int k, int at_least_1, int32_t *out)
 static int64_t fl_ceil(fl_t v, int k)
 {
     int s = v.e + k;
+    if (v.m == 0u) {
+        return 0;
+    }
     if (s >= 0) {
-        return v.m != 0u && bitlen(v.m) + s > 62 ? (int64_t)1 << 62 : (int64_t)(v.m << s);
+        return bitlen(v.m) + s > 62 ? (int64_t)1 << 62 : (int64_t)(v.m << s);
     }
     if (-s >= 64) {
         return v.m != 0u;
