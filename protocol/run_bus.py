@@ -84,7 +84,7 @@ class RunBus(can.BusABC):
             message = can.Message(arbitration_id=wire, data=bytes(data), is_extended_id=extended)
             self.bus.send(message)
         if self.sequence is not None:
-            self.sequence.sent(frame_id)
+            self._ready.extend(self.sequence.sent(frame_id))
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if msg.is_extended_id or msg.is_error_frame:
@@ -93,7 +93,7 @@ class RunBus(can.BusABC):
         out = msg if not extended else _with_id(msg, wire, extended)
         self.bus.send(out, timeout)
         if self.sequence is not None:
-            self.sequence.sent(msg.arbitration_id)
+            self._ready.extend(self.sequence.sent(msg.arbitration_id))
 
     # -- receiving ------------------------------------------------------------------------------
     def recv_frame(self, timeout: float | None) -> Frame | None:

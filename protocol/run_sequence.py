@@ -25,6 +25,25 @@ every node of the run, and :class:`RunSequence` keeps a node to it (``strict``):
    run's frames come in a burst just before the turn's last frame, another sender's anywhere in
    the turn); the other is foreign.
 
+5. **Resync.** A frame of the run may be lost, or come after its turn's last frame (its sender
+   moved between cores while sending a turn): its message's next frame then carries a counter
+   (or multiplexer index) one further on. A frame that fits every rule but its place in its
+   message's sequence is taken, and the sequence goes on from it, where its tick proves it
+   (PlantSensors, PlantAnalog, EcuActuator, EcuStarter, Demand), or, for a message without a
+   tick, where no frame of that message in sequence comes in the turn (the nearer by rule 4 if
+   several do). A Demand after lost ones carries a tick and a counter both as many frames on
+   (up to three). Counted in ``resyncs``. A FaultInject must carry the next counter.
+6. **Early frames.** A third node (the command node, hearing both) may get a frame of the next
+   turn before the last frame of this one: the multicast loopback hands a datagram to its
+   listeners one by one, and the peer, woken by the first, may answer before the sender's core
+   reaches the last (a virtual core stalled by its host). A plant or ECU frame out of its turn
+   that is the next turn's next frame of its message (rules 2 and 3) is therefore kept (up to
+   ``EARLY_MAX``), and handed on in the run's order when its turn comes; one of a message that
+   was due in its sender's last turn and did not come there is that turn's, late; the rest are
+   dropped. Should this turn's last frame have been lost (the peer's last frame of the next
+   turn kept, and a last frame of the turn after come), the turn is closed without it (a
+   resync).
+
 Frames that fail are dropped and counted per ID (:attr:`RunSequence.foreign`). The command node's
 frames (Demand, FaultInject) are not turn-bound: they are checked by 1 and 3 and passed at once.
 Frames of no message of the run (the XCP transport's, ``exempt``) pass unchecked; with
@@ -57,6 +76,9 @@ SENSORS_NAME, ACTUATOR_NAME, DEMAND_NAME = "PlantSensors", "EcuActuator", "Deman
 EVERY_TICK = frozenset((SENSORS_NAME, ACTUATOR_NAME, "EcuStarter"))
 COUNTER_MODULO = 15
 NO_TICK = -1
+EARLY_MAX = 64  # rule 6: at most this many frames kept for the next turn
+LOST_DEMANDS = 3  # rule 5: a Demand may follow this many lost ones
+FIRST_KEPT = 5  # the first frames dropped are kept with the reason, for the run's summary
 
 
 @dataclass(frozen=True)
@@ -139,26 +161,38 @@ class RunSequence:
         self.tick = 0
         self.next_demand = 0  # the DemandTick the command node sends next (16-bit)
         self._counter: dict[int, int] = dict.fromkeys(self.messages, 0)
-        self._held: list[tuple[object, int, bytes]] = []  # this turn's frames, as they came
+        # this turn's frames, as they came, each with why it is out of sequence (None: it is not)
+        self._held: list[tuple[object, int, bytes, str | None]] = []
+        self._early: list[tuple[object, int, bytes]] = []  # the next turn's, come before its time
         self._last: dict[int, bytes] = {}  # each message's last frame taken
+        self._taken_at: dict[int, int] = {}  # ... and the tick of its turn
         self._last_of_index: dict[tuple[int, int], bytes] = {}  # ... and per multiplexer index
         self.foreign: Counter[int] = Counter()  # frames of another sender, per ID
+        self.first: list[str] = []  # the first few dropped, and why (FIRST_KEPT)
         self.ties = 0  # two frames of one message in a turn, told apart by their values
+        self.resyncs = 0  # frames taken out of their message's sequence (rule 5)
+        self.first_resyncs: list[str] = []
 
     def relax(self) -> list:
         """From now on only rule 1: the run's lockstep is over (a node was found dead, and its
         peer runs on its own clock). The frames held, to hand on."""
         self.strict = False
         held, self._held = self._held, []
-        return [frame for frame, _, _ in held]
+        early, self._early = self._early, []
+        return [frame for frame, _, _, _ in held] + [frame for frame, _, _ in early]
 
     # -- the node's own frames ------------------------------------------------------------------
-    def sent(self, frame_id: int) -> None:
-        """The node sent a frame: its own PlantSensors or EcuActuator moves the turn on."""
+    def sent(self, frame_id: int) -> list:
+        """The node sent a frame: its own PlantSensors or EcuActuator moves the turn on. The
+        frames to hand to the node now (its peer's that came early, none in lockstep)."""
         m = self.messages.get(frame_id)
-        if m is not None and m.ends_turn and m.role == self.turn:
-            self._release()  # (a node hears no frames of its own turn: nothing is held)
-            self._next_turn()
+        if m is None or not m.ends_turn:
+            return []
+        if m.role != self.turn:  # its peer's last frame was lost: past that turn first
+            self._skip_turn()
+        self._release()  # (a node hears no frames of its own turn: nothing is held)
+        self._next_turn()
+        return self._replay_early()
 
     # -- frames heard ---------------------------------------------------------------------------
     def heard(self, frame: object, frame_id: int, data: bytes | bytearray) -> list:
@@ -166,68 +200,170 @@ class RunSequence:
         ``data`` its DBC ID and payload) if it is the run's and is not held, with the turn's
         held frames when it ends the turn; none if it is foreign or held."""
         if frame_id in self.own_ids:
-            self.foreign[frame_id] += 1
+            self._drop(frame_id, data, "an ID this node sends")
             return []
         if not self.strict or frame_id in self.exempt:
             return [frame]
         m = self.messages.get(frame_id)
-        if m is None or len(data) != 8 or not self._fits(m, data):
-            self.foreign[frame_id] += 1
+        if m is None:
+            self._drop(frame_id, data, "no message of the run")
             return []
+        if m.role != COMMAND and m.role != self.turn:
+            return self._come_early(m, frame, data)
+        if self._early and self._lost_end(m, data):
+            return self._skip_turn() + self.heard(frame, frame_id, data)
+        why, in_step = self._misfit(m, data)
+        # rule 5: out of its message's sequence is the run's still where its tick proves it, or
+        # (held to the turn's end) where no frame of the message in sequence comes in the turn
+        if why is not None and not (in_step and (m.tick_shift != NO_TICK or m.role != COMMAND)):
+            self._drop(frame_id, data, why)
+            return []
+        if m.role == COMMAND or m.ends_turn:
+            return self._end_turn(m, frame, data, why)
+        self._held.append((frame, frame_id, bytes(data), why))
+        return []
+
+    def _end_turn(
+        self, m: _Message, frame: object, data: bytes | bytearray, why: str | None
+    ) -> list:
+        """Take a Demand or FaultInject (not turn-bound), or the turn's last frame with the
+        turn's held frames before it."""
         if m.role == COMMAND:
-            self._take(m, data)
+            self._take(m, data, why)
             return [frame]
-        if not m.ends_turn:
-            self._held.append((frame, frame_id, bytes(data)))
-            return []
         out = self._release()
-        self._take(m, data)
+        self._take(m, data, why)
         out.append(frame)
         self._next_turn()
+        return out + self._replay_early()
+
+    def _come_early(self, m: _Message, frame: object, data: bytes | bytearray) -> list:
+        """Rule 6: a plant or ECU frame out of its turn. One of a message that was due in its
+        sender's last turn and did not come is that turn's, late: dropped. Else, if it is the
+        next turn's next frame of its message (rules 2 and 3), it is kept for that turn (up to
+        ``EARLY_MAX``), else dropped."""
+        last = self.tick - (m.role == ECU)  # the tick of its sender's last turn
+        if last >= 0 and last % m.every == 0 and self._taken_at.get(m.frame_id) != last:
+            self._drop(m.frame_id, data, f"after the {m.role}'s turn of tick {last} ended")
+            return []  # (due then, and none came: it is that turn's, late)
+        turn, tick = self.turn, self.tick
+        self.turn, self.tick = m.role, last + 1  # checked as the next turn's, now
+        why, _ = self._misfit(m, data)
+        self.turn, self.tick = turn, tick
+        if why is not None or len(self._early) >= EARLY_MAX:
+            self._drop(m.frame_id, data, f"before its turn: {why or 'too many before it'}")
+            return []
+        self._early.append((frame, m.frame_id, bytes(data)))
+        return []
+
+    def _lost_end(self, m: _Message, data: bytes | bytearray) -> bool:
+        """This turn's last frame was lost: ``m`` is a last frame of this turn's sender carrying
+        the tick of its next turn, and its peer's last frame of the turn between is kept."""
+        if not m.ends_turn or not any(self.messages[f].ends_turn for _, f, _ in self._early):
+            return False
+        tick = (int.from_bytes(data, "little") >> m.tick_shift) & 0xFFFF
+        return tick == (self.tick + 1) % TICK_MODULO
+
+    def _skip_turn(self) -> list:
+        """This turn's last frame was lost: its held frames, then the next turn's that came."""
+        self.resyncs += 1
+        if len(self.first_resyncs) < FIRST_KEPT:
+            self.first_resyncs.append(f"the {self.turn}'s turn of tick {self.tick}: no last frame")
+        out = self._release()
+        self._next_turn()
+        return out + self._replay_early()
+
+    def _replay_early(self) -> list:
+        """The frames that came before their turn, heard again now that it has come."""
+        early, self._early = self._early, []
+        out: list = []
+        for frame, frame_id, data in early:
+            out += self.heard(frame, frame_id, data)
         return out
 
-    def _fits(self, m: _Message, data: bytes | bytearray) -> bool:
-        """Rules 2 and 3: the turn (plant and ECU frames), due, the next counter, the tick."""
-        if m.role != COMMAND and (m.role != self.turn or self.tick % m.every):
-            return False
-        if data[1] & 0x0F != self._counter[m.frame_id]:
-            return False
+    def _misfit(self, m: _Message, data: bytes | bytearray) -> tuple[str | None, bool]:
+        """Rules 2 and 3: why the frame is not the run's next of its message (None: it is), and
+        whether it fits but for its place in the message's sequence (the alive counter or the
+        multiplexer index: a frame of the run was lost or came late)."""
+        if len(data) != 8:
+            return f"{len(data)} bytes", False
+        if m.role != COMMAND and m.role != self.turn:
+            return f"in the {self.turn}'s turn", False
+        if m.role != COMMAND and self.tick % m.every:
+            return f"not due (every {m.every} ticks)", False
+        if m.tick_shift != NO_TICK:
+            tick = (int.from_bytes(data, "little") >> m.tick_shift) & 0xFFFF
+            expected = self.next_demand if m.role == COMMAND else self.tick % TICK_MODULO
+            if tick != expected:
+                lost = self._demands_lost(m, data, tick)
+                return f"tick {tick}, the run's is {expected}", lost
+        if (counter := data[1] & 0x0F) != self._counter[m.frame_id]:
+            return f"alive counter {counter}, the run's next is {self._counter[m.frame_id]}", True
         if m.mux:
             last = self._last.get(m.frame_id)
-            if m.mux_of(data) != (m.mux[0] if last is None else m.next_mux(last)):
-                return False
-        if m.tick_shift == NO_TICK:
-            return True
-        tick = (int.from_bytes(data, "little") >> m.tick_shift) & 0xFFFF
-        if m.role == COMMAND:
-            return tick == self.next_demand
-        return tick == self.tick % TICK_MODULO
+            index = m.mux[0] if last is None else m.next_mux(last)
+            if m.mux_of(data) != index:
+                return f"index {m.mux_of(data)}, the run's next is {index}", True
+        return None, False
 
-    def _take(self, m: _Message, data: bytes | bytearray) -> None:
-        self._counter[m.frame_id] = (self._counter[m.frame_id] + 1) % COUNTER_MODULO
+    def _demands_lost(self, m: _Message, data: bytes | bytearray, tick: int) -> bool:
+        """A Demand whose tick and alive counter are both j frames on from the run's next (j up
+        to LOST_DEMANDS): the j before it were lost."""
+        if m.role != COMMAND:
+            return False
+        ahead = (tick - self.next_demand) % TICK_MODULO
+        j = ahead // self.demand_every
+        counter = (self._counter[m.frame_id] + j) % COUNTER_MODULO
+        return (
+            ahead % self.demand_every == 0 and 1 <= j <= LOST_DEMANDS and data[1] & 0x0F == counter
+        )
+
+    def _drop(self, frame_id: int, data: bytes | bytearray, why: str) -> None:
+        self.foreign[frame_id] += 1
+        if len(self.first) < FIRST_KEPT:
+            self.first.append(f"0x{frame_id:03X} {bytes(data).hex()} at tick {self.tick}: {why}")
+
+    def _take(self, m: _Message, data: bytes | bytearray, why: str | None = None) -> None:
+        """The run's next frame of ``m``; ``why``: it is out of the message's sequence (rule 5),
+        which goes on from it."""
+        if why is not None:
+            self.resyncs += 1
+            if len(self.first_resyncs) < FIRST_KEPT:
+                self.first_resyncs.append(
+                    f"0x{m.frame_id:03X} {bytes(data).hex()} at tick {self.tick}: {why}"
+                )
+        self._counter[m.frame_id] = ((data[1] & 0x0F) + 1) % COUNTER_MODULO
+        self._taken_at[m.frame_id] = self.tick
         self._last[m.frame_id] = bytes(data)
         if m.mux:
             self._last_of_index[m.frame_id, m.mux_of(data)] = bytes(data)
         if m.role == COMMAND and m.tick_shift != NO_TICK:
-            self.next_demand = (self.next_demand + self.demand_every) % TICK_MODULO
+            tick = (int.from_bytes(data, "little") >> m.tick_shift) & 0xFFFF
+            self.next_demand = (tick + self.demand_every) % TICK_MODULO
 
     def _release(self) -> list:
-        """Rule 4 on the turn's held frames: those taken, in the order they came."""
+        """Rules 4 and 5 on the turn's held frames: those taken, in the order they came."""
         held, self._held = self._held, []
         if not held:
             return []
         by_id: dict[int, list[int]] = {}
-        for i, (_, frame_id, _) in enumerate(held):
+        for i, (_, frame_id, _, _) in enumerate(held):
             by_id.setdefault(frame_id, []).append(i)
         taken = set()
         for frame_id, positions in by_id.items():
-            if len(positions) > 1:
+            in_sequence = [i for i in positions if held[i][3] is None]
+            candidates = in_sequence or positions  # (rule 5: only when none is in sequence)
+            for i in positions:
+                if held[i][3] is not None and in_sequence:
+                    self._drop(frame_id, held[i][2], held[i][3])
+            if len(candidates) > 1:
                 self.ties += 1
-                self.foreign[frame_id] += len(positions) - 1
-                best = self._nearest(frame_id, [held[i][2] for i in positions])
-                positions = [positions[best]]
-            taken.add(positions[0])
-            self._take(self.messages[frame_id], held[positions[0]][2])
+                best = self._nearest(frame_id, [held[i][2] for i in candidates])
+                for i in candidates[:best] + candidates[best + 1 :]:
+                    self._drop(frame_id, held[i][2], "a second frame of its message in the turn")
+                candidates = [candidates[best]]
+            taken.add(candidates[0])
+            self._take(self.messages[frame_id], held[candidates[0]][2], held[candidates[0]][3])
         return [held[i][0] for i in sorted(taken)]
 
     def _nearest(self, frame_id: int, candidates: list[bytes]) -> int:
@@ -264,11 +400,15 @@ class RunSequence:
         return sum(self.foreign.values())
 
     def stats(self) -> dict:
-        """``other_sender_frames`` and, per ID, ``other_sender_ids``; ``ties``."""
+        """``other_sender_frames``, per ID ``other_sender_ids``, the first few dropped and why;
+        ``ties``; ``sequence_resyncs`` (rule 5) and the first few."""
         return {
             "other_sender_frames": self.foreign_frames,
             "other_sender_ids": {f"0x{i:03X}": n for i, n in sorted(self.foreign.items())},
             **({"other_sender_ties": self.ties} if self.ties else {}),
+            **({"other_sender_first": list(self.first)} if self.first else {}),
+            **({"sequence_resyncs": self.resyncs} if self.resyncs else {}),
+            **({"sequence_resyncs_first": list(self.first_resyncs)} if self.resyncs else {}),
         }
 
 

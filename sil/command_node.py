@@ -66,6 +66,7 @@ class CommandNode:
         self.progress = progress
         self.realtime = realtime
         self.own_tick = 0  # real time: the command node's own clock, in ECU periods
+        self.next_play = 0  # lockstep: the next demand tick to send
         self.finished = False
         self._wall_s: float | None = None
 
@@ -107,6 +108,7 @@ class CommandNode:
             return  # real time: demands go out by the node's own clock (on_period)
         for tick in range(0, min(self.lead, self.last_tick + 1), self.every):
             self._play(tick, send)
+            self.next_play = tick + self.every
 
     def on_frame(
         self, frame_id: int, data: bytes | bytearray, send: SendFn, wall_s: float | None = None
@@ -116,9 +118,12 @@ class CommandNode:
         self._wall_s = wall_s
         recorder.record(frame_id, data, wall_s)
         if frame_id == SENSORS and not self.realtime:
-            target = recorder.latest_sensor_tick + self.lead
-            if target % self.every == 0 and target <= self.last_tick:
-                self._play(target, send)
+            # every demand tick up to the lead: one at a time, or those after a sensor frame
+            # the bus lost for this node (the ECU would wait for them for ever)
+            target = min(recorder.latest_sensor_tick + self.lead, self.last_tick)
+            while self.next_play <= target:
+                self._play(self.next_play, send)
+                self.next_play += self.every
             recorder.commands_sent()
         if recorder.tick != tick_before:  # the ECU answered a tick
             if self.progress is not None:

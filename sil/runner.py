@@ -547,7 +547,7 @@ def _guard_s(opts: RunOptions, s: Scenario) -> float:
 def _foreign_frames(opts: RunOptions, s: Scenario) -> str:
     """The nodes' --foreign-frames: the run's sequence in lockstep without bus faults, else
     only their own IDs (protocol.run_sequence)."""
-    return "ids"
+    return "sequence" if _strict(opts, s) else "ids"
 
 
 def _plant_args(
@@ -827,9 +827,11 @@ def _listen(
                 elif died_at is None and drained and (dead := watch.dead(now)) is not None:
                     state.status, state.abort_reason = "aborted", dead
                     died_at = now
-                if died_at is not None and watch is not None:
+                if died_at is not None and watch is not None and state.status == "aborted":
                     _peer_lost(state, bus)
-            elif now - died_at > grace:
+            elif now - died_at > (grace if state.status == "aborted" else GRACE_S):
+                if state.status != "aborted":  # it ended cleanly, and the run's end never came
+                    state.status, state.abort_reason = "aborted", _ended_early(state, command)
                 return
         frames = receive(min(0.05, next_period - now) if realtime else 0.05)
         drained = not frames
@@ -886,14 +888,27 @@ def _peer_lost(state: RunState, bus: RunBus) -> None:
 
 
 def _node_exited(state: RunState, now: float) -> float | None:
-    """``now`` if a node process has exited (the run is then marked aborted), else None."""
+    """``now`` if a node process has exited, else None. One that failed marks the run aborted;
+    one that ended cleanly (code 0: its last tick done) does not yet: the command node, behind
+    it on a loaded machine, may still have its last frames to read (``_ended_early``)."""
     for name, proc in state.children.items():
         code = proc.poll()
         if code is not None:
-            state.status = "aborted"
-            state.abort_reason = f"{name} process exited with code {code} mid-run"
+            if code != 0:
+                state.status = "aborted"
+                state.abort_reason = f"{name} process exited with code {code} mid-run"
             return now
     return None
+
+
+def _ended_early(state: RunState, command: CommandNode) -> str:
+    """Why the run aborts when a node that ended cleanly left it short of its last tick."""
+    ended = [n for n, p in state.children.items() if p.poll() == 0] or ["a node"]
+    return (
+        f"{ended[0]} process ended (code 0) before the ECU answered the run's last tick "
+        f"(answered {command.recorder.tick} of {command.last_tick + 1} ticks within "
+        f"{GRACE_S:g} s)"
+    )
 
 
 def _silent(dog: Watchdog, seen: dict[int, float], state: RunState, now: float) -> str | None:
@@ -1024,16 +1039,20 @@ def _other_senders(summary: dict) -> None:
     warns of them."""
     counts = [summary.get("other_sender_frames", 0)]
     ids = set(summary.get("other_sender_ids", {}))
-    for node in summary.get("nodes", {}).values():
+    firsts = [f"run: {summary['other_sender_first'][0]}"] if "other_sender_first" in summary else []
+    for name, node in summary.get("nodes", {}).items():
         counts.append(node.get("other_sender_frames", 0))
         ids |= set(node.get("other_sender_ids", {}))
+        if "other_sender_first" in node:
+            firsts.append(f"{name}: {node['other_sender_first'][0]}")
     frames = max(counts)
     if not frames:
         return
     listed = sorted(ids, key=lambda i: int(i, 16))
     shown = ", ".join(listed[:6]) + (", ..." if len(listed) > 6 else "")
+    first = f"; first dropped by {firsts[0]}" if firsts else ""
     said = (
-        f"foreign frames on the bus: {frames:,} from another sender (IDs {shown}) — "
+        f"foreign frames on the bus: {frames:,} from another sender (IDs {shown}{first}) — "
         "the run's bus is shared"
     )
     if summary["status"] != "completed" or summary["missed_ticks"]:

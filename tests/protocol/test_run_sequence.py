@@ -102,6 +102,11 @@ def test_a_node_keeps_exactly_the_runs_frames_with_another_senders_mixed_in(logs
         assert heard == expected, seed
         assert sequence.foreign_frames == len(foreign)  # every one of them, whatever its ID
         assert set(sequence.foreign) == {f for f, _ in foreign}
+    # a replay playing while the node waits for the run to start: a second of it before tick 0
+    early = RunSequence(codec, 100.0, own)
+    flood = [f for f in other[:1500] if f[0] not in own]
+    assert _hear(early, flood + run, role, sends) == expected
+    assert early.foreign_frames == len(flood) and early.resyncs == 0
 
 
 def test_a_second_frame_of_a_message_in_one_turn_is_told_apart_by_its_values(logs):
@@ -129,6 +134,10 @@ def test_own_ids_unknown_ids_and_the_xcp_transport():
     assert ecu.stats() == {
         "other_sender_frames": 2,
         "other_sender_ids": {"0x110": 1, "0x555": 1},
+        "other_sender_first": [  # what was dropped first, where and why
+            "0x110 0000000000000000 at tick 0: an ID this node sends",
+            "0x555 0000000000000000 at tick 0: no message of the run",
+        ],
     }
     loose = RunSequence(codec, 100.0, sent_by(codec, ECU), strict=False)  # real time, bus faults
     assert loose.heard("a", ACTUATOR, bytes(8)) == []
@@ -140,3 +149,84 @@ def test_own_ids_unknown_ids_and_the_xcp_transport():
     assert held.heard("analog", analog.frame_id, analog.data) == []  # held to the turn's end
     assert held.relax() == ["analog"]  # the lockstep is over: handed on
     assert held.heard("x", SENSORS, bytes(8)) == ["x"]
+
+
+def _missing(heard: list[Frame], expected: list[Frame]) -> list[int]:
+    """Where in ``expected`` the frames ``heard`` leaves out (``heard`` must be ``expected`` less
+    some frames, in order)."""
+    out, j = [], 0
+    for i, frame in enumerate(expected):
+        if j < len(heard) and heard[j] == frame:
+            j += 1
+        else:
+            out.append(i)
+    assert j == len(heard), "a frame heard that is not the run's, or out of order"
+    return out
+
+
+@pytest.mark.parametrize("role", [COMMAND, ECU, PLANT])
+def test_a_frame_of_the_run_lost_or_late_costs_that_turn_only(logs, role):
+    """The bus loses one of the run's frames, or delivers one after its turn's last frame: the
+    node drops at most the frames of that tick, and from the next tick on keeps every frame of
+    the run again (rule 5), its sequence taken up from the frames that follow."""
+    run, _ = logs
+    codec = Codec()
+    own = sent_by(codec, role)
+    sends = {f for f in run if f[0] in own}
+    expected = [f for f in run if f[0] not in own]
+    ends = [i for i, f in enumerate(run) if f[0] in (SENSORS, ACTUATOR)]
+    rng = random.Random(7)
+    heard_ids = [i for i, f in enumerate(run) if f[0] not in own]
+    # (a node in lockstep does not send its turn's frames without its peer's last one: the
+    # peer's last frame lost is the command node's case, which hears both)
+    may_lose = [i for i in heard_ids if role == COMMAND or run[i][0] not in (SENSORS, ACTUATOR)]
+    for at in rng.sample(may_lose[20:-40], 25):
+        turn_end = next(e for e in ends if e >= at)
+        late = run[at][0] not in (SENSORS, ACTUATOR, 0x080, 0x310) and rng.random() < 0.5
+        if late:  # after its turn's last frame
+            frames = run[:at] + run[at + 1 : turn_end + 1] + [run[at]] + run[turn_end + 1 :]
+        else:  # lost
+            frames = run[:at] + run[at + 1 :]
+        sequence = RunSequence(codec, 100.0, own)
+        heard = _hear(sequence, frames, role, sends)
+        missing = [heard_ids[i] for i in _missing(heard, expected)]
+        assert at in missing, (at, run[at])
+        window = (ends[max(0, ends.index(turn_end) - 2)], ends[ends.index(turn_end) + 2])
+        assert all(window[0] <= i <= window[1] for i in missing), (at, run[at], missing)
+        assert sequence.foreign_frames == (len(missing) if late else len(missing) - 1)
+        assert sequence.resyncs >= 1
+
+
+def test_a_replayed_fault_injection_is_never_taken_out_of_sequence(logs):
+    """A FaultInject carries no tick: one with another counter than the run's next is dropped,
+    whatever else (rule 5 does not apply to it)."""
+    codec = Codec()
+    plant = RunSequence(codec, 100.0, sent_by(codec, PLANT))
+    fault = codec["FaultInject"]
+    fault.pack([1, 0, 0.8])
+    data = bytearray(fault.data)
+    data[1] = (data[1] & 0xF0) | 5  # the run's next counter is 0
+    assert plant.heard("f", fault.frame_id, data) == []
+    assert plant.first == ["0x310 " + bytes(data).hex() + " at tick 0: alive counter 5, the "
+                           "run's next is 0"]  # fmt: skip
+
+
+def test_the_command_node_puts_a_turn_that_came_early_back_in_the_runs_order(logs):
+    """What the command node was seen to hear on a loaded machine: the ECU's answer to tick k
+    (up to its EcuActuator) before the plant's PlantSensors(k), which the ECU had heard already
+    (the loopback hands a datagram to its listeners one by one). Rule 6: every frame kept, and
+    handed on in the run's order, as if none had come early."""
+    run, _ = logs
+    codec = Codec()
+    own = sent_by(codec, COMMAND)
+    sends = {f for f in run if f[0] in own}
+    expected = [f for f in run if f[0] not in own]
+    sensors = [i for i, f in enumerate(run) if f[0] == SENSORS]
+    rng = random.Random(3)
+    for at in rng.sample(sensors[5:-5], 40):
+        answer = next(i for i in range(at, len(run)) if run[i][0] == ACTUATOR)
+        upto = rng.randrange(at + 1, answer + 1)  # some of the ECU's frames, or all of them
+        frames = run[:at] + run[at + 1 : upto + 1] + [run[at]] + run[upto + 1 :]
+        sequence = RunSequence(codec, 100.0, own)
+        assert _hear(sequence, frames, COMMAND, sends) == expected, at
+        assert sequence.foreign_frames == 0 and sequence.resyncs == 0
