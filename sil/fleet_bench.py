@@ -47,6 +47,13 @@ TARGET_TEXT = {
 }
 
 
+def _rounded(value: float | None, digits: int) -> float | None:
+    """``round``, where a figure the campaign could not measure (None, NaN) stays None."""
+    if value is None or value != value:
+        return None
+    return round(value, digits)
+
+
 def _campaign(name: str, base: str, folder: Path, quick: bool) -> list[dict]:
     """``sil campaign NAME.toml --ecu-impl c`` (quick: its first QUICK_ENGINES engines); the
     rows of its results."""
@@ -79,14 +86,14 @@ def _variation(rows: list[dict]) -> dict:
         "variation_failed_runs": sum(1 for r in rows if r["status"] != "completed"),
     }
     for name, t in report.tracking(rows).items():
-        out[f"variation_{name}_rms_nominal_pct"] = round(t["nominal"], 4)
-        out[f"variation_{name}_rms_median_pct"] = round(t["p50"], 4)
-        out[f"variation_{name}_rms_p95_pct"] = round(t["p95"], 4)
+        out[f"variation_{name}_rms_nominal_pct"] = _rounded(t["nominal"], 4)
+        out[f"variation_{name}_rms_median_pct"] = _rounded(t["p50"], 4)
+        out[f"variation_{name}_rms_p95_pct"] = _rounded(t["p95"], 4)
         out[f"variation_{name}_held_engines"] = t["limited"]
-        out[f"variation_{name}_rms_p95_free_pct"] = round(t["p95_free"], 4)
-        out[f"variation_{name}_limiter_time_nominal_s"] = round(t["limiter_s_nominal"], 2)
-        out[f"variation_{name}_limiter_time_median_s"] = round(t["limiter_s_p50"], 2)
-        out[f"variation_{name}_limiter_time_mean_s"] = round(t["limiter_s_mean"], 2)
+        out[f"variation_{name}_rms_p95_free_pct"] = _rounded(t["p95_free"], 4)
+        out[f"variation_{name}_limiter_time_nominal_s"] = _rounded(t["limiter_s_nominal"], 2)
+        out[f"variation_{name}_limiter_time_median_s"] = _rounded(t["limiter_s_p50"], 2)
+        out[f"variation_{name}_limiter_time_mean_s"] = _rounded(t["limiter_s_mean"], 2)
     return out
 
 
@@ -99,7 +106,7 @@ def _transients(rows: list[dict]) -> dict:
         key = f"transient_{s['controller']}_{s['variant']}"
         if s["step_pct"] > 0.0:  # the step up: the thrust's rise
             for q in ("nominal", "p50", "p95", "max"):
-                out[f"{key}_rise_{q.replace('p50', 'median')}_s"] = round(s[f"rise_{q}"], 2)
+                out[f"{key}_rise_{q.replace('p50', 'median')}_s"] = _rounded(s[f"rise_{q}"], 2)
             rise = np.array([
                 float(r["thrust_rise_s"] or "nan") for r in rows
                 if r["controller.kind"] == s["controller"] and r["variant"] == s["variant"]
@@ -107,12 +114,12 @@ def _transients(rows: list[dict]) -> dict:
             out[f"{key}_within_5_s"] = int(np.sum(rise <= RISE_S))
             out[f"{key}_engines"] = int(rise.size)
         else:  # the chop: the thrust's fall
-            out[f"{key}_fall_nominal_s"] = round(s["rise_nominal"], 2)
-            out[f"{key}_fall_median_s"] = round(s["rise_p50"], 2)
-        out[f"{key}_egt_overshoot_max_K"] = round(s["egt_overshoot_max"], 1)
-        out[f"{key}_surge_margin_min_pct"] = round(s["surge_margin_min"], 1)
+            out[f"{key}_fall_nominal_s"] = _rounded(s["rise_nominal"], 2)
+            out[f"{key}_fall_median_s"] = _rounded(s["rise_p50"], 2)
+        out[f"{key}_egt_overshoot_max_K"] = _rounded(s["egt_overshoot_max"], 1)
+        out[f"{key}_surge_margin_min_pct"] = _rounded(s["surge_margin_min"], 1)
         out[f"{key}_flameout_runs"] = s["flameout_runs"]
-        out[f"{key}_speed_min_pct"] = round(s["speed_min"], 1)
+        out[f"{key}_speed_min_pct"] = _rounded(s["speed_min"], 1)
     kinds = _kinds(rows)
     out["transient_limit_violations"] = sum(k != "thrust_rise" for k in kinds)
     out["transient_rise_violations"] = kinds.count("thrust_rise")
@@ -129,7 +136,7 @@ def _failure(folder: Path) -> dict:
         path.write_text(dumps(data))
         summary = completed_run(path, folder / f"failure-{kind}", "--mode", "inproc", "--ecu-impl",
                                 "c")  # fmt: skip
-        out[f"failure_{kind}_tracking_rms_pct"] = round(summary["tracking_rms_pct"], 4)
+        out[f"failure_{kind}_tracking_rms_pct"] = _rounded(summary["tracking_rms_pct"], 4)
     return out
 
 
@@ -140,12 +147,12 @@ def _rise_bounds(quick: bool) -> dict:
     model = make_model()
     line = running_line(model)
     own = schedules.schedule(model)
-    out = {"rise_bound_nominal_own_line_s": round(schedules.line_rise_s(own, line), 2)}
+    out = {"rise_bound_nominal_own_line_s": _rounded(schedules.line_rise_s(own, line), 2)}
     if quick:
         return out
     corners = schedules.corner_schedules(model)
     fleet = schedules.fleet_schedule(model, corners=corners)
-    out["rise_bound_nominal_fleet_line_s"] = round(schedules.line_rise_s(fleet, line), 2)
+    out["rise_bound_nominal_fleet_line_s"] = _rounded(schedules.line_rise_s(fleet, line), 2)
     slow = [
         len(pts) < 2 or not schedules.line_rise_s(pts, corner_line) <= RISE_S
         for corner_line, pts in corners

@@ -131,10 +131,18 @@ def output_file(source: str, field: str, path: Path) -> Path:
     return path
 
 
+def path_option(text: str) -> Path:
+    """An argparse ``type`` for a path: an empty one is refused (``Path("")`` is the current
+    folder, which a user who left a variable empty did not mean)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path (. is the current folder)")
+    return Path(text)
+
+
 def file_option(text: str) -> Path:
     """An argparse ``type`` for a file to write (:func:`output_file`)."""
     try:
-        return output_file("", "", Path(text))
+        return output_file("", "", path_option(text))
     except InputError as exc:
         raise argparse.ArgumentTypeError(str(exc).lstrip(": ")) from None
 
@@ -142,6 +150,6 @@ def file_option(text: str) -> Path:
 def folder_option(text: str) -> Path:
     """An argparse ``type`` for an output folder (:func:`output_folder`)."""
     try:
-        return output_folder("", "", Path(text))
+        return output_folder("", "", path_option(text))
     except InputError as exc:
         raise argparse.ArgumentTypeError(str(exc).lstrip(": ")) from None

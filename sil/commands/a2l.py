@@ -1,12 +1,13 @@
-"""`sil a2l [--out FILE]`: the ECU's A2L (ASAM MCD-2 MC 1.7) for calibration and measurement
-tools (CANape, INCA, pyXCP with pya2ldb), written from the tables its XCP slave serves."""
+"""`sil a2l [--out FILE] [--impl python|c|pil]`: the ECU's A2L (ASAM MCD-2 MC 1.7) for
+calibration and measurement tools (CANape, INCA, pyXCP with pya2ldb), written from the tables its
+XCP slave serves, with the limits of the implementation's slave."""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
+from sil import validation
 from sil.node_options import xcp_ids
 from sil.validation import option
 
@@ -16,12 +17,22 @@ HELP = "write the ECU's A2L (parameters, measurements, XCP on CAN) for calibrati
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--out", type=Path, metavar="FILE", help="write it to FILE (default: standard output)"
+        "--out",
+        type=validation.path_option,
+        metavar="FILE",
+        help="write it to FILE (default: standard output)",
     )
     parser.add_argument(
         "--rate", type=option(integer=True, ecu_rate_hz=True), metavar="HZ",
         help="the ECU's tick rate, the control-tick event's cycle (default: 100)",
     )  # fmt: skip
+    parser.add_argument(
+        "--impl",
+        choices=("python", "c", "pil"),
+        default="python",
+        help="the ECU implementation the tool will attach to: the C slave (c, pil) takes smaller "
+        "master blocks and fewer DAQ lists (default: python)",
+    )
     parser.add_argument(
         "--xcp-ids",
         type=xcp_ids,
@@ -34,7 +45,12 @@ def run(args: argparse.Namespace) -> int:
     from ecu.xcp.a2l import a2l_text
     from protocol.dbc import xcp_frame_ids
 
-    text = a2l_text(args.rate, args.xcp_ids or xcp_frame_ids())
+    limits = None
+    if args.impl != "python":
+        from ecu.port.xcp import header_limits
+
+        limits = header_limits()
+    text = a2l_text(args.rate, args.xcp_ids or xcp_frame_ids(), *([limits] if limits else []))
     if args.out is None:
         sys.stdout.write(text)
         return 0

@@ -27,7 +27,9 @@ def max_workers() -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="campaign file (TOML, see sil/campaigns/)")
+    parser.add_argument(
+        "file", type=validation.path_option, help="campaign file (TOML, see sil/campaigns/)"
+    )
     parser.add_argument(
         "--executor",
         choices=("local", "dask"),
@@ -52,7 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"worker processes (default: all cores; at most {WORKERS_PER_CORE} per core, "
         f"{max_workers()} here)",
     )
-    parser.add_argument("--out", type=Path, help="output folder (default: out/campaign-NAME)")
+    parser.add_argument(
+        "--out", type=validation.path_option, help="output folder (default: out/campaign-NAME)"
+    )
     parser.add_argument("--no-report", action="store_true", help="skip report.md and plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", action="store_true", help="print the outcome as JSON")

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from protocol import strict_json
-from sil import results, run_folder  # noqa: E402
+from sil import results, run_folder, validation  # noqa: E402
 from sil.metrics import load_trace  # noqa: E402
 
 NAME = "compare"
@@ -40,8 +40,10 @@ EPILOG = """exit status:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.add_argument("run_a", type=Path, help="output folder of the first run")
-    parser.add_argument("run_b", type=Path, help="output folder of the second run")
+    parser.add_argument("run_a", type=validation.path_option, help="output folder of the first run")
+    parser.add_argument(
+        "run_b", type=validation.path_option, help="output folder of the second run"
+    )
     parser.add_argument("--out", metavar="DIR", help="folder for compare.png (default: RUN_B)")
     parser.add_argument(
         "--allow-incomplete",

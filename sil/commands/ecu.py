@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
 
 from ecu.params import CONTROLLERS
+from protocol import strict_json
 from sil.node_options import add_launcher_options, add_pil_link, run_sequence, xcp_ids
 from sil.parent_death import NodeStop, PeerLost
 from sil.validation import option
@@ -384,9 +384,9 @@ def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
 def _report(summary: dict, args: argparse.Namespace) -> int:
     """The run summary into --stats-file and on stdout (as JSON with --json)."""
     if args.stats_file is not None:
-        args.stats_file.write_text(json.dumps(summary, indent=2) + "\n")
+        args.stats_file.write_text(strict_json.dumps(summary, indent=2) + "\n")
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print(strict_json.dumps(summary, indent=2))
     else:
         for key, value in summary.items():
             print(f"{key}: {value}")

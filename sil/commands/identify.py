@@ -22,7 +22,9 @@ HELP = "identify the fast engine model (eq. 3.5 or appendix B) from a trace, CAN
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", type=Path, help="trace.csv of a run, a CAN log, or a plain CSV")
+    parser.add_argument(
+        "file", type=validation.path_option, help="trace.csv of a run, a CAN log, or a plain CSV"
+    )
     parser.add_argument(
         "--order",
         choices=ident.ORDERS,
@@ -44,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--validate",
-        type=Path,
+        type=validation.path_option,
         metavar="FILE",
         help="a second recording to judge the fit on (default: held-out part)",
     )
@@ -58,10 +60,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed-column", default="speed_meas")
     parser.add_argument("--voltage-column", default="PumpVoltageTarget")
     parser.add_argument("--speed-unit", choices=("pct", "rpm"), default="pct")
-    parser.add_argument("--out", type=Path, help="folder for identify.json and the fit plot")
+    parser.add_argument(
+        "--out", type=validation.path_option, help="folder for identify.json and the fit plot"
+    )
     parser.add_argument(
         "--export",
-        type=Path,
+        type=validation.path_option,
         metavar="FILE",
         help="write the ECU commissioning file (initial estimates, trim); a file the ECU would "
         "refuse is not written (exit 2)",

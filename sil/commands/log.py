@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from protocol import strict_json
+from sil import validation
 
 NAME = "log"
 HELP = "convert a CAN log between candump, ASC, BLF, TRC, CSV and MF4 (ASAM MDF 4 bus logging)"
@@ -20,8 +20,12 @@ CONVERT = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     convert = actions.add_parser("convert", help=CONVERT, description=CONVERT)
-    convert.add_argument("source", type=Path, metavar="IN", help="the log to convert")
-    convert.add_argument("target", type=Path, metavar="OUT", help="the log to write")
+    convert.add_argument(
+        "source", type=validation.path_option, metavar="IN", help="the log to convert"
+    )
+    convert.add_argument(
+        "target", type=validation.path_option, metavar="OUT", help="the log to write"
+    )
     convert.add_argument(
         "--start",
         metavar="TIME",

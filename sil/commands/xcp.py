@@ -6,9 +6,9 @@ from __future__ import annotations
 import argparse
 import socket
 import sys
-from pathlib import Path
 
 from protocol import strict_json
+from sil import validation
 from sil.validation import option
 
 SO_RCVBUFFORCE = 33  # <asm-generic/socket.h>
@@ -24,13 +24,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     p = actions.add_parser("record", help=RECORD, description=RECORD)
     p.add_argument("--bus", metavar="SPEC", help="the ECU's bus (default as in protocol)")
-    p.add_argument("--a2l", type=Path, required=True, metavar="FILE",
+    p.add_argument("--a2l", type=validation.path_option, required=True, metavar="FILE",
                    help="the ECU's A2L (sil a2l): addresses, types, units, XCP IDs")  # fmt: skip
     p.add_argument("--measure", nargs="+", action="extend", required=True, metavar="NAME",
                    help="MEASUREMENTs of the A2L to record (repeatable)")  # fmt: skip
     p.add_argument("--seconds", type=option(lo=0.01, hi=1e6), required=True, metavar="S",
                    help="how long to record (wall-clock time)")  # fmt: skip
-    p.add_argument("--out", type=Path, required=True, metavar="FILE.mf4",
+    p.add_argument("--out", type=validation.path_option, required=True, metavar="FILE.mf4",
                    help="the MF4 to write")  # fmt: skip
     p.add_argument("--event", type=option(integer=True, lo=0, hi=255), default=0, metavar="N",
                    help="the DAQ event: 0 the control tick (default), 1 every 100 ms")  # fmt: skip
