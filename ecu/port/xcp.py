@@ -101,6 +101,22 @@ def c_limits() -> Limits:
     return xcp_library().limits
 
 
+HEADER = Path(__file__).with_name("ecu_xcp.h")
+_LIMIT_NAMES = ("QUEUE", "MAX_BS", "MAX_DAQ", "MAX_ODTS", "MAX_ENTRIES")
+
+
+def header_limits() -> Limits:
+    """What the C slave holds, as its header defines it (no compiler needed: ``sil a2l``)."""
+    text = HEADER.read_text()
+    values = []
+    for name in _LIMIT_NAMES:
+        found = re.search(rf"^#define ECU_XCP_{name} (\d+)\b", text, re.MULTILINE)
+        if found is None:
+            raise PortError(f"{HEADER}: no #define ECU_XCP_{name}")
+        values.append(int(found.group(1)))
+    return Limits(*values)
+
+
 class XorShiftSeeds:
     """The C slave's seeds (xorshift32 from ``seed``) as a ``random.Random`` stand-in: give it
     to a Python slave (``slave._rng``) for the same GET_SEED answers."""

@@ -261,9 +261,14 @@ def characteristics() -> list[tuple[str, int, int]]:
     return out
 
 
-def a2l_text(rate_hz: int | None = None, ids: tuple[int, int] = S.DEFAULT_IDS) -> str:
+def a2l_text(
+    rate_hz: int | None = None,
+    ids: tuple[int, int] = S.DEFAULT_IDS,
+    limits: S.Limits = S.Limits(),  # noqa: B008 (frozen)
+) -> str:
     """The A2L of this firmware and slave, for an ECU ticking at ``rate_hz`` (default: the
-    parameters' default) with the XCP identifiers ``ids`` (master to ECU, ECU to master)."""
+    parameters' default) with the XCP identifiers ``ids`` (master to ECU, ECU to master) and a
+    slave that holds ``limits`` (the C slave's are smaller: ``ecu.port.xcp.header_limits``)."""
     rate_hz = rate_hz or EcuParams().rate_hz
     identification = f"{FIRMWARE} build {build_id()}"
     epk_address = MEM.TEXT_BASE  # the slave's texts start with its identification
@@ -322,7 +327,7 @@ def a2l_text(rate_hz: int | None = None, ids: tuple[int, int] = S.DEFAULT_IDS) -
             A2ML,
             _mod_common(),
             _mod_par(identification, epk_address),
-            _if_data(rate_hz, ids),
+            _if_data(rate_hz, ids, limits),
             _record_layouts(),
             *compu,
             *vtabs,
@@ -373,7 +378,7 @@ def _mod_par(identification: str, epk_address: int) -> str:
     return "\n".join(lines)
 
 
-def _if_data(rate_hz: int, ids: tuple[int, int]) -> str:
+def _if_data(rate_hz: int, ids: tuple[int, int], limits: S.Limits) -> str:
     cycle_ms = 1000 // rate_hz
     optional = "\n".join(f"        OPTIONAL_CMD {c}" for c in OPTIONAL_CMDS)
     return f"""    /begin IF_DATA XCP
@@ -381,10 +386,10 @@ def _if_data(rate_hz: int, ids: tuple[int, int]) -> str:
         0x0100 {T_MS} {T_MS} {T_MS} {T_MS} {T_MS} {T_MS} {T_MS} {S.MAX_CTO} {S.MAX_DTO}
         BYTE_ORDER_MSB_LAST ADDRESS_GRANULARITY_BYTE
 {optional}
-        COMMUNICATION_MODE_SUPPORTED BLOCK MASTER {S.MAX_BS} 0
+        COMMUNICATION_MODE_SUPPORTED BLOCK MASTER {limits.max_bs} 0
       /end PROTOCOL_LAYER
       /begin DAQ
-        DYNAMIC {D.MAX_DAQ} {D.EVENTS} 0 OPTIMISATION_TYPE_DEFAULT ADDRESS_EXTENSION_FREE
+        DYNAMIC {limits.max_daq} {D.EVENTS} 0 OPTIMISATION_TYPE_DEFAULT ADDRESS_EXTENSION_FREE
         IDENTIFICATION_FIELD_TYPE_ABSOLUTE GRANULARITY_ODT_ENTRY_SIZE_DAQ_BYTE
         {D.MAX_ENTRY_SIZE} NO_OVERLOAD_INDICATION
         PRESCALER_SUPPORTED

@@ -83,3 +83,19 @@ def test_a2l_for_another_rate_and_ids(sil, tmp_path):
     text = path.read_text(encoding="latin-1")
     assert "CAN_ID_MASTER 0x600" in text and '"control tick" "tick" 0 DAQ 255 5 6 1' in text
     assert sil("a2l", "--xcp-ids", "0x100,0x101").returncode == 2
+
+
+def test_the_c_slaves_a2l_states_what_the_c_slave_answers(sil, tmp_path):
+    """`sil a2l --impl c` (and pil): the master block and the DAQ lists of the C slave, read from
+    its header without a compiler, as the compiled slave reports them."""
+    from ecu.port.xcp import c_limits, header_limits
+
+    assert header_limits() == c_limits()
+    for impl in ("c", "pil"):
+        path = tmp_path / f"{impl}.a2l"
+        assert sil("a2l", "--impl", impl, "--out", str(path)).returncode == 0
+        text = path.read_text(encoding="latin-1")
+        assert f"BLOCK MASTER {c_limits().max_bs} 0" in text
+        assert f"DYNAMIC {c_limits().max_daq} 2 0" in text
+    python = sil("a2l").stdout
+    assert "BLOCK MASTER 42 0" in python
