@@ -1,6 +1,6 @@
 """Golden vectors: the Python firmware's every tick (inputs, outputs, digest of the whole state),
 for the C port to replay and match integer for integer. What they are recorded from (SIL
-scenarios in process, a scripted sequence through every mode) is in :mod:`sil.golden`, which
+scenarios in process, a scripted sequence through every mode) is in :mod:`sil.run.golden`, which
 runs the plant: the firmware side knows only the format and the recording tick.
 
 File layout (``.gv``, little-endian int32 words, read by ``ecu/port/replay.c``): ``EGV1``, the

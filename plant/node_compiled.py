@@ -1,4 +1,5 @@
-"""The plant node's compiled twin, for a lockstep run in one compiled loop (sil/compiled_loop.py).
+"""The plant node's compiled twin, for a lockstep run in one compiled loop
+(sil/run/compiled_loop.py).
 
 PlantNode's lockstep handling of EcuActuator and its advance, operation for operation, on an
 int64 state array (the NS_ slots) and a float64 one (NF_): the Python parts of a period (faults

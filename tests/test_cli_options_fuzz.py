@@ -43,9 +43,7 @@ def _options() -> list[tuple[str, str, list[str]]]:
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     for name, command in sorted(sub.choices.items()):
         actions = command._actions
-        positionals = [
-            "X" for a in actions if not a.option_strings and a.required and a.nargs != 0
-        ]
+        positionals = ["X" for a in actions if not a.option_strings and a.required and a.nargs != 0]
         if any(isinstance(a, argparse._SubParsersAction) for a in actions):
             continue  # a command of actions (console): its actions carry their own options
         for action in actions:

@@ -557,7 +557,7 @@ def test_identify_exports_only_what_the_ecu_loads(
     import json
     import warnings
 
-    from sil.identify import commissioning_refusal
+    from sil.analysis.identify import commissioning_refusal
 
     export = tmp_path / "commission.json"
     export.unlink(missing_ok=True)

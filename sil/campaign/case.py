@@ -1,8 +1,8 @@
 """One campaign case: the scenario's three nodes in this process with a :class:`Probe`.
 
-The same nodes and order as ``sil run --mode inproc`` (:mod:`sil.runner`), so the figures equal
+The same nodes and order as ``sil run --mode inproc`` (:mod:`sil.run.runner`), so the figures equal
 those of the printed ``sil run`` command line; only the recording is left out. With the C ECU and
-no bus faults, as there, the nodes run in the compiled loop (:mod:`sil.compiled_loop`).
+no bus faults, as there, the nodes run in the compiled loop (:mod:`sil.run.compiled_loop`).
 """
 
 from __future__ import annotations
@@ -20,14 +20,13 @@ from ecu.port.node import CEcuNode
 from plant.node import PlantNode
 from protocol.codec import Codec
 from protocol.node import InProcessBus
-from sil import profiles
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
 from sil.campaign.probe import Probe
-from sil.command_node import CommandNode
-from sil.compiled_loop import CompiledLoop, compile_loop
-from sil.runner import build_plant, ecu_params
-from sil.scenario import Scenario
+from sil.run.command_node import CommandNode
+from sil.run.compiled_loop import CompiledLoop, compile_loop
+from sil.run.config import build_plant, ecu_params
+from sil.scenario import Scenario, profiles
 
 
 @dataclass

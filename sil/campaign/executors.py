@@ -24,7 +24,7 @@ from pathlib import Path
 
 from protocol import strict_json
 from sil.campaign.spec import Campaign, Case, Invariants
-from sil.parent_death import die_with_parent
+from sil.run.parent_death import die_with_parent
 
 FIGURES = (
     "ticks", "wall_s", "tracking_rms_pct", "tracking_speed_loop_rms_pct", "tracking_mean_pct",

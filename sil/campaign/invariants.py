@@ -33,7 +33,7 @@ from ecu import faults as ecu_faults
 from ecu import modes as ecu_modes
 from ecu.limiters import OWNER_EGT, OWNER_SPEED
 from plant.flags import FLAMEOUT
-from sil import metrics
+from sil.analysis import metrics
 from sil.busfault.spec import E2E_KINDS
 from sil.campaign.case import CaseRun
 from sil.campaign.spec import Invariants
@@ -54,8 +54,9 @@ def _rms(x: np.ndarray) -> float:
 
 
 def transient(r: CaseRun) -> dict:
-    """The transient figures of sil.metrics on the plant's truth: thrust rise of the largest
-    demand step, EGT overshoot (true EGT), least surge margin, flameouts and least speed in RUN."""
+    """The transient figures of sil.analysis.metrics on the plant's truth: thrust rise of the
+    largest demand step, EGT overshoot (true EGT), least surge margin, flameouts and least speed in
+    RUN."""
     rate = r.scenario.ecu_rate_hz
     n = len(r.probe.n_pct)
     running = r.column("mode") == ecu_modes.RUN
@@ -78,8 +79,8 @@ def transient(r: CaseRun) -> dict:
 
 
 def start(r: CaseRun) -> dict:
-    """sil.metrics.start_stop of a run from rest ({} for any other run) on the plant's truth (the
-    true EGT and speed), with NaN (and "" for no abort) where a figure does not apply."""
+    """sil.analysis.metrics.start_stop of a run from rest ({} for any other run) on the plant's
+    truth (the true EGT and speed), with NaN (and "" for no abort) where a figure does not apply."""
     if not r.scenario.plant.standstill:
         return {}
     trace = {

@@ -1,6 +1,6 @@
 """A lean recorder for campaign runs: no files, one row per tick of what the metrics need.
 
-It stands in for :class:`sil.recorder.Recorder` towards the command node (``record``,
+It stands in for :class:`sil.record.recorder.Recorder` towards the command node (``record``,
 ``commands_sent``, ``tick``, ``latest_sensor_tick``) and keeps, sample-and-hold as the trace
 does, the true speed of PlantTruthB, the fuel delivered without a flame of PlantTruthC, the ECU's
 reference speed, fault word and loop owner of EcuStatus, the sequencer's state and abort reason
@@ -8,7 +8,7 @@ of EcuStarter and the pump voltage and mode of EcuActuator; the plant's true spe
 thrust and flags are read from the plant in process (``truth``), so invariants hold on the
 engine, not on what its sensors claim.
 
-A run in the compiled loop (sil/compiled_loop.py, the C ECU) hands the frames over in blocks
+A run in the compiled loop (sil/run/compiled_loop.py, the C ECU) hands the frames over in blocks
 (:meth:`Probe.record_ticks`, decoded vectorised to the same rows) and the plant's truth per tick
 afterwards (:meth:`Probe.take_truth`), as the loop kept it when the ECU answered each tick.
 """
@@ -21,8 +21,8 @@ from collections.abc import Callable
 import numpy as np
 
 from protocol.codec import Codec
-from sil.ticks import ACTUATOR, InOrderTicks
-from sil.trace_writer import N_MAX_RPM, raw_field
+from sil.record.ticks import ACTUATOR, InOrderTicks
+from sil.record.trace_writer import N_MAX_RPM, raw_field
 
 Truth = Callable[[], tuple[float, float, float, float, int]]  # (N %, EGT K, P3 Pa, thrust N, flags)
 

@@ -8,7 +8,7 @@ import argparse
 import sys
 
 from sil import validation
-from sil.node_options import xcp_ids
+from sil.run.node_options import xcp_ids
 from sil.validation import option
 
 NAME = "a2l"

@@ -1,5 +1,5 @@
 """`sil bench TARGET`: speed and memory figures, printed or as JSON; `sil bench all`: every
-bench, and the page docs/benchmarks.md (sil/bench_all.py)."""
+bench, and the page docs/benchmarks.md (sil/bench/suite.py)."""
 
 from __future__ import annotations
 
@@ -9,25 +9,10 @@ import sys
 from pathlib import Path
 
 from protocol import strict_json
+from sil.bench import TARGETS
 
 NAME = "bench"
 HELP = "measure speed and memory figures (codec, plant, ecu, ...)"
-
-# target -> module with `run(quick: bool) -> dict` returning the figures
-TARGETS = {
-    "codec": "protocol.bench",
-    "plant": "plant.bench",
-    "ecu": "ecu.bench",
-    "replay": "sil.replay_bench",
-    "sil": "sil.bench",
-    "service": "sil.console.bench",
-    "port": "sil.port_bench",
-    "realtime": "sil.realtime_bench",
-    "pil": "sil.pil_bench",
-    "starts": "sil.start_bench",
-    "control": "sil.control_bench",
-    "fleet": "sil.fleet_bench",
-}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_all(args: argparse.Namespace) -> int:
-    from sil.bench_all import markdown, print_progress, run_all
+    from sil.bench.suite import markdown, print_progress, run_all
 
     names = list(TARGETS) if not args.only else [n.strip() for n in args.only.split(",")]
     unknown = [n for n in names if n not in TARGETS]

@@ -12,8 +12,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from protocol import strict_json
-from sil import results, run_folder, validation  # noqa: E402
-from sil.metrics import load_trace  # noqa: E402
+from sil import validation
+from sil.analysis.metrics import load_trace  # noqa: E402
+from sil.record import results  # noqa: E402
+from sil.run import run_folder
 
 NAME = "compare"
 HELP = "compare two runs: table of their summaries and an overlay plot of speed"
@@ -63,7 +65,7 @@ def _fmt(value: object) -> str:
 
 def _load(run: Path, allow_incomplete: bool) -> tuple[dict, dict, str | None]:
     """The run's summary, trace and why it is incomplete (None: completed). Raises
-    :class:`~sil.results.IncompleteRun` for a folder it cannot compare."""
+    :class:`~sil.record.results.IncompleteRun` for a folder it cannot compare."""
     summary = results.load_summary(run)
     why = results.incomplete_reason(summary)
     if why is not None and not allow_incomplete:

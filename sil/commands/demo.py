@@ -6,9 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from sil import run_folder
 from sil.commands import compare
 from sil.commands import run as run_command
+from sil.run import run_folder
 
 NAME = "demo"
 HELP = "run the demo: MRAC and PID on the staircase over the default bus, compared, with plots"

@@ -9,8 +9,8 @@ from pathlib import Path
 
 from ecu.params import CONTROLLERS
 from protocol import strict_json
-from sil.node_options import add_launcher_options, add_pil_link, run_sequence, xcp_ids
-from sil.parent_death import NodeStop, PeerLost
+from sil.run.node_options import add_launcher_options, add_pil_link, run_sequence, xcp_ids
+from sil.run.parent_death import NodeStop, PeerLost
 from sil.validation import option
 
 NAME = "ecu"

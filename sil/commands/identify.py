@@ -13,9 +13,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from protocol import strict_json
-from sil import identify as ident  # noqa: E402
 from sil import validation  # noqa: E402
-from sil.canlog import LogReadError  # noqa: E402
+from sil.analysis import identify as ident  # noqa: E402
+from sil.record.canlog import LogReadError  # noqa: E402
 
 NAME = "identify"
 HELP = "identify the fast engine model (eq. 3.5 or appendix B) from a trace, CAN log or CSV"

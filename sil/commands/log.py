@@ -1,5 +1,5 @@
 """`sil log convert IN OUT`: a CAN log in another format (candump, ASC, BLF, TRC, python-can
-CSV, MF4), keeping its absolute start (sil/canlog.py, sil/mdf.py; docs/replay.md)."""
+CSV, MF4), keeping its absolute start (sil/record/canlog.py, sil/record/mdf.py; docs/replay.md)."""
 
 from __future__ import annotations
 
@@ -37,9 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sil.canlog import LogReadError, convert_log
-    from sil.mdf import MdfUnavailable, parse_start
-    from sil.results import WriteError
+    from sil.record.canlog import LogReadError, convert_log
+    from sil.record.mdf import MdfUnavailable, parse_start
+    from sil.record.results import WriteError
 
     prefix = "sil log convert"
     if not args.source.is_file():

@@ -12,8 +12,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from protocol import strict_json
-from sil.node_options import add_launcher_options, run_sequence
-from sil.parent_death import NodeStop, PeerLost
+from sil.run.node_options import add_launcher_options, run_sequence
+from sil.run.parent_death import NodeStop, PeerLost
 from sil.validation import option
 
 NAME = "plant"

@@ -9,9 +9,11 @@ from pathlib import Path
 
 from protocol import strict_json
 from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
-from sil import replay, run_folder, validation
-from sil.canlog import LogReadError, read_frames
-from sil.results import REPLAY_FILES, WriteError, named, write_atomically, write_with
+from sil import validation
+from sil.record import replay
+from sil.record.canlog import LogReadError, read_frames
+from sil.record.results import REPLAY_FILES, WriteError, named, write_atomically, write_with
+from sil.run import run_folder
 
 NAME = "replay"
 HELP = (
@@ -112,7 +114,7 @@ def _into_ecu(args: argparse.Namespace) -> int:
     from ecu.port.build import PortBuildError
     from ecu.port.core import PortError
     from sil import scenario as scenarios
-    from sil.run_record import load as load_record
+    from sil.run.run_record import load as load_record
 
     try:
         out = run_folder.out_path("--out", args.out)
@@ -177,7 +179,7 @@ def _ecu_for(s, record, param_texts: list[str]):  # noqa: ANN001, ANN202 (Scenar
     from ecu.node import EcuNode
     from ecu.port.core import make_ecu
     from sil.commands.ecu import _param
-    from sil.runner import build_plant, ecu_params
+    from sil.run.config import build_plant, ecu_params
 
     params = ecu_params(s, build_plant(s, s.seed))
     commissioned = record.commissioning if record is not None else None

@@ -10,13 +10,14 @@ from pathlib import Path
 
 from protocol import strict_json
 from protocol.bus import BusSpecError
-from sil import results, run_folder
 from sil import scenario as scenarios
-from sil.canlog import EXTRA_FORMATS
-from sil.mdf import require as require_mdf
-from sil.node_options import add_pil_link
-from sil.run_record import Overrides
-from sil.watchdog import Terminated, interrupt_reason
+from sil.record import results
+from sil.record.canlog import EXTRA_FORMATS
+from sil.record.mdf import require as require_mdf
+from sil.run import run_folder
+from sil.run.node_options import add_pil_link
+from sil.run.run_record import Overrides
+from sil.run.watchdog import Terminated, interrupt_reason
 
 NAME = "run"
 HELP = "run a scenario: plant and ECU nodes over a bus (or in one process), with results"
@@ -178,8 +179,8 @@ def _interrupt_on_signals() -> None:
 def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None) -> int:
     """Fly ``scenario_ref`` into ``out`` (default: ``--out``, else out/SCENARIO). Every input is
     checked before the folder is touched: a refusal (exit 2) leaves it as it was."""
-    from sil.runner import RunOptions
-    from sil.runner import run as run_scenario
+    from sil.run.runner import RunOptions
+    from sil.run.runner import run as run_scenario
 
     try:
         given = out or run_folder.out_path("--out", args.out)

@@ -11,7 +11,8 @@ NAME = "verify"
 HELP = "check every published number of the document against the ECU and plant, one row each"
 
 
-# sil.verify.SECTIONS, kept here so that parsing the command line imports no runs (a test checks)
+# sil.verify.SECTIONS, kept here so that parsing the command line imports no runs (a test
+# checks)
 SECTIONS = ("trim", "identification", "sec4.2", "sec4.3", "sec5.2", "sec5.3", "controllers")
 
 

@@ -1,5 +1,5 @@
 """`sil xcp record`: DAQ from the ECU's XCP slave, pyXCP the master, into an MF4 with the A2L's
-names, units and conversions (sil/xcp_record.py; docs/calibration.md)."""
+names, units and conversions (sil/record/xcp_record.py; docs/calibration.md)."""
 
 from __future__ import annotations
 
@@ -57,9 +57,9 @@ def _room_for_bursts(bus) -> None:  # noqa: ANN001 (a python-can bus)
 
 def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
-    from sil import xcp_record
-    from sil.mdf import MdfUnavailable, asammdf
-    from sil.results import WriteError
+    from sil.record import xcp_record
+    from sil.record.mdf import MdfUnavailable, asammdf
+    from sil.record.results import WriteError
 
     prefix = "sil xcp record"
     try:

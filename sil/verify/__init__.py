@@ -9,7 +9,8 @@ it is still checked.
 
 Sections (SECTIONS):
 - trim (eq. 2.32), identification (eq. 3.1, 3.23, appendix B), sec. 4.3 and 5.3 on the
-  aero-thermal engine, controllers (sec. 5.4 and the claims of ch. 6): :mod:`sil.verify.aero`;
+  aero-thermal engine, controllers (sec. 5.4 and the claims of ch. 6):
+  :mod:`sil.verify.aero`;
 - sec. 4.2, the estimator alone on the eq. 3.24 model, and sec. 5.2, the indirect MRAC on it,
   both readings (this module and :mod:`sil.verify.fast`); the published numbers are checked
   against the firmware's fixed-point kernels handed the true state (as the document's

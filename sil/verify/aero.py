@@ -23,9 +23,10 @@ from plant.interface import PlantConfig
 from plant.linearise import Linearisation, linearise, linearise_at_speed
 from plant.sensors import SpeedPickupConfig
 from plant.trim import solve_steady, trim_summary
-from sil import identify as ident
-from sil import runner, scenario
-from sil.metrics import load_trace, tracking_rms_pct
+from sil import scenario
+from sil.analysis import identify as ident
+from sil.analysis.metrics import load_trace, tracking_rms_pct
+from sil.run import runner
 from sil.verify.fast import run_core
 from sil.verify.rows import Row, at_least, check, explained, info
 

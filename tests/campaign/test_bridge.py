@@ -17,7 +17,7 @@ from sil import scenario as scenarios
 from sil.busfault.bridge import Bridge, SensorTicks
 from sil.busfault.injector import Injector
 from sil.busfault.spec import BusFault
-from sil.runner import RunOptions, run
+from sil.run.runner import RunOptions, run
 
 CODEC = Codec()
 SENSORS = CODEC["PlantSensors"]

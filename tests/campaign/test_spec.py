@@ -30,7 +30,7 @@ def test_cases_pair_controllers_on_the_same_engine_and_seed(write):
 
 
 def test_shipped_campaigns_load():
-    shipped = sorted(Path("sil/campaigns").glob("*.toml"))
+    shipped = sorted(Path("sil/campaign/library").glob("*.toml"))
     assert {p.stem for p in shipped} >= {"engine-variation", "bus-faults"}
     sizes = {p.stem: len(load(p).cases) for p in shipped}
     assert sizes["engine-variation"] == 1500

@@ -7,7 +7,8 @@ import pytest
 from plant.aerothermal import AeroThermalPlant
 from plant.interface import PlantConfig
 from sil import scenario as scenarios
-from sil.runner import RunOptions, build_plant, ecu_trim_voltage, run
+from sil.run.config import build_plant, ecu_trim_voltage
+from sil.run.runner import RunOptions, run
 from sil.scenario import PlantSettings
 
 

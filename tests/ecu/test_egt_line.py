@@ -103,7 +103,7 @@ def test_the_intercept_is_checked() -> None:
             validate(replace(EcuParams(), egt_zero_fuel_k=bad))
 
 
-SCENARIO = Path(__file__).parents[2] / "sil" / "scenarios" / "accel-idle-to-max.toml"
+SCENARIO = Path(__file__).parents[2] / "sil" / "scenario" / "library" / "accel-idle-to-max.toml"
 # a hot engine of the transients campaign with a pump 17 % stronger than the commissioned one
 HOT_STRONG = """
 initial_egt_max_K = 1280

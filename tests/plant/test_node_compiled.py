@@ -24,7 +24,7 @@ FAULT_TARGETS = (1, 2, 7, 8, 9, 10, 11, 0)  # pump effectiveness, wear, speed fa
 
 
 class Twin:
-    """A PlantNode driven through the compiled functions, as sil/compiled_loop.py drives it."""
+    """A PlantNode driven through the compiled functions, as sil/run/compiled_loop.py drives it."""
 
     def __init__(self, node: PlantNode) -> None:
         self.node = node

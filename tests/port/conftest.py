@@ -9,12 +9,12 @@ import pytest
 
 from ecu import golden
 from ecu.port import toolchain
-from sil import golden as sources
+from sil.run import golden as sources
 
 
 @pytest.fixture(scope="session")
 def vectors(tmp_path_factory) -> dict[str, tuple[Path, golden.Golden]]:
-    """Every golden vector of sil.golden.SOURCES, recorded now: name -> (file, vectors)."""
+    """Every golden vector of sil.run.golden.SOURCES, recorded now: name -> (file, vectors)."""
     out = tmp_path_factory.mktemp("golden")
     found = {}
     for name in sources.SOURCES:

@@ -6,8 +6,8 @@ import subprocess
 import pytest
 
 from ecu.port import build, qemu
-from sil import golden as sources
-from sil import port_bench as bench
+from sil.bench import port as bench
+from sil.run import golden as sources
 
 
 @pytest.fixture(scope="module")

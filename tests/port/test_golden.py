@@ -10,7 +10,7 @@ from ecu import faults as F
 from ecu import golden
 from ecu.params import CTRL_MRAC, CTRL_OPEN_LOOP, CTRL_PI, CTRL_PID
 from ecu.port import build
-from sil import golden as sources
+from sil.run import golden as sources
 
 NAMES = list(sources.SOURCES)
 OUT = {name: len(golden.INPUT_FIELDS) + k for k, name in enumerate(golden.OUTPUT_FIELDS)}

@@ -375,7 +375,8 @@ ECU_IDS = (0x110, 0x200, 0x210)
 def _record_run(tmp: Path, scenario_name: str, ecu_impl: str, duration_s: float):
     """A scenario run in process through the Python node (on the Python firmware or the C core):
     its parameters and the frames of its can.log."""
-    from sil import runner, scenario
+    from sil import scenario
+    from sil.run import runner
 
     s = dataclasses.replace(scenario.load(scenario_name), duration_s=duration_s)
     options = runner.RunOptions(

@@ -23,7 +23,7 @@ from ecu.port.pil import PilError, PilImage, calibration_block, image_sizes
 from plant.fast_plant import FastPlant
 from plant.interface import PlantConfig
 from plant.node import PlantNode
-from sil import port_bench
+from sil.bench import port as port_bench
 from tests.port.test_sil import _run, _udp_spec
 
 

@@ -94,7 +94,7 @@ def test_sil_ecu_without_a_compiler_says_so(tmp_path):
 def test_sil_bench_port_reports_the_in_process_cases():
     """`sil bench port`'s SIL part (quick: 30 s): every case's real-time factor, and the shares
     of the compiled run's parts, which are parts of one whole."""
-    from sil import port_bench
+    from sil.bench import port as port_bench
 
     figures = port_bench.sil_figures(quick=True)
     for key in ("c_ecu", "c_ecu_python_loop", "python_ecu"):

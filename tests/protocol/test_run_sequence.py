@@ -39,7 +39,7 @@ Frame = tuple[int, bytes]
 
 def _log(tmp_path: Path, name: str, duration: float, seed: int) -> list[Frame]:
     from sil import scenario
-    from sil.runner import RunOptions, run
+    from sil.run.runner import RunOptions, run
 
     path = tmp_path / f"{name}.toml"
     path.write_text(SCENARIO.format(duration=duration, seed=seed))

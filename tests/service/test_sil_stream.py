@@ -12,8 +12,8 @@ from ecu.service import live
 from ecu.service.transport import open_transport
 from sil import scenario
 from sil.console.client import ServiceClient
-from sil.runner import RunOptions
-from sil.runner import run as run_scenario
+from sil.run.runner import RunOptions
+from sil.run.runner import run as run_scenario
 
 SCENARIO = """
 description = "short MRAC staircase, streamed over the service port"

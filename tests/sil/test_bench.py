@@ -2,7 +2,7 @@
 
 import pytest
 
-from sil import bench
+from sil.bench import speed as bench
 
 
 def test_sil_bench_reports_every_run_and_the_loop_without_start_up():

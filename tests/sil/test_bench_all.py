@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sil.bench_all import markdown, run_all, targets_of
+from sil.bench.suite import markdown, run_all, targets_of
 
 
 def _sil(*args: str) -> subprocess.CompletedProcess:

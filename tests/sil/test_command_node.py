@@ -4,8 +4,8 @@ whichever order the plant's and the ECU's frames of that tick reached it."""
 import numpy as np
 
 from protocol.codec import Codec
-from sil.command_node import CommandNode
-from sil.recorder import Recorder
+from sil.record.recorder import Recorder
+from sil.run.command_node import CommandNode
 
 TICKS = 12  # commands for ticks 0..11
 

@@ -1,6 +1,6 @@
-"""The in-process run with the C ECU as one compiled loop (sil/compiled_loop.py) against the same
-run through InProcessBus (``compiled_loop=False``, the Python nodes around the C core): the same
-can.log and trace.csv byte for byte, the same summary but for its timings, on the shipped
+"""The in-process run with the C ECU as one compiled loop (sil/run/compiled_loop.py) against the
+same run through InProcessBus (``compiled_loop=False``, the Python nodes around the C core): the
+same can.log and trace.csv byte for byte, the same summary but for its timings, on the shipped
 scenarios' kinds (MRAC, PID and open loop; aero-thermal and fast plant; fault injections; an
 engine that wears its pump from tick 0), and what an interrupted run keeps."""
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from sil import scenario as scenarios
-from sil.runner import RunOptions, run
+from sil.run.runner import RunOptions, run
 
 TIMINGS = ("wall_time_s", "realtime_factor", "inproc_loop", "plots")
 
@@ -114,7 +114,7 @@ def test_an_interrupted_compiled_run_keeps_every_frame_it_recorded(tmp_path, mon
     them."""
     s = replace(scenarios.load("thesis-5.3-mrac-aero"), duration_s=30.0)
     full = _run(s, tmp_path / "full", True)
-    from sil import compiled_loop
+    from sil.run import compiled_loop
 
     calls = {"n": 0}
     real = compiled_loop.run_frames

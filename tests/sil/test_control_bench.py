@@ -1,5 +1,5 @@
 """`sil bench control` and the smoothness figures it is built on: a known swing read back by
-sil.metrics.command_smoothness, and the bench's runs against what they must show."""
+sil.analysis.metrics.command_smoothness, and the bench's runs against what they must show."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from ecu.params import EcuParams
-from sil import metrics
+from sil.analysis import metrics
 
 
 @pytest.mark.parametrize(("amplitude", "hz"), [(0.5, 8.5), (0.02, 1.0)])

@@ -7,7 +7,7 @@ import json
 import subprocess
 import sys
 
-from sil import fleet_bench
+from sil.bench import fleet as fleet_bench
 
 
 def _row(kind: str, variant: str, sample: int, rise: float, violations: str = "", **kw) -> dict:

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from sil import scenario as scenarios
-from sil.run_record import scenario_text
-from sil.runner import RunOptions, run
+from sil.run.run_record import scenario_text
+from sil.run.runner import RunOptions, run
 
 
 def _cut(tmp_path: Path, name: str, duration: float, seed: int) -> Path:

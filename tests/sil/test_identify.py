@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from plant.fast_model import THETA_EQ_3_23, FastEngine
-from sil import identify as ident
+from sil.analysis import identify as ident
 
 TRIM = ident.Trim(89.68, 5.0)
 

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from sil import identify as ident
+from sil.analysis import identify as ident
 
 ALPHA0_EQ_3_23 = 2.6709
 

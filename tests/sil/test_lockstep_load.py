@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from sil import scenario as scenarios
-from sil.run_record import scenario_text
+from sil.run.run_record import scenario_text
 
 LOAD_S = 600  # the busy processes end on their own after this, whatever happens to the test
 

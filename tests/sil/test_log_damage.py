@@ -13,7 +13,7 @@ import can
 import pytest
 
 from protocol.codec import Codec
-from sil.canlog import LogReadError, detect_format, read_frames
+from sil.record.canlog import LogReadError, detect_format, read_frames
 
 WRITERS = {
     "candump": (can.CanutilsLogWriter, "log"),

@@ -1,4 +1,4 @@
-"""MF4 bus logs (sil/mdf.py, `sil log convert`, `sil replay` of an MF4): the ASAM bus-logging
+"""MF4 bus logs (sil/record/mdf.py, `sil log convert`, `sil replay` of an MF4): the ASAM bus-logging
 layout with the absolute start in the header and the time axis from it; asammdf decodes a run's
 MF4 with the DBC to the run's trace.csv; frames, times and channels survive the trip to MF4 and
 back; a damaged MF4 is named in one line, as the other formats are."""
@@ -23,8 +23,8 @@ import pytest
 
 from protocol.bus import open_bus
 from protocol.codec import Codec
-from sil import replay
-from sil.canlog import CandumpWriter, LogReadError, convert_log, detect_format, read_frames
+from sil.record import replay
+from sil.record.canlog import CandumpWriter, LogReadError, convert_log, detect_format, read_frames
 
 asammdf = pytest.importorskip("asammdf")
 
@@ -99,7 +99,7 @@ def _same_frame(a: can.Message, b: can.Message) -> None:
 
 
 def test_every_kind_of_frame_survives_mf4_with_the_absolute_start(tmp_path):
-    from sil import mdf
+    from sil.record import mdf
 
     frames = _mixed()
     base = mdf.TimeBase(round(START.timestamp() * 1e6), True, "a test")

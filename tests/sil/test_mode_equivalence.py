@@ -22,8 +22,8 @@ from dataclasses import replace
 import pytest
 
 from sil import scenario as scenarios
-from sil.run_record import scenario_text
-from sil.runner import RunOptions, run
+from sil.run.run_record import scenario_text
+from sil.run.runner import RunOptions, run
 from sil.scenario import Scenario
 
 CUT_S = 25.0  # every scenario is cut to this, or to 3 s past its last fault

@@ -9,13 +9,13 @@ import sys
 import time
 from pathlib import Path
 
-from sil.parent_death import PARENT_ENV, NodeStop
+from sil.run.parent_death import PARENT_ENV, NodeStop
 
 ROOT = Path(__file__).parents[2]
 
 CHILD = """
 import time
-from sil.parent_death import NodeStop
+from sil.run.parent_death import NodeStop
 stop = NodeStop()
 while not stop.is_set():
     time.sleep(0.05)
@@ -25,7 +25,7 @@ while not stop.is_set():
 # it) and ends at once
 PARENT = """
 import subprocess, sys, os
-from sil.parent_death import child_env
+from sil.run.parent_death import child_env
 child = subprocess.Popen([sys.executable, "-c", sys.argv[1]], env={**os.environ, **child_env()})
 print(child.pid, flush=True)
 """

@@ -9,8 +9,8 @@ import pytest
 
 from ecu.port.build import ARM_CC
 from ecu.port.qemu import QEMU
-from sil import pil_bench
-from sil.bench import BenchError
+from sil.bench import pil as pil_bench
+from sil.bench.common import BenchError
 
 
 def test_a_missing_qemu_is_named_before_any_run(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sil import plots
+from sil.analysis import plots
 
 
 def test_egt_plot_draws_the_ecus_limit(tmp_path, monkeypatch) -> None:

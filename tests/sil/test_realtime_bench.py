@@ -3,7 +3,7 @@ real-time runs as a user makes them."""
 
 import os
 
-from sil import realtime_bench
+from sil.bench import realtime as realtime_bench
 
 
 def test_realtime_bench_reports_each_node_at_each_rate(monkeypatch):

@@ -7,14 +7,14 @@ import can
 import numpy as np
 import pytest
 
-import sil.recorder as recorder_module
+import sil.record.recorder as recorder_module
 from protocol.busload import frames_bits, frames_bits_bytewise
 from protocol.codec import Codec
 from protocol.e2e import crc8, crc8_rows, data_id_crc_start
-from sil.canlog import CandumpWriter, fixed6
-from sil.metrics import load_trace, summarize, tracking_rms_pct
-from sil.recorder import Recorder
-from sil.trace_writer import TraceWriter
+from sil.analysis.metrics import load_trace, summarize, tracking_rms_pct
+from sil.record.canlog import CandumpWriter, fixed6
+from sil.record.recorder import Recorder
+from sil.record.trace_writer import TraceWriter
 
 
 def _tick(

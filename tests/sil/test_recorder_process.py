@@ -13,16 +13,17 @@ import can
 import pytest
 
 from protocol.codec import Codec
-from sil import runner, scenario
-from sil.recorder import Recorder
-from sil.recorder_process import (
+from sil import scenario
+from sil.record.recorder import Recorder
+from sil.run import runner
+from sil.run.recorder_process import (
     BATCH_FRAMES,
     NICE,
     RecorderFailed,
     RecorderProcess,
     _patiently,
 )
-from sil.runner import RunOptions
+from sil.run.runner import RunOptions
 
 SCENARIO = """
 description = "MRAC staircase with a pump failure, for the recorder process tests"
@@ -66,7 +67,7 @@ def _recorder_processes(parent: int | None = None) -> list[int]:
     machine)."""
     where = ["-P", str(parent)] if parent is not None else []
     found = subprocess.run(
-        ["pgrep", *where, "-f", "sil.recorder_process"], capture_output=True, text=True
+        ["pgrep", *where, "-f", "sil.run.recorder_process"], capture_output=True, text=True
     )
     return [int(pid) for pid in found.stdout.split()]
 

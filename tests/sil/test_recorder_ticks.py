@@ -10,15 +10,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import sil.recorder as recorder_module
+import sil.record.recorder as recorder_module
 from protocol.codec import Codec
 from protocol.e2e import crc8, data_id_crc_start
-from sil import runner, scenario
-from sil.recorder import Recorder
-from sil.recorder_process import RecorderFailed, RecorderProcess
-from sil.runner import RunOptions
-from sil.ticks import ACTUATOR, SENSORS, InOrderTicks
-from sil.trace_writer import TraceWriter
+from sil import scenario
+from sil.record.recorder import Recorder
+from sil.record.ticks import ACTUATOR, SENSORS, InOrderTicks
+from sil.record.trace_writer import TraceWriter
+from sil.run import runner
+from sil.run.recorder_process import RecorderFailed, RecorderProcess
+from sil.run.runner import RunOptions
 
 COMMANDS = (0x080, 0x310)  # the command node's frames: Demand, FaultInject
 PERIOD_S = 0.01

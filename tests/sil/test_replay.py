@@ -11,8 +11,8 @@ import pytest
 
 from protocol.bus import open_bus
 from protocol.codec import Codec
-from sil import replay
-from sil.canlog import CandumpWriter, LogReadError, detect_format, read_frames
+from sil.record import replay
+from sil.record.canlog import CandumpWriter, LogReadError, detect_format, read_frames
 
 FOREIGN = Path(__file__).resolve().parents[3] / "shared" / "data" / "foreign-logs"
 FOREIGN_LOGS = sorted(p for p in FOREIGN.glob("*") if p.suffix != ".md")

@@ -12,7 +12,7 @@ from pathlib import Path
 import can
 import pytest
 
-from sil import results
+from sil.record import results
 
 SCENARIO = """
 duration_s = {duration}
@@ -100,7 +100,7 @@ def test_a_refused_scenario_file_leaves_the_folder_as_it_was(tmp_path):
 
 
 def test_a_run_failing_once_set_up_began_is_marked_failed(tmp_path, monkeypatch):
-    from sil import runner
+    from sil.run import runner
 
     out = tmp_path / "run"
     _good_run(tmp_path, out)
@@ -218,7 +218,7 @@ def test_compare_refuses_a_folder_without_a_run(tmp_path):
 
 def test_a_summary_with_nan_metrics_is_strict_json(tmp_path, monkeypatch):
     from protocol import strict_json
-    from sil import metrics
+    from sil.analysis import metrics
     from sil.cli import main
 
     summarize = metrics.summarize

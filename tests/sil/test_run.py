@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from protocol.codec import Codec
-from sil.metrics import load_trace
+from sil.analysis.metrics import load_trace
 
 SCENARIO = """
 description = "short MRAC staircase for tests"
@@ -389,7 +389,7 @@ def test_an_open_thermocouple_reading_its_burnout_value_is_flagged(tmp_path):
     amplifier's upscale burnout); the ECU flags EGT_OPEN after its persistence time."""
     from ecu.params import EGT_FULL_SCALE_K, EcuParams
     from sil import scenario as scenarios
-    from sil.runner import RunOptions, run
+    from sil.run.runner import RunOptions, run
 
     path = tmp_path / "open.toml"
     path.write_text(OPEN_THERMOCOUPLE)

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from sil import cli, results, run_folder
+from sil import cli
+from sil.record import results
+from sil.run import run_folder
 
 SCENARIO = """
 duration_s = {duration}
@@ -131,11 +133,11 @@ def test_a_folder_being_written_is_locked_naming_the_other_run(tmp_path, capsys)
 
 
 def test_every_plot_a_run_may_write_is_a_run_file():
-    source = (Path(__file__).parents[2] / "sil" / "plots.py").read_text()
+    source = (Path(__file__).parents[2] / "sil" / "analysis" / "plots.py").read_text()
     written = set(re.findall(r'out_dir / "([\w.]+)"', source))
     assert written and written <= set(results.PLOTS) <= set(results.RUN_FILES)
-    runner = (Path(__file__).parents[2] / "sil" / "runner.py").read_text()
-    assert not re.findall(r'out_dir / "([\w.]+\.png)"', runner)  # plots only via sil.plots
+    for module in (Path(__file__).parents[2] / "sil" / "run").glob("*.py"):  # plots only there
+        assert not re.findall(r'out_dir / "([\w.]+\.png)"', module.read_text()), module
 
 
 def test_a_run_clears_every_file_an_earlier_run_or_replay_left(tmp_path, capsys):
@@ -161,7 +163,7 @@ def _no_space(*_args, **_kwargs):
 def test_a_plot_that_cannot_be_written_aborts_the_flown_run_naming_it(
     tmp_path, capsys, monkeypatch
 ):
-    from sil import plots
+    from sil.analysis import plots
 
     def savefig_on_a_full_disk(path, writer):
         with results.atomic(path) as tmp:

@@ -13,7 +13,7 @@ import pytest
 
 from protocol.codec import Codec
 from sil import scenario as scenarios
-from sil.run_record import Overrides, scenario_text
+from sil.run.run_record import Overrides, scenario_text
 
 DOCTORED_TICK = 150
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from ecu.params import preset
-from sil import profiles, scenario
+from sil import scenario
+from sil.scenario import profiles
 
 REQUIRED = [
     "thesis-3.3-staircase",
@@ -160,7 +161,7 @@ def test_scenarios_command_lists_and_checks(tmp_path):
 
 def test_a_start_speed_is_the_plants_not_the_ecus(tmp_path):
     """The plant starts where the scenario says; the ECU keeps the commissioned trim."""
-    from sil.runner import build_plant, ecu_trim_voltage
+    from sil.run.config import build_plant, ecu_trim_voltage
 
     path = tmp_path / "start.toml"
     path.write_text("duration_s = 10\n[plant]\ninitial_speed_pct = 75\n[command]\n")

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from sil import scenario as scenarios
-from sil import start_bench as bench
+from sil.bench import starts as bench
 
 
 def _figures(**changed) -> dict:

@@ -12,10 +12,10 @@ import pytest
 
 from ecu import start_sequencer as seq
 from ecu.params import EcuParams
-from sil import metrics
 from sil import scenario as scenarios
+from sil.analysis import metrics
 from sil.campaign.spec import load as load_campaign
-from sil.runner import RunOptions, run
+from sil.run.runner import RunOptions, run
 from sil.scenario import ScenarioError, parse
 
 
@@ -73,7 +73,7 @@ def test_standstill_and_stop_fields_are_checked(tmp_path):
 
 
 def test_the_start_campaign_is_200_engines_with_start_invariants():
-    c = load_campaign(scenarios.SCENARIO_DIR.parent / "campaigns" / "starts.toml")
+    c = load_campaign(scenarios.SCENARIO_DIR.parents[1] / "campaign" / "library" / "starts.toml")
     assert len(c.cases) == 200
     assert c.invariants.check_start and c.invariants.max_cool_down_s == 60.0
     first = parse(c.cases[1].scenario_toml, "case", scenarios.SCENARIO_DIR)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from sil import scenario
-from sil.metrics import load_trace, tracking_rms_pct
-from sil.runner import RunOptions, run
+from sil.analysis.metrics import load_trace, tracking_rms_pct
+from sil.run.runner import RunOptions, run
 
 
 def _run(name: str, out: Path, seed: int | None = None) -> dict[str, np.ndarray]:

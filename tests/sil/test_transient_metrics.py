@@ -1,4 +1,4 @@
-"""Transient figures of a run (sil.metrics.transient) against closed forms, and the shipped
+"""Transient figures of a run (sil.analysis.metrics.transient) against closed forms, and the shipped
 transient scenarios: each engine starts where its governor holds it and the ECU takes it over
 without a bump."""
 
@@ -13,7 +13,7 @@ import pytest
 from ecu.params import EcuParams
 from plant.aerothermal import make_model
 from plant.compressor import surge_margin
-from sil import metrics
+from sil.analysis import metrics
 from sil.cli import main
 
 

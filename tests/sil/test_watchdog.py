@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from sil.watchdog import ProcSample, Starting, StartWatch, TurnWatch, Watchdog, sample
+from sil.run.watchdog import ProcSample, Starting, StartWatch, TurnWatch, Watchdog, sample
 
 SCENARIO = """
 duration_s = 3000

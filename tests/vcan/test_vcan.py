@@ -230,6 +230,7 @@ def _guest_status(run: VmRun, step: str) -> None:
 
 
 @pytest.mark.vcan
+@pytest.mark.timeout(VM_TIMEOUT_S + 300)  # the VM's own limit first, with the set-up
 @pytest.mark.slow
 def test_codec_frames_on_real_vcan0(vm_run: VmRun) -> None:
     _guest_status(vm_run, "probe")
@@ -271,6 +272,7 @@ def _frames(log: Path) -> list[tuple[str, str]]:
 
 
 @pytest.mark.vcan
+@pytest.mark.timeout(VM_TIMEOUT_S + 300)  # the VM's own limit first, with the set-up
 @pytest.mark.slow
 def test_lockstep_sil_on_real_vcan0(vm_run: VmRun) -> None:
     _guest_status(vm_run, "sil")
@@ -313,6 +315,7 @@ def test_lockstep_sil_on_real_vcan0(vm_run: VmRun) -> None:
 
 
 @pytest.mark.vcan
+@pytest.mark.timeout(VM_TIMEOUT_S + 300)  # the VM's own limit first, with the set-up
 @pytest.mark.slow
 def test_two_runs_at_once_on_real_vcan0_keep_apart(vm_run: VmRun) -> None:
     status = vm_run.folder / "pair.status"

@@ -1,4 +1,4 @@
-"""DAQ recorded into MF4 (sil/xcp_record.py, `sil xcp record`): pyXCP the master, the A2L's
+"""DAQ recorded into MF4 (sil/record/xcp_record.py, `sil xcp record`): pyXCP the master, the A2L's
 names, units and conversions on the channels.
 
 (a) The recorder on a lockstep run: every sample's physical values, as asammdf reads them from
@@ -22,9 +22,10 @@ import numpy as np
 import pytest
 
 from protocol.udp_loopback import LoopbackUdpMulticastBus
-from sil import scenario, xcp_record
-from sil.runner import RunOptions
-from sil.runner import run as run_scenario
+from sil import scenario
+from sil.record import xcp_record
+from sil.run.runner import RunOptions
+from sil.run.runner import run as run_scenario
 
 pytestmark = pytest.mark.slow
 asammdf = pytest.importorskip("asammdf")
@@ -106,8 +107,9 @@ def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path):
     out = tmp_path / "run"
     try:
         summary = run_scenario(
-            RunOptions(scenario.load(path), out, bus=f"udp:{group}@{port}", plots=False,
-                       progress=False)  # fmt: skip
+            RunOptions(
+                scenario.load(path), out, bus=f"udp:{group}@{port}", plots=False, progress=False
+            )  # fmt: skip
         )
     finally:
         time.sleep(1.0)  # the last DTOs out of the socket

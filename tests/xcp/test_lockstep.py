@@ -23,8 +23,8 @@ import pytest
 
 from protocol.udp_loopback import LoopbackUdpMulticastBus
 from sil import scenario
-from sil.runner import RunOptions
-from sil.runner import run as run_scenario
+from sil.run.runner import RunOptions
+from sil.run.runner import run as run_scenario
 
 pytestmark = pytest.mark.slow
 SO_RCVBUFFORCE = 33  # <asm-generic/socket.h>: beyond rmem_max, with CAP_NET_ADMIN
