@@ -246,10 +246,7 @@ class RunSequence:
         if last >= 0 and last % m.every == 0 and self._taken_at.get(m.frame_id) != last:
             self._drop(m.frame_id, data, f"after the {m.role}'s turn of tick {last} ended")
             return []  # (due then, and none came: it is that turn's, late)
-        turn, tick = self.turn, self.tick
-        self.turn, self.tick = m.role, last + 1  # checked as the next turn's, now
-        why, _ = self._misfit(m, data)
-        self.turn, self.tick = turn, tick
+        why, _ = self._misfit(m, data, (m.role, last + 1))  # checked as the next turn's, now
         if why is not None or len(self._early) >= EARLY_MAX:
             self._drop(m.frame_id, data, f"before its turn: {why or 'too many before it'}")
             return []
@@ -281,19 +278,23 @@ class RunSequence:
             out += self.heard(frame, frame_id, data)
         return out
 
-    def _misfit(self, m: _Message, data: bytes | bytearray) -> tuple[str | None, bool]:
+    def _misfit(
+        self, m: _Message, data: bytes | bytearray, turn: tuple[str, int] | None = None
+    ) -> tuple[str | None, bool]:
         """Rules 2 and 3: why the frame is not the run's next of its message (None: it is), and
         whether it fits but for its place in the message's sequence (the alive counter or the
-        multiplexer index: a frame of the run was lost or came late)."""
+        multiplexer index: a frame of the run was lost or came late). ``turn``: the sender and
+        tick of the turn to check it against (default: this one)."""
+        role, at = turn or (self.turn, self.tick)
         if len(data) != 8:
             return f"{len(data)} bytes", False
-        if m.role != COMMAND and m.role != self.turn:
-            return f"in the {self.turn}'s turn", False
-        if m.role != COMMAND and self.tick % m.every:
+        if m.role != COMMAND and m.role != role:
+            return f"in the {role}'s turn", False
+        if m.role != COMMAND and at % m.every:
             return f"not due (every {m.every} ticks)", False
         if m.tick_shift != NO_TICK:
             tick = (int.from_bytes(data, "little") >> m.tick_shift) & 0xFFFF
-            expected = self.next_demand if m.role == COMMAND else self.tick % TICK_MODULO
+            expected = self.next_demand if m.role == COMMAND else at % TICK_MODULO
             if tick != expected:
                 lost = self._demands_lost(m, data, tick)
                 return f"tick {tick}, the run's is {expected}", lost

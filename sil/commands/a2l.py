@@ -42,15 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ecu.port.xcp import header_limits
     from ecu.xcp.a2l import a2l_text
+    from ecu.xcp.slave import Limits
     from protocol.dbc import xcp_frame_ids
 
-    limits = None
-    if args.impl != "python":
-        from ecu.port.xcp import header_limits
-
-        limits = header_limits()
-    text = a2l_text(args.rate, args.xcp_ids or xcp_frame_ids(), *([limits] if limits else []))
+    limits = Limits() if args.impl == "python" else header_limits()
+    text = a2l_text(args.rate, args.xcp_ids or xcp_frame_ids(), limits)
     if args.out is None:
         sys.stdout.write(text)
         return 0
