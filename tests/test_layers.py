@@ -72,7 +72,7 @@ SIL_ROOMS = {
     "scenario": {"busfault", "validation"},
     "record": {"scenario", "busfault", "validation"},
     "analysis": {"record", "scenario", "busfault", "validation"},
-    "console": {"validation"},
+    "console": {"record", "scenario", "busfault", "validation"},
     "run": _RECORDS,
     "campaign": _RUNS,
     "verify": _RUNS,

@@ -58,15 +58,16 @@ def _room_for_bursts(bus) -> None:  # noqa: ANN001 (a python-can bus)
 def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
     from sil.record import xcp_record
+    from sil.record.a2l import A2lError, read_a2l
     from sil.record.mdf import MdfUnavailable, asammdf
     from sil.record.results import WriteError
 
     prefix = "sil xcp record"
     try:
         asammdf()
-        a2l = xcp_record.read_a2l(args.a2l)
+        a2l = read_a2l(args.a2l)
         measurements = xcp_record.pick(a2l, args.measure)
-    except (xcp_record.RecordError, MdfUnavailable) as exc:
+    except (A2lError, MdfUnavailable) as exc:
         print(f"{prefix}: {exc}", file=sys.stderr)
         return 2
     if args.out.is_dir() or not args.out.parent.is_dir():

@@ -1,0 +1,106 @@
+"""The page's server on its own (no ECU on the bus): local only, every /api request needs the
+session's token and a known host name, a command is a JSON POST, a start needs its
+confirmation, and what the ECU cannot be asked (no answer) comes back as a refusal, not a
+crash."""
+
+from __future__ import annotations
+
+import json
+import threading
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+
+import pytest
+
+from sil.console.gsu.app import App
+from sil.record.a2l import A2l
+
+TOKEN = "test-token-123"
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory) -> Iterator[str]:
+    from protocol.bus import unique_udp_spec
+
+    app = App.open(str(unique_udp_spec()), A2l({}, None), (0x700, 0x701),
+                   tmp_path_factory.mktemp("gsu"), TOKEN)  # fmt: skip
+    server = app.serve("127.0.0.1", 0)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+    app.close()
+
+
+def _call(url: str, body: object = None, headers: dict | None = None) -> tuple[int, dict | str]:
+    data = None if body is None else json.dumps(body).encode()
+    request = urllib.request.Request(url, data=data, headers=headers or {})
+    try:
+        with urllib.request.urlopen(request, timeout=10) as response:
+            text = response.read().decode()
+            status = response.status
+    except urllib.error.HTTPError as exc:
+        text, status = exc.read().decode(), exc.code
+    try:
+        return status, json.loads(text)
+    except ValueError:
+        return status, text
+
+
+def _auth(**more: str) -> dict:
+    return {"X-GSU-Token": TOKEN, **more}
+
+
+def test_the_page_and_its_files_are_served(page: str) -> None:
+    status, text = _call(page + "/")
+    assert status == 200 and 'data-testid="speed"' in text
+    for name in ("gsu.js", "gsu.css"):
+        assert _call(f"{page}/{name}")[0] == 200
+    assert _call(page + "/../pyproject.toml")[0] == 404
+
+
+def test_every_api_request_needs_the_token_and_a_local_host_name(page: str) -> None:
+    assert _call(page + "/api/state")[0] == 403
+    assert _call(page + "/api/state", headers={"X-GSU-Token": "wrong"})[0] == 403
+    status, answer = _call(page + "/api/state", headers=_auth(Host="evil.example:80"))
+    assert status == 403 and answer == {"error": "unknown host name"}
+    status, state = _call(page + "/api/state", headers=_auth())
+    assert status == 200 and state["xcp"]["ids"] == ["0x700", "0x701"]
+    assert _call(f"{page}/api/state?token={TOKEN}")[0] == 200  # (the event stream's way)
+
+
+def test_commands_are_json_posts_and_a_start_needs_its_confirmation(page: str) -> None:
+    status, answer = _call(page + "/api/start", {"confirm": True}, _auth())
+    assert status == 409 and answer["error"] == "a command is a JSON POST"
+    json_post = _auth(**{"Content-Type": "application/json"})
+    status, answer = _call(page + "/api/start", {}, json_post)
+    assert status == 409 and answer["error"] == "start: not confirmed"
+    status, answer = _call(page + "/api/throttle", {"pct": "fast"}, json_post)
+    assert status == 409 and "a number" in answer["error"]
+    status, answer = _call(page + "/api/nothing", {}, json_post)
+    assert status == 404
+    status, answer = _call(page + "/api/record/stop", {}, json_post)
+    assert status == 409 and answer["error"] == "no recording under way"
+
+
+def test_an_ecu_that_does_not_answer_is_a_refusal(page: str) -> None:
+    json_post = _auth(**{"Content-Type": "application/json"})
+    status, answer = _call(page + "/api/stop", {}, json_post)
+    assert status == 409 and "not in the A2L" in answer["error"]
+    status, answer = _call(page + "/api/unlock", {}, json_post)
+    assert status == 409 and "did not answer" in answer["error"]
+    status, answer = _call(page + "/api/logbook", headers=_auth())
+    assert status == 409 and "no logbook" in answer["error"]
+
+
+def test_sil_gsu_listens_on_the_loopback_unless_told() -> None:
+    import argparse
+
+    from sil.commands import gsu
+
+    parser = argparse.ArgumentParser()
+    gsu.add_arguments(parser)
+    assert parser.parse_args([]).listen == "127.0.0.1"
+    assert parser.parse_args(["--listen", "0.0.0.0"]).listen == "0.0.0.0"
