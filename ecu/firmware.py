@@ -19,7 +19,9 @@ as the C port's ``ecu_tick`` (``ecu/port/ecu_core.c``):
 7. limit selection (RUN): min/max selection with the limit loops and fuel schedules, voltage
    limits and slew, integrator tracking, observer (eq. 3.5);
 8. pump driver: PWM duty from the measured supply; the stop's cool-down outside RUN;
-9. health: pump health, fault word, saturation count and outputs.
+9. health: pump health, fault word, saturation count and outputs;
+10. logbook: runs, time in RUN, starts, aborts by reason, the last run's highest EGT and speed,
+   the last shutdown's reason (ecu.logbook).
 """
 
 from __future__ import annotations
@@ -50,8 +52,17 @@ from ecu.limiters import (
     schedule_v,
     select_voltage,
 )
+from ecu.logbook import logbook_step
 from ecu.mrac import command_lag, mrac_control, mrac_gain_update, reference_model_step
-from ecu.params import CTRL_MRAC, CTRL_PI, CTRL_PID, EGT_ERROR_MAX_DK, RATE_BUF_LEN, EcuParams
+from ecu.params import (
+    CTRL_MRAC,
+    CTRL_PI,
+    CTRL_PID,
+    EGT_ERROR_MAX_DK,
+    LOG_ABORTS,
+    RATE_BUF_LEN,
+    EcuParams,
+)
 from ecu.pi import pi_control, pi_track
 from ecu.pid import pid_control, pid_track
 from ecu.pump_driver import pump_current_checks, pump_duty, volts_q24_to_mv
@@ -179,6 +190,8 @@ class Ecu:
         for k in range(RATE_BUF_LEN):
             s.n_hist_rpm[k] = 0
             s.u_hist_q24[k] = 0
+        for k in range(LOG_ABORTS):
+            s.log_aborts[k] = 0  # the logbook: zero until the node loads the stored one
         s.supply_mv = p.supply_nominal_mv
         s.demand_q24 = p.idle_q24
         s.mode = M.OFF
@@ -221,6 +234,7 @@ class Ecu:
                 self._stage_limit_selection()
             self._stage_pump_driver()
             self._stage_health(i)
+            self._stage_logbook()
         finally:
             counting_into(outer)
         return self.out
@@ -599,3 +613,19 @@ class Ecu:
         o.seq_state = s.seq_state
         o.seq_reason = s.seq_reason
         o.inputs_valid = t.inputs_valid
+
+    def _stage_logbook(self) -> None:
+        """The engine's logbook (ecu.logbook) from this tick's mode transition."""
+        s = self.s
+        t = self.t
+        demand_lost = 1 if s.demand_age >= self.p.demand_shutdown_ticks else 0
+        logbook_step(
+            s,
+            t.mode,
+            t.new_mode,
+            t.start_abort,
+            demand_lost,
+            t.trip_shutdown,
+            self.out.n_cpct,
+            self.p.rate_hz,
+        )

@@ -36,6 +36,7 @@ from protocol.lockstep import TICK_MODULO, every_ticks
 from protocol.node import SendFn
 
 if TYPE_CHECKING:
+    from ecu.service.logbook_save import LogbookSaver
     from ecu.service.port import ServicePort
     from ecu.xcp.slave import XcpSlave
 
@@ -120,6 +121,8 @@ class EcuNode:
         # the service port (ecu.service.port.ServicePort), polled before each tick, or None
         self.service: ServicePort | None = None
         self.xcp: XcpSlave | None = None  # the XCP slave (attach_xcp), or None
+        # the logbook's save at rest (ecu.service.logbook_save), after each tick, or None
+        self.logbook_saver: LogbookSaver | None = None
         self._xcp_send: Callable[[bytes], None] | None = None
         self._xcp_send_for: SendFn | None = None
 
@@ -300,6 +303,8 @@ class EcuNode:
             o = self.ecu.tick(i)
         if xcp is not None:
             xcp.sample(self._xcp_sender(send))  # the DAQ lists of this tick's events
+        if self.logbook_saver is not None:
+            self.logbook_saver.after_tick()
         i.sensor_status = i.analog_status = i.demand_status = E2E_NONEWDATA
         k = self.ticks
         if k % self.every_status == 0:

@@ -16,6 +16,7 @@ RATE_MIN_HZ = 50
 RATE_MAX_HZ = 1000
 RATE_WINDOW_MAX_S = 0.05
 RATE_BUF_LEN = RATE_MAX_HZ // 20 + 2  # central-difference ring: 0.05 s at 1000 Hz, +2 samples
+LOG_ABORTS = 6  # the logbook's abort counters: one per start abort reason (ecu.logbook)
 
 CONTROLLERS = ("mrac", "pid", "open_loop", "pi")
 # how the document's printed gains are read (docs/errata.md, "Two readings"):

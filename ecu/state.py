@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from array import array
 
-from ecu.params import RATE_BUF_LEN
+from ecu.params import LOG_ABORTS, RATE_BUF_LEN
 
 # slow integrators (split accumulators): estimator (eq. 4.31), MRAC gains (eq. 5.16), PID integral
 AP21 = 0  # A_p-hat row 2, column 1
@@ -71,6 +71,11 @@ class EcuState:
         "ncor_k_q24",
         # modes, faults, counters
         "mode", "faults", "sat_events", "ticks",
+        # the engine's logbook (ecu.logbook): runs, seconds in RUN and the ticks of the second
+        # under way, starts, aborts by reason, the last run's highest EGT (0.1 K) and speed
+        # (0.01 %N), the last shutdown's reason, a run under way
+        "log_runs", "log_run_time_s", "log_run_frac_ticks", "log_starts", "log_aborts",
+        "log_last_max_egt_dk", "log_last_max_speed_cpct", "log_last_shutdown", "log_in_run",
     )  # fmt: skip
 
     def __init__(self) -> None:
@@ -78,6 +83,7 @@ class EcuState:
         self.theta_ext = array("i", [0] * N_THETA)
         self.n_hist_rpm = array("i", [0] * RATE_BUF_LEN)
         self.u_hist_q24 = array("i", [0] * RATE_BUF_LEN)
+        self.log_aborts = array("i", [0] * LOG_ABORTS)
         for name in self.__slots__:
             if not hasattr(self, name):
                 setattr(self, name, 0)

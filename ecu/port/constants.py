@@ -107,7 +107,7 @@ def _module_ints(module: ModuleType) -> dict[str, int]:
 def _python_sections() -> list[str]:
     from ecu import faults as F
     from ecu import firmware as FW
-    from ecu import fixedpoint, inlet, limiters, modes, params, pi_design, state
+    from ecu import fixedpoint, inlet, limiters, logbook, modes, params, pi_design, state
     from ecu import start_sequencer as Q
     from protocol.e2e import E2EStatus
 
@@ -121,6 +121,7 @@ def _python_sections() -> list[str]:
         _define(
             "ECU_RATE_BUF_LEN", str(params.RATE_BUF_LEN), "ecu.params.RATE_BUF_LEN: speed ring"
         ),
+        _define("ECU_LOG_ABORTS", str(params.LOG_ABORTS), "ecu.params.LOG_ABORTS: logbook aborts"),
         "",
     ]
     slots = sorted((v, k) for k, v in _module_ints(state).items() if k != "N_THETA")
@@ -135,6 +136,10 @@ def _python_sections() -> list[str]:
     reasons = [(n, Q.NO_ABORT if n == "NONE" else getattr(Q, n)) for n in Q.REASONS]
     out += _enum(
         "start abort reasons (ecu.start_sequencer)", ((f"ECU_ABORT_{n}", v) for n, v in reasons)
+    )
+    out += _enum(
+        "the last shutdown's reason in the logbook (ecu.logbook SD_*)",
+        ((f"ECU_SD_{n}", getattr(logbook, f"SD_{n}")) for n in logbook.SHUTDOWN_NAMES),
     )
     out += _enum(
         "controllers (ecu.params CTRL_*, in the order of ecu.params.CONTROLLERS)",

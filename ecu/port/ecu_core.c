@@ -1416,6 +1416,71 @@ static void stage_health(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
     o->inputs_valid = t->inputs_valid;
 }
 
+/* the engine's logbook (ecu/logbook.py logbook_step) from this tick's mode transition:
+   starts, runs and their time, the last run's highest EGT and speed, the aborts by reason and
+   the last shutdown's reason; every counter saturates */
+static int32_t log_inc(int32_t x)
+{
+    return x < INT32_MAX ? x + 1 : INT32_MAX;
+}
+
+static int32_t shutdown_reason(int32_t new_mode, int start_abort, int demand_lost,
+                               int trip_shutdown)
+{
+    if (new_mode == ECU_FAULT) {
+        return ECU_SD_FAULT;
+    }
+    if (start_abort) {
+        return ECU_SD_START_ABORT;
+    }
+    if (demand_lost) {
+        return ECU_SD_DEMAND_LOST;
+    }
+    return trip_shutdown ? ECU_SD_FLAMEOUT : ECU_SD_OPERATOR_STOP;
+}
+
+static void stage_logbook(ecu_t *e, const tick_vars_t *t)
+{
+    ecu_state_t *s = &e->s;
+    int32_t mode = t->mode, new_mode = t->new_mode;
+    if (new_mode == ECU_ARMED && mode == ECU_OFF) {
+        s->log_starts = log_inc(s->log_starts);
+    }
+    if (new_mode == ECU_RUN && !s->log_in_run) {
+        s->log_in_run = 1;
+        s->log_runs = log_inc(s->log_runs);
+        s->log_last_max_egt_dk = 0;
+        s->log_last_max_speed_cpct = 0;
+    }
+    if (s->log_in_run) {
+        if (s->egt_dk > s->log_last_max_egt_dk) {
+            s->log_last_max_egt_dk = s->egt_dk;
+        }
+        if (e->o.n_cpct > s->log_last_max_speed_cpct) {
+            s->log_last_max_speed_cpct = e->o.n_cpct;
+        }
+    }
+    if (new_mode == ECU_RUN) {
+        if (s->log_run_frac_ticks >= e->p->rate_hz - 1) { /* a second is full */
+            s->log_run_frac_ticks = 0;
+            s->log_run_time_s = log_inc(s->log_run_time_s);
+        } else {
+            s->log_run_frac_ticks++;
+        }
+    }
+    if ((mode == ECU_ARMED || mode == ECU_RUN) && new_mode != ECU_ARMED && new_mode != ECU_RUN) {
+        s->log_in_run = 0;
+        if (mode == ECU_ARMED && s->seq_reason > ECU_ABORT_NONE &&
+            s->seq_reason <= ECU_LOG_ABORTS) {
+            int32_t k = s->seq_reason - 1;
+            s->log_aborts[k] = log_inc(s->log_aborts[k]);
+        }
+        s->log_last_shutdown =
+            shutdown_reason(new_mode, t->start_abort != 0,
+                            s->demand_age >= e->p->demand_shutdown_ticks, t->trip_shutdown);
+    }
+}
+
 const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
 {
     ecu_state_t *s = &e->s;
@@ -1434,6 +1499,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     }
     stage_pump_driver(e, &t);
     stage_health(e, in, &t);
+    stage_logbook(e, &t);
     e->rate_q24 = t.rate;
     return &e->o;
 }

@@ -48,7 +48,8 @@
  * The constants shared with the Python firmware and the CAN contract, generated from their
  * definitions (python -m ecu.port.codegen): array lengths ECU_N_THETA, ECU_PI_POINTS,
  * ECU_SCHED_POINTS, ECU_RATE_BUF_LEN; theta slots ECU_AP21..ECU_KB; modes ECU_OFF..ECU_FAULT;
- * sequencer states ECU_SEQ_*; abort reasons ECU_ABORT_*; controllers ECU_CTRL_*; E2E statuses
+ * sequencer states ECU_SEQ_*; abort reasons ECU_ABORT_*; the logbook's length ECU_LOG_ABORTS and
+ * shutdown reasons ECU_SD_*; controllers ECU_CTRL_*; E2E statuses
  * ECU_E2E_* (OK: a fresh valid frame, its values are used; REPEATED, WRONGSEQUENCE, WRONGCRC:
  * rejected, the values are not used; NONEWDATA: nothing arrived); loop owners ECU_OWNER_*; fault
  * word bits ECU_FAULT_*; the ECU's frame IDs, E2E data IDs and signal ranges.
@@ -123,7 +124,10 @@ extern "C" {
     X(pump_stall_cnt) X(pump_dry_cnt) X(speed_failed) X(speed_seen) X(inputs_seen) X(rearm_wait) \
     X(seq_state) X(seq_reason) X(seq_timer) X(seq_v_q24) X(seq_egt_ref_q8) X(relights) \
     X(starter_cpct) X(igniter) X(seq_target_dk) X(ncor_k_q24) \
-    X(mode) X(faults) X(sat_events) X(ticks)
+    X(mode) X(faults) X(sat_events) X(ticks) \
+    X(log_runs) X(log_run_time_s) X(log_run_frac_ticks) X(log_starts) \
+    A(log_aborts, ECU_LOG_ABORTS) X(log_last_max_egt_dk) X(log_last_max_speed_cpct) \
+    X(log_last_shutdown) X(log_in_run)
 
 /* ecu.firmware.EcuInputs: raw integers in the CAN contract's units */
 #define ECU_INPUT_FIELDS(X, A) \

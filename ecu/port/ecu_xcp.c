@@ -67,13 +67,18 @@ static const struct {
 static const int32_t rule_k[] = ECU_XCP_RULE_K;
 
 /* the regions, in ecu.xcp.memory.MemoryMap's order */
-enum { AXIS, TEXT, CAL, MEAS, BENCH, REGIONS, NO_REGION = 7 };
+enum { AXIS, TEXT, CAL, MEAS, BENCH, LOG, REGIONS, NO_REGION = 7 };
 static const uint32_t region_base[REGIONS] = {ECU_XCP_AXIS_BASE, ECU_XCP_TEXT_BASE,
                                               ECU_XCP_CAL_BASE, ECU_XCP_MEAS_BASE,
-                                              ECU_XCP_BENCH_BASE};
+                                              ECU_XCP_BENCH_BASE, ECU_XCP_LOG_BASE};
 static const uint16_t region_size[REGIONS] = {4 * ECU_XCP_AXIS_POINTS, ECU_XCP_TEXT_SIZE,
                                               4 * ECU_XCP_PARAMS, ECU_XCP_MEAS_SIZE,
-                                              4 * ECU_XCP_BENCH_WORDS};
+                                              4 * ECU_XCP_BENCH_WORDS, 4 * ECU_XCP_LOG_WORDS};
+/* the logbook's words: where each is in ecu_t */
+static const uint16_t log_member[ECU_XCP_LOG_WORDS] = {
+#define ECU_XCP_X_LOG(member) (uint16_t)offsetof(ecu_t, member),
+    ECU_XCP_LOG_LIST(ECU_XCP_X_LOG)
+};
 
 #define PROTECTED (ECU_XCP_RES_CAL_PAG | ECU_XCP_RES_DAQ)
 #define NONE (-0x10000)                /* a handler's result: no answer (a block goes on) */
@@ -738,6 +743,9 @@ static uint8_t byte_at(const ecu_xcp_t *x, int region, uint32_t off, const uint8
         break;
     case MEAS:
         return img[off];
+    case LOG:
+        memcpy(&w, (const unsigned char *)x->ecu + log_member[off / 4], sizeof w);
+        break;
     default:
         w = (uint32_t)bench_word(x, off / 4);
     }

@@ -23,6 +23,7 @@ from functools import cache
 from ecu.node import RECEIVED, SERVICE_IDLE_POLL_S
 from ecu.port.core import CEcu, PortError, library
 from ecu.port.xcp import CXcpSlave
+from ecu.service.logbook_save import LogbookSaver
 from protocol.codec import Codec
 from protocol.lockstep import every_ticks
 from protocol.node import SendFn
@@ -160,6 +161,9 @@ class CEcuNode:
         self.xcp: CXcpSlave | None = None  # the C XCP slave (attach_xcp), or None
         self._xcp_send_for: SendFn | None = None
         self._receive = nl.lib.ecu_node_receive
+        # the logbook's save at rest (ecu.service.logbook_save), stepped once per tick run
+        self.logbook_saver: LogbookSaver | None = None
+        self._saver_ticks = 0
 
     def attach_xcp(self, slave: CXcpSlave) -> None:
         """Put the C XCP slave on the node (``ecu_node_attach_xcp``): its command frames are
@@ -179,6 +183,10 @@ class CEcuNode:
             self._xcp_send_for = send
 
     def _send(self, count: int, send: SendFn) -> None:
+        saver = self.logbook_saver
+        if saver is not None and self.ticks != self._saver_ticks:
+            self._saver_ticks = self.ticks
+            saver.after_tick()
         out = self._out
         for k in range(count):
             frame = out[k]
@@ -201,9 +209,7 @@ class CEcuNode:
             if frame_id in self.frame_ids:
                 raise ValueError(f"frame {frame_id:#x} with {len(data)} data bytes: expected 8")
             return
-        count = self._frame(self._ref, frame_id, bytes(data), self._out)
-        if count:
-            self._send(count, send)
+        self._send(self._frame(self._ref, frame_id, bytes(data), self._out), send)
 
     def on_timeout(self, send: SendFn) -> None:
         self._xcp_to(send)

@@ -22,8 +22,10 @@ from pathlib import Path
 
 import msgpack
 
+from ecu import logbook as L
 from ecu.port.core import CEcu, PortError, library
 from ecu.port.xcp_run import run_record
+from ecu.service.logbook_save import LogbookSaver
 from ecu.service.param_table import TABLE, ParamTable
 from ecu.service.storage import FlashImage, SlotWriter
 from ecu.xcp import codes as C
@@ -137,18 +139,29 @@ class FlashStore:
     """A store of the C slave's parameter set into a flash image (``--flash``), one flash
     operation a tick, as the Python slave's SET_REQUEST STORE_CAL_REQ."""
 
-    def __init__(self, path: Path, raws: Callable[[], list[int]]) -> None:
+    def __init__(
+        self,
+        path: Path,
+        raws: Callable[[], list[int]],
+        logbook: Callable[[], dict[str, int]] = dict,
+    ) -> None:
         self.flash = FlashImage(path)
         self.raws = raws
+        self.logbook = logbook
         self.writer: SlotWriter | None = None
+        self.saver: LogbookSaver | None = None  # the node's saves at rest, on this image
+
+    def image(self) -> bytes:
+        """The stored set: the slave's parameter set and the engine's logbook."""
+        raws = {spec.name: raw for spec, raw in zip(TABLE, self.raws(), strict=True)}
+        return msgpack.packb({**raws, L.STORE_KEY: self.logbook()})
 
     def __call__(self, begin: int) -> int:
         try:
             if begin:
-                image = msgpack.packb(
-                    {spec.name: raw for spec, raw in zip(TABLE, self.raws(), strict=True)}
-                )
-                self.writer = self.flash.writer(image)
+                if self.saver is not None:
+                    self.saver.writer = None  # this store takes the logbook as well
+                self.writer = self.flash.writer(self.image())
                 return 0
             assert self.writer is not None
             if self.writer.step():
@@ -186,7 +199,8 @@ class CXcpSlave:
         self._send_cb = SEND_FN(self._on_send)
         self._clock = clock_us
         self._clock_cb = CLOCK_FN(lambda ctx: clock_us() & 0xFFFF_FFFF) if clock_us else CLOCK_FN()
-        self.store = FlashStore(flash, self.raws) if flash is not None else None
+        logbook = lambda: L.stored_dict(ecu.s)  # noqa: E731
+        self.store = FlashStore(flash, self.raws, logbook) if flash is not None else None
         self._store_cb = STORE_FN(lambda ctx, begin: self.store(begin)) if flash else STORE_FN()
         self.config = XcpConfig(
             cmd_id=self.cmd_id, res_id=self.res_id, seed=seed or 1,

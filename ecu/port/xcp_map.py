@@ -110,7 +110,19 @@ def _texts() -> list[str]:
     return [*out, ""]
 
 
+def _log_member(name: str) -> str:
+    """A stored word of the logbook as a member of ecu_t: ``s.log_runs``,
+    ``s.log_aborts[k]``."""
+    prefix = "log_aborts_"
+    if name.startswith(prefix):
+        from ecu import logbook as L
+
+        return f"s.log_aborts[{L.ABORT_NAMES.index(name[len(prefix) :])}]"
+    return f"s.{name}"
+
+
 def _memory() -> list[str]:
+    from ecu import logbook as L
     from ecu.service.param_table import TABLE
     from ecu.xcp import memory as MEM
 
@@ -119,6 +131,7 @@ def _memory() -> list[str]:
         _define("ECU_XCP_CAL_BASE", f"0x{MEM.CAL_BASE:08X}u", "the parameters, int32 raws"),
         _define("ECU_XCP_MEAS_BASE", f"0x{MEM.MEAS_BASE:08X}u", "the measurements"),
         _define("ECU_XCP_BENCH_BASE", f"0x{MEM.BENCH_BASE:08X}u", "arm, stop, throttle"),
+        _define("ECU_XCP_LOG_BASE", f"0x{MEM.LOG_BASE:08X}u", "the logbook, int32 words"),
         _define("ECU_XCP_AXIS_BASE", f"0x{MEM.AXIS_BASE:08X}u", "the schedules' breakpoints"),
         _define("ECU_XCP_TEXT_BASE", f"0x{MEM.TEXT_BASE:08X}u", "identification and names"),
         _define("ECU_XCP_PARAMS", str(len(TABLE)), "parameters (ecu.service.param_table)"),
@@ -128,6 +141,14 @@ def _memory() -> list[str]:
         _define("ECU_XCP_BENCH_ARM", str(MEM.BENCH_ARM)),
         _define("ECU_XCP_BENCH_STOP", str(MEM.BENCH_STOP)),
         _define("ECU_XCP_BENCH_THROTTLE", str(MEM.BENCH_THROTTLE)),
+        _define("ECU_XCP_LOG_WORDS", str(len(MEM.LOGBOOK)), "the logbook's words"),
+        "/* the logbook's words (ecu.logbook.word_names): X(member of ecu_t) */",
+        "#define ECU_XCP_LOG_LIST(X) \\",
+        *(
+            f"    X({_log_member(name)}) /* {m.name} */ \\"
+            for name, m in zip(L.word_names(), MEM.LOGBOOK, strict=True)
+        ),
+        "",
         _define("ECU_XCP_AXIS_POINTS", str(len(MEM.AXIS))),
         _define("ECU_XCP_AXIS", "{" + ", ".join(_c_int(v) for v in MEM.AXIS) + "}"),
         "",

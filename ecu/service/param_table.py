@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 import msgpack
 
 from ecu.firmware_params import FirmwareParams, compile_params
+from ecu.logbook import STORE_KEY
 from ecu.params import SCHED_POINTS, EcuParams
 from ecu.service.crc import crc16
 
@@ -247,6 +248,11 @@ class ParamTable:
     def crc(self) -> int:
         return self._crc
 
+    def stored_image(self, logbook: dict[str, int]) -> bytes:
+        """The set with the engine's logbook as a save puts it in flash: the parameters (as
+        :meth:`image`) and the logbook's words under ``ecu.logbook.STORE_KEY``."""
+        return msgpack.packb({**self._raws, STORE_KEY: logbook})
+
     def load_image(self, image: bytes) -> list[str]:
         """Apply a stored set (entry by entry, limits checked, the whole set validated at the
         end); returns the problems found, each naming the parameter. Bad entries are skipped."""
@@ -259,6 +265,8 @@ class ParamTable:
             return ["stored set is not a map of names to values"]
         params = self.params
         for name, raw in stored.items():
+            if name == STORE_KEY:
+                continue  # the engine's logbook (stored_logbook), not a parameter
             spec = BY_NAME.get(name) if isinstance(name, str) else None
             if spec is None:
                 problems.append(f"{name!r}: not a parameter of this firmware, skipped")
@@ -271,3 +279,14 @@ class ParamTable:
         except (ValueError, ArithmeticError) as exc:
             problems.append(f"stored set refused by the parameter checks, defaults kept: {exc}")
         return problems
+
+
+def stored_logbook(image: bytes) -> dict | None:
+    """The engine's logbook of a stored set ({word name: value}), None when the set has none
+    (an image saved before the logbook) or cannot be read."""
+    try:
+        stored = msgpack.unpackb(image)
+    except (ValueError, TypeError, msgpack.UnpackException):
+        return None
+    logbook = stored.get(STORE_KEY) if isinstance(stored, dict) else None
+    return logbook if isinstance(logbook, dict) else None

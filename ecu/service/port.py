@@ -33,6 +33,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from ecu import logbook as L
 from ecu import modes as M
 from ecu.firmware import Ecu, EcuInputs
 from ecu.params import EcuParams
@@ -95,6 +96,7 @@ class Boot:
     sequence: int | None = None
     problems: list[str] = field(default_factory=list)
     saving: object | None = None  # who is saving the set to flash (one save at a time)
+    payload: bytes | None = None  # the stored set loaded (its logbook: ecu.service.logbook_save)
 
 
 def boot(params: EcuParams, flash_path: Path | None) -> Boot:
@@ -107,7 +109,7 @@ def boot(params: EcuParams, flash_path: Path | None) -> Boot:
     if slot is None:
         return Boot(table, flash, "defaults")
     problems = table.load_image(slot.payload)
-    return Boot(table, flash, "loaded", slot.index, slot.sequence, problems)
+    return Boot(table, flash, "loaded", slot.index, slot.sequence, problems, payload=slot.payload)
 
 
 class ServiceError(Exception):
@@ -429,7 +431,9 @@ class ServicePort:
         if self._writer is not None or self.boot.saving is not None:
             raise ServiceError(Status.BUSY, "a save is in progress")
         try:
-            self._writer = self.boot.flash.writer(self.table.image())
+            self._writer = self.boot.flash.writer(
+                self.table.stored_image(L.stored_dict(self.ecu.s))
+            )
         except OSError as exc:
             raise ServiceError(Status.STORAGE, f"flash image unreadable: {exc}") from None
         self.boot.saving = self

@@ -303,12 +303,14 @@ def a2l_text(
         conv = use(Conversion(word.factor, word.unit))
         body.append(_value(word.name, word.description, MEM.bench_address(k), conv, word.lo,
                            word.hi))  # fmt: skip
-    for k, m in enumerate(MEM.MEASUREMENTS):
+    measurements = [(m, MEM.measurement_address(k)) for k, m in enumerate(MEM.MEASUREMENTS)]
+    measurements += [(m, MEM.logbook_address(k)) for k, m in enumerate(MEM.LOGBOOK)]
+    for m, address in measurements:
         conv = use(Conversion(m.factor, m.unit, m.values, m.name if m.values else ""))
         body.append(
             f"    /begin MEASUREMENT {m.name} {_text(m.description)} {m.datatype} {conv.name} 1 0 "
             f"{_number(m.lo)} {_number(m.hi)}\n"
-            f"      ECU_ADDRESS 0x{MEM.measurement_address(k):08X}\n"
+            f"      ECU_ADDRESS 0x{address:08X}\n"
             f'      FORMAT "{FORMAT}"\n'
             + (f"      PHYS_UNIT {_text(m.unit)}\n" if m.unit else "")
             + "    /end MEASUREMENT"
@@ -358,6 +360,8 @@ def _mod_par(identification: str, epk_address: int) -> str:
          MEM.MEAS_BASE, MEM.MEAS_SIZE),
         ("Bench", "the bench's arm, stop and throttle", "VARIABLES", "RAM", MEM.BENCH_BASE,
          4 * len(MEM.BENCH)),
+        ("Logbook", "the engine's logbook (read only)", "VARIABLES", "RAM", MEM.LOG_BASE,
+         4 * len(MEM.LOGBOOK)),
         ("AxisPoints", "the fuel schedules' breakpoints", "DATA", "FLASH", MEM.AXIS_BASE,
          4 * len(MEM.AXIS)),
     ]  # fmt: skip

@@ -9,6 +9,8 @@
   int32 otherwise), at an address aligned to its size; read only;
 - bench, 0x20020000: the bench's arm, stop and throttle (:data:`BENCH`), one int32 each; a read
   gives the bench's state, a write is the bench command;
+- logbook, 0x20030000: the engine's logbook (ecu.logbook, :data:`LOGBOOK`), one int32 word
+  each in its stored order; read only;
 - axis points, 0x08000000: the fuel schedules' breakpoints, %N corrected (Q7.24); read only;
 - text, 0x08001000: the identification, the A2L's name and the event channels' names (ASCII);
   read only.
@@ -29,6 +31,7 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ecu import logbook as L
 from ecu import modes as M
 from ecu import start_sequencer as Q
 from ecu.firmware import Ecu
@@ -41,6 +44,7 @@ WORD = 4
 CAL_BASE = 0x2000_0000
 MEAS_BASE = 0x2001_0000
 BENCH_BASE = 0x2002_0000
+LOG_BASE = 0x2003_0000
 AXIS_BASE = 0x0800_0000
 TEXT_BASE = 0x0800_1000
 Q24 = 1.0 / (1 << 24)
@@ -204,6 +208,27 @@ def measure(ecu: Ecu, demand_source: int) -> list[int]:
     return values
 
 
+# the logbook region: the stored words of ecu.logbook in their order (int32 each), under the
+# names the A2L gives them (the EGT and speed without their units' suffixes)
+LOGBOOK: tuple[Measurement, ...] = (
+    _m("log_runs", S32, "engine runs (entries into RUN; a relight stays in its run)", "", 1.0, 0,
+       I32),
+    _m("log_run_time_s", S32, "time in RUN, whole seconds", "s", 1.0, 0, I32),
+    _m("log_run_frac_ticks", S32, "ticks of the second in RUN under way", "", 1.0, 0, 10000),
+    _m("log_starts", S32, "arms that began a start", "", 1.0, 0, I32),
+    *(
+        _m(f"log_aborts_{name}", S32, f"starts aborted: {name.upper()}", "", 1.0, 0, I32)
+        for name in L.ABORT_NAMES
+    ),
+    _m("log_last_max_egt", S32, "the last run's highest EGT", "K", 0.1, 0, 1638.3),
+    _m("log_last_max_speed", S32, "the last run's highest speed", "%", 0.01, 0, 327.67),
+    _m("log_last_shutdown", S32, "why the last start or run ended", "", 1.0, 0,
+       len(L.SHUTDOWN_NAMES) - 1, L.SHUTDOWN_NAMES),
+)  # fmt: skip
+if len(LOGBOOK) != len(L.word_names()):
+    raise RuntimeError("ecu.xcp.memory: LOGBOOK must name every stored word of ecu.logbook")
+
+
 @dataclass(frozen=True)
 class BenchWord:
     name: str
@@ -270,6 +295,7 @@ class MemoryMap:
         self._meas = bytearray(MEAS_SIZE)
         self._meas_tick = -1
         self._bench = bytearray(WORD * len(BENCH))
+        self._log = bytearray(WORD * len(LOGBOOK))
         axis = struct.pack(f"<{len(AXIS)}i", *AXIS)
         text = bytes(self.texts.data)
         self.calibration = Region("calibration", CAL_BASE, len(self._cal), True, self._cal_image)
@@ -283,6 +309,7 @@ class MemoryMap:
             self.calibration,
             self.measurement,
             self.bench_region,
+            Region("logbook", LOG_BASE, len(self._log), False, self._log_image),
         )
 
     def locate(self, address: int, size: int) -> Region | None:
@@ -330,6 +357,15 @@ class MemoryMap:
             d.throttle_cpct,
         )  # fmt: skip
         return self._bench
+
+    def _log_image(self) -> bytearray:
+        """The logbook's words as the firmware holds them now."""
+        struct.pack_into(f"<{len(LOGBOOK)}i", self._log, 0, *L.stored_words(self.ecu.s))
+        return self._log
+
+
+def logbook_address(index: int) -> int:
+    return LOG_BASE + WORD * index
 
 
 def parameter_address(index: int) -> int:

@@ -52,6 +52,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from ecu import logbook as L
 from ecu import modes as M
 from ecu.firmware import Ecu
 from ecu.service.bench_control import BenchControl, BenchRefused
@@ -605,7 +606,7 @@ class XcpSlave:
         if self.boot.saving is not None:
             raise XcpError(C.Err.CMD_BUSY, "a save is in progress")
         try:
-            self._writer = flash.writer(self.table.image())
+            self._writer = flash.writer(self.table.stored_image(L.stored_dict(self.ecu.s)))
         except OSError as exc:
             raise XcpError(C.Err.ACCESS_DENIED, f"flash image unreadable: {exc}") from None
         self.boot.saving = self

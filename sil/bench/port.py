@@ -1,6 +1,6 @@
 """`sil bench port`: figures of the C port.
 
-- flash and RAM on a Cortex-M4, against the targets of 16 KiB and 2 KiB. Flash is what firmware
+- flash and RAM on a Cortex-M4, against the targets of 16 KiB and 2.25 KiB. Flash is what firmware
   carries of the control core, the frame codec and E2E: ``arm-none-eabi-size`` of an image of
   their objects (-Os, a section per function) linked with --gc-sections from their public
   functions, with libgcc and the C library (``ecu.port.build.arm_flash_image``), split by origin
@@ -44,7 +44,7 @@ from sil.run import golden as golden_sources
 SCENARIO = "thesis-5.3-mrac-aero"
 VECTOR = "mrac-aero"
 FLASH_TARGET = 16 * 1024
-RAM_TARGET = 2 * 1024
+RAM_TARGET = 2304  # 2.25 KiB: the core with the engine's logbook in its state
 INSTRUCTIONS_TARGET = 5000
 REPEATS = 3  # SIL runs per case
 SIL_TARGET = 500.0  # in process with the C ECU, real-time factor
@@ -55,7 +55,7 @@ XCP_SHARE_TARGET = 10.0  # % of the node's instructions per tick, no master atta
 PIL_TICKS = 300
 TARGET_TEXT = {
     "flash": "control core and frame codec <= 16 KiB of Cortex-M4 flash",
-    "ram": "<= 2 KiB of RAM with the CAN node (data, bss, stack bound)",
+    "ram": "<= 2.25 KiB of RAM with the CAN node (data, bss, stack bound)",
     "instructions": "< 5,000 instructions per tick (host and Cortex-M4)",
     "sil_inproc": ">= 500x real time in process with the C ECU",
     "node_xcp_flash": "the CAN node with its XCP slave <= 20 KiB of Cortex-M4 flash",

@@ -197,6 +197,8 @@ def run(args: argparse.Namespace) -> int:
             node = _c_node(ecu, booted if xcp_on else None, args, codec)
         else:
             node = EcuNode(ecu=ecu, lockstep=lockstep, max_ticks=args.ticks, codec=codec)
+        if booted is not None and booted.flash is not None:
+            _logbook_in_flash(node, booted)
     except (PortBuildError, PortError, ValueError) as exc:
         print(f"sil ecu: --impl {args.impl}: {exc}", file=sys.stderr)
         return 2
@@ -274,6 +276,23 @@ def _attach_xcp(node, booted, args: argparse.Namespace) -> None:  # noqa: ANN001
 
     bench = node.service.bench_control if node.service is not None else None
     node.attach_xcp(XcpSlave(node.ecu, booted, bench, ids=ids, clock_us=clock_us))
+
+
+def _logbook_in_flash(node, booted) -> None:  # noqa: ANN001
+    """The engine's logbook from the stored set into the firmware (power-up), and its save at
+    rest into the same flash image: beside the C slave's stores on the C node, else beside
+    the service port's and the Python slave's saves."""
+    from ecu.service import logbook_save
+
+    for problem in logbook_save.load(node.ecu, booted.payload):
+        print(f"sil ecu: {problem}", file=sys.stderr)
+    store = getattr(node.xcp, "store", None)
+    if store is not None:  # the C slave's flash store: the saver on the same image
+        store.saver = node.logbook_saver = logbook_save.LogbookSaver(
+            node.ecu, store.flash, store.image, busy=lambda: store.writer is not None
+        )
+    else:
+        node.logbook_saver = logbook_save.boot_saver(node.ecu, booted)
 
 
 def _wall_clock_us():  # noqa: ANN202

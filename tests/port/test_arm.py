@@ -57,7 +57,7 @@ def test_flash_ram_and_instructions_per_tick_meet_the_targets(elf, vectors):
     flash = figures["cm4_flash_bytes"]
     assert flash == figures["cm4_core_flash_bytes"] + figures["cm4_frames_flash_bytes"]
     assert flash <= 16 * 1024
-    assert 0 < figures["cm4_ram_bytes"] <= 2 * 1024
+    assert 0 < figures["cm4_ram_bytes"] <= bench.RAM_TARGET
     path, g = vectors["mrac-aero"]
     host = bench.callgrind_instructions(build.host_replayer(), path, g.ticks)
     arm = bench.qemu_instructions(path, g.ticks)

@@ -13,6 +13,7 @@
 #define ECU_PI_POINTS 9                          /* ecu.pi_design.PI_POINTS */
 #define ECU_SCHED_POINTS 12                      /* ecu.params.SCHED_POINTS */
 #define ECU_RATE_BUF_LEN 52                      /* ecu.params.RATE_BUF_LEN: speed ring */
+#define ECU_LOG_ABORTS 6                         /* ecu.params.LOG_ABORTS: logbook aborts */
 
 /* slots of theta_q24 / theta_ext (ecu.state) */
 enum {
@@ -61,6 +62,16 @@ enum {
     ECU_ABORT_HOT_START = 4,
     ECU_ABORT_FLAMEOUT = 5,
     ECU_ABORT_STOPPED = 6
+};
+
+/* the last shutdown's reason in the logbook (ecu.logbook SD_*) */
+enum {
+    ECU_SD_NONE = 0,
+    ECU_SD_OPERATOR_STOP = 1,
+    ECU_SD_DEMAND_LOST = 2,
+    ECU_SD_FLAMEOUT = 3,
+    ECU_SD_START_ABORT = 4,
+    ECU_SD_FAULT = 5
 };
 
 /* controllers (ecu.params CTRL_*, in the order of ecu.params.CONTROLLERS) */

@@ -181,6 +181,7 @@
 #define ECU_XCP_CAL_BASE 0x20000000u             /* the parameters, int32 raws */
 #define ECU_XCP_MEAS_BASE 0x20010000u            /* the measurements */
 #define ECU_XCP_BENCH_BASE 0x20020000u           /* arm, stop, throttle */
+#define ECU_XCP_LOG_BASE 0x20030000u             /* the logbook, int32 words */
 #define ECU_XCP_AXIS_BASE 0x08000000u            /* the schedules' breakpoints */
 #define ECU_XCP_TEXT_BASE 0x08001000u            /* identification and names */
 #define ECU_XCP_PARAMS 117                       /* parameters (ecu.service.param_table) */
@@ -190,6 +191,23 @@
 #define ECU_XCP_BENCH_ARM 0
 #define ECU_XCP_BENCH_STOP 1
 #define ECU_XCP_BENCH_THROTTLE 2
+#define ECU_XCP_LOG_WORDS 13                     /* the logbook's words */
+/* the logbook's words (ecu.logbook.word_names): X(member of ecu_t) */
+#define ECU_XCP_LOG_LIST(X) \
+    X(s.log_runs) /* log_runs */ \
+    X(s.log_run_time_s) /* log_run_time_s */ \
+    X(s.log_run_frac_ticks) /* log_run_frac_ticks */ \
+    X(s.log_starts) /* log_starts */ \
+    X(s.log_aborts[0]) /* log_aborts_ignition_timeout */ \
+    X(s.log_aborts[1]) /* log_aborts_slow_accel */ \
+    X(s.log_aborts[2]) /* log_aborts_starter_failure */ \
+    X(s.log_aborts[3]) /* log_aborts_hot_start */ \
+    X(s.log_aborts[4]) /* log_aborts_flameout */ \
+    X(s.log_aborts[5]) /* log_aborts_stopped */ \
+    X(s.log_last_max_egt_dk) /* log_last_max_egt */ \
+    X(s.log_last_max_speed_cpct) /* log_last_max_speed */ \
+    X(s.log_last_shutdown) /* log_last_shutdown */ \
+
 #define ECU_XCP_AXIS_POINTS 12
 #define ECU_XCP_AXIS {754974720, 838860800, 922746880, 1006632960, 1090519040, 1174405120, 1258291200, 1342177280, 1426063360, 1509949440, 1593835520, 1677721600}
 
