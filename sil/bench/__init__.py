@@ -17,4 +17,5 @@ TARGETS = {
     "starts": "sil.bench.starts",
     "control": "sil.bench.control",
     "fleet": "sil.bench.fleet",
+    "gsu": "sil.bench.gsu",
 }

@@ -9,7 +9,9 @@ const CHART_HZ = 10;
 let state = {};
 let history = [];  // [t, speed %N, reference %N, EGT K]
 let pending = false;
-const stats = { latencies: [], renders: [], updates: 0 };
+// what the page showed: the age of the newest sensor frame at each screen update (ms), the
+// updates of the last second, the events and screen updates in all
+const stats = { latencies: [], renders: [], updates: 0, drawn: 0 };
 window.gsuStats = stats;
 
 // -- requests --------------------------------------------------------------------------------
@@ -65,6 +67,7 @@ function fmt(value, digits) {
 
 function render() {
   pending = false;
+  stats.drawn += 1;
   const s = state;
   const now = Date.now() / 1000;
   if (typeof s.frame_s === "number") {
