@@ -26,6 +26,7 @@ HISTORY_S = 60.0
 HISTORY_HZ = 10.0
 SILENT_S = 0.5  # the ECU's status frame older than this: the ECU is silent
 FAULT_LOG_MAX = 200
+INFORMATION = faults.LIMITER_ACTIVE | faults.PUMP_SATURATED  # not logged: the loops at work
 # signals shown, by frame: (signal, key on the page)
 SHOWN = {
     "PlantSensors": (("ShaftSpeed", "speed_rpm"), ("EGT", "egt_k")),
@@ -124,6 +125,7 @@ class Live:
         self.values["_fault_word_before"] = word
         self.values["faults"] = faults.names(word)
         self.status_s = now_s
+        new &= ~INFORMATION
         if new:
             snapshot = {k: v for k, v in self.values.items() if not k.startswith("_")}
             self.fault_log.append(FaultEntry(now_s, faults.names(new), word, snapshot))

@@ -66,6 +66,18 @@ def error_name(code: int) -> str:
         return f"error 0x{code:02X}"
 
 
+def physical(raw: int, conversion: dict | None) -> float | str:
+    """A raw value through its A2L conversion (as :func:`sil.record.a2l.read_a2l` gives it:
+    linear, a verbal table, or none)."""
+    conv = conversion or {}
+    if "a" in conv:
+        return raw * conv["a"] + conv.get("b", 0.0)
+    k = next((k for k in range(len(conv)) if conv.get(f"val_{k}") == raw), None)
+    if k is not None:
+        return conv[f"text_{k}"].decode()
+    return raw
+
+
 class XcpLink:
     """An XCP session with the ECU on ``bus``, by the names of ``a2l``."""
 
@@ -155,9 +167,10 @@ class XcpLink:
         values = [c.to_value(v) for (v,) in struct.iter_unpack(fmt, raw)]
         return values[0] if c.kind == "VALUE" else values
 
-    def read_measurements(self, names: list[str]) -> dict[str, float]:
-        """The measurements of ``names`` the A2L has, as physical values where linear."""
-        out: dict[str, float] = {}
+    def read_measurements(self, names: list[str]) -> dict[str, float | str]:
+        """The measurements of ``names`` the A2L has, as physical values (or the name of an
+        enumeration's value)."""
+        out: dict[str, float | str] = {}
         with self._command("parameter", "read") as x:
             for name in names:
                 m = self.a2l.measurements.get(name)
@@ -165,8 +178,7 @@ class XcpLink:
                     continue
                 fmt = SIZES[m.datatype]
                 (raw,) = struct.unpack(fmt, self._upload(x, m.address, struct.calcsize(fmt)))
-                conv = m.conversion or {}
-                out[name] = raw * conv.get("a", 1.0) + conv.get("b", 0.0) if "a" in conv else raw
+                out[name] = physical(raw, m.conversion)
         return out
 
     def write_characteristic(self, c: Characteristic, values: list[float], kind: str) -> None:
