@@ -20,6 +20,7 @@ from pathlib import Path
 from types import ModuleType
 
 from protocol import strict_json
+from sil.bench import TARGETS
 
 
 def machine() -> dict:
@@ -146,6 +147,45 @@ def markdown(result: dict) -> str:
         lines += ["| figure | value |", "|---|---|", *_rows(entry["figures"])]
         lines += ["", f"({entry['seconds']:g} s)"]
     return "\n".join(lines) + "\n"
+
+
+_SECTION = "\n## `sil bench "
+
+
+def _parts(page: str) -> tuple[str, dict[str, list[str]], dict[str, str]]:
+    """A page :func:`markdown` wrote: its head (title, first paragraphs, machine), its target rows
+    by bench and its sections by bench, in order."""
+    head, _, rest = page.partition("\n## Targets\n")
+    table, *sections = rest.split(_SECTION)
+    rows: dict[str, list[str]] = {}
+    for line in table.splitlines():
+        cells = line.split("|")
+        if len(cells) > 2 and cells[1].strip() not in ("bench", "---", ""):
+            rows.setdefault(cells[1].strip(), []).append(line)
+    by_name = {sec.split("`", 1)[0]: _SECTION + sec.rstrip("\n") for sec in sections}
+    return head.rstrip("\n"), rows, by_name
+
+
+def merge(page: str, result: dict) -> str:
+    """``page`` with the benches of ``result`` written anew (their target rows and sections
+    replaced, or added in the registry's order), every other bench kept as it was measured; the
+    head says which benches were refreshed, when, and on what machine."""
+    head, rows, sections = _parts(page)
+    _, new_rows, new_sections = _parts(markdown(result))
+    rows.update(new_rows)
+    sections.update(new_sections)
+    m = result["machine"]
+    names = ", ".join(f"`{n}`" for n in result["benches"])
+    note = (
+        f"Refreshed by `sil bench all --only ... --merge`: {names} ({result['mode']} runs, "
+        f"{result['date']}, {m['cpu']}, {m['cores']} cores, load {m['load_average_1min']})."
+    )
+    order = [n for n in TARGETS if n in sections or n in rows]
+    order += [n for n in [*sections, *rows] if n not in order]
+    lines = [head, "", note, "", "## Targets", "", "| bench | target | met |", "|---|---|---|"]
+    lines += [row for name in order for row in rows.get(name, [])]
+    body = "".join(sections[name] + "\n" for name in order if name in sections)
+    return "\n".join(lines) + "\n" + body
 
 
 def print_progress(name: str) -> None:

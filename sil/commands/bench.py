@@ -36,13 +36,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="all: write the page of figures (machine, targets, each bench) to FILE, "
         "e.g. docs/benchmarks.md",
     )
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="all, with --markdown: write the benches run now into the page FILE already holds, "
+        "keeping the others as they were measured",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.target == "all":
         return _run_all(args)
-    if args.only or args.markdown or args.full:
-        print("sil bench: --only, --markdown and --full go with 'all'", file=sys.stderr)
+    if args.only or args.markdown or args.full or args.merge:
+        print("sil bench: --only, --markdown, --merge and --full go with 'all'", file=sys.stderr)
         return 2
     try:
         figures = importlib.import_module(TARGETS[args.target]).run(quick=args.quick)
@@ -59,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_all(args: argparse.Namespace) -> int:
-    from sil.bench.suite import markdown, print_progress, run_all
+    from sil.bench.suite import markdown, merge, print_progress, run_all
 
     names = list(TARGETS) if not args.only else [n.strip() for n in args.only.split(",")]
     unknown = [n for n in names if n not in TARGETS]
@@ -73,9 +79,14 @@ def _run_all(args: argparse.Namespace) -> int:
     if args.markdown is not None and not args.markdown.parent.is_dir():
         print(f"sil bench all: --markdown {args.markdown}: no such folder", file=sys.stderr)
         return 2
+    if args.merge and (args.markdown is None or not args.markdown.is_file()):
+        print("sil bench all: --merge needs --markdown FILE of a page already written",
+              file=sys.stderr)  # fmt: skip
+        return 2
     result = run_all({n: TARGETS[n] for n in names}, quick=not args.full, progress=print_progress)
     if args.markdown is not None:
-        args.markdown.write_text(markdown(result))
+        page = merge(args.markdown.read_text(), result) if args.merge else markdown(result)
+        args.markdown.write_text(page)
         print(f"sil bench all: wrote {args.markdown}", file=sys.stderr)
     if args.json:
         print(strict_json.dumps(result, indent=2))
