@@ -23,7 +23,10 @@ DEFAULT_PORT = 8470
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bus", help="the engine's bus (default: vcan0 if up, else loopback)")
+    parser.add_argument(
+        "--bus", required=True, metavar="SPEC", help="the engine's bus: socketcan:vcan0, "
+        "udp:GROUP[@PORT] as the ECU's, or any python-can interface:channel"
+    )  # fmt: skip
     parser.add_argument(
         "--port",
         type=option(integer=True, lo=0, hi=65535),
@@ -84,7 +87,7 @@ def _interrupt(signum: int, frame: object) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from protocol.bus import BusSpecError, default_spec, parse_spec
+    from protocol.bus import BusSpecError, parse_spec
     from protocol.dbc import xcp_frame_ids
     from sil.console.gsu.app import App
     from sil.record.a2l import A2lError
@@ -99,11 +102,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{prefix}: {exc}", file=sys.stderr)
         return exc.code
     try:
-        if args.bus:
-            spec = parse_spec(args.bus)
-        else:
-            spec, why = default_spec()
-            print(why, file=sys.stderr)
+        spec = parse_spec(args.bus)
         app = App.open(str(spec), a2l, args.xcp_ids or a2l.ids or xcp_frame_ids(), args.out)
     except BusSpecError as exc:
         print(f"{prefix}: {exc}", file=sys.stderr)
