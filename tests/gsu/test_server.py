@@ -102,5 +102,5 @@ def test_sil_gsu_listens_on_the_loopback_unless_told() -> None:
 
     parser = argparse.ArgumentParser()
     gsu.add_arguments(parser)
-    assert parser.parse_args([]).listen == "127.0.0.1"
-    assert parser.parse_args(["--listen", "0.0.0.0"]).listen == "0.0.0.0"
+    assert parser.parse_args(["--bus", "udp:239.255.7.7"]).listen == "127.0.0.1"
+    assert parser.parse_args(["--bus", "vcan", "--listen", "0.0.0.0"]).listen == "0.0.0.0"
