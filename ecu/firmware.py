@@ -19,13 +19,15 @@ as the C port's ``ecu_tick`` (``ecu/port/ecu_core.c``):
 7. limit selection (RUN): min/max selection with the limit loops and fuel schedules, voltage
    limits and slew, integrator tracking, observer (eq. 3.5);
 8. pump driver: PWM duty from the measured supply; the stop's cool-down outside RUN;
-9. health: pump health, fault word, saturation count and outputs;
-10. logbook: runs, time in RUN, starts, aborts by reason, the last run's highest EGT and speed,
+9. actuator tests: in OFF, a bench test function's igniter, starter or pump (ecu.actuator_tests);
+10. health: pump health, fault word, saturation count and outputs;
+11. logbook: runs, time in RUN, starts, aborts by reason, the last run's highest EGT and speed,
    the last shutdown's reason (ecu.logbook).
 """
 
 from __future__ import annotations
 
+from ecu import actuator_tests as T
 from ecu import faults as F
 from ecu import modes as M
 from ecu import start_sequencer as Q
@@ -104,6 +106,12 @@ class EcuInputs:
         "sensor_status",  # sensor frame (speed, EGT): expected every tick
         "analog_status",  # analog frame (supply, pump current): every 50 ms
         "demand_status",  # demand frame (demand, open loop, arm, stop): every 50 ms
+        # a bench test function (ecu.actuator_tests), acted on in OFF only: 1 glow plug,
+        # 2 starter spin, 3 pump prime, 0 none / end; its level (starter duty 0.01 %, pump mV)
+        # and duration (ms)
+        "test_request",
+        "test_level",
+        "test_ms",
     )
 
     def __init__(self) -> None:
@@ -233,6 +241,7 @@ class Ecu:
                 self._stage_control_law()
                 self._stage_limit_selection()
             self._stage_pump_driver()
+            self._stage_actuator_tests(i)
             self._stage_health(i)
             self._stage_logbook()
         finally:
@@ -573,6 +582,26 @@ class Ecu:
         s.starter_cpct = seq.starter_cpct
         s.igniter = seq.igniter
         t.faults = faults
+
+    def _stage_actuator_tests(self, i: EcuInputs) -> None:
+        """In OFF with no arm or stop request, a bench test function (ecu.actuator_tests): the
+        igniter, the starter at its duty or the pump at its voltage, for the test's time."""
+        s = self.s
+        p = self.p
+        t = self.t
+        seq = self.seq
+        allowed = 1 if (t.new_mode == M.OFF and not s.arm and not s.stop) else 0
+        test = T.actuator_test_step(s, p, i.test_request, i.test_level, i.test_ms, allowed)
+        if test == T.GLOW:
+            seq.igniter = 1
+        elif test == T.STARTER:
+            seq.starter_cpct = clamp(s.test_level_held, 0, T.level_max(p, T.STARTER))
+        elif test == T.PRIME:
+            t.pump_mv = clamp(s.test_level_held, 0, T.level_max(p, T.PRIME))
+            t.duty = pump_duty(s, p, t.pump_mv, s.supply_mv)
+            t.enable = 1
+        s.starter_cpct = seq.starter_cpct
+        s.igniter = seq.igniter
 
     def _stage_health(self, i: EcuInputs) -> None:
         """Pump health, the fault word, the saturation count and the output record."""

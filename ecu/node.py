@@ -5,7 +5,8 @@ units: rpm, 0.1 K, mV, mA, 0.01 %) and checked with its E2E checkers; the per-fr
 of what arrived since the last tick goes to the firmware with the values (see
 :class:`ecu.firmware.EcuInputs`). Outputs go back as EcuStatus and EcuTelemetry when due,
 EcuStarter while the ECU is ARMED or in SHUTDOWN (the start/stop sequencer drives the starter
-and igniter), then EcuActuator last, following :mod:`protocol.lockstep`:
+and igniter) or a bench test function drives them in OFF (and the tick after, which says they
+ended), then EcuActuator last, following :mod:`protocol.lockstep`:
 
 - lockstep: one tick per PlantSensors frame, answered with ActuatorTick = SensorTick; when a
   Demand is due at that tick (and the command node sends ticked demands) the tick waits for it,
@@ -108,6 +109,7 @@ class EcuNode:
         self.ticks = 0  # ticks run
         self.tick = 0  # tick number being answered (lockstep: SensorTick)
         self.telemetry_index = 0
+        self._starter_on = False  # a bench test drove the starter or igniter in OFF last tick
         self.ticked_demands = False  # the command node sends Demand frames with their tick
         self.demand_tick = -1  # DemandTick of the last valid Demand
         self.demand_pending = 0  # valid Demands not yet handed to the firmware (0, 1 or 2)
@@ -332,7 +334,8 @@ class EcuNode:
             self.telemetry.pack_raw(raw)
             send(self.telemetry.frame_id, self.telemetry.data)
             self.telemetry_index = j + 1 if j + 1 < TELEMETRY_COUNT else 0
-        if o.mode == M.ARMED or o.mode == M.SHUTDOWN:
+        drive = o.mode == M.OFF and (o.starter_cpct > 0 or o.igniter)
+        if o.mode == M.ARMED or o.mode == M.SHUTDOWN or drive or self._starter_on:
             raw = self._starter_raw
             raw[0] = o.igniter
             raw[1] = self.tick
@@ -341,6 +344,7 @@ class EcuNode:
             raw[4] = o.seq_reason
             self.starter.pack_raw(raw)
             send(self.starter.frame_id, self.starter.data)
+        self._starter_on = drive  # a test's outputs in OFF: one more frame says they ended
         raw = self._actuator_raw
         raw[0] = o.pump_enable
         raw[1] = o.mode

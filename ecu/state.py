@@ -76,6 +76,10 @@ class EcuState:
         # (0.01 %N), the last shutdown's reason, a run under way
         "log_runs", "log_run_time_s", "log_run_frac_ticks", "log_starts", "log_aborts",
         "log_last_max_egt_dk", "log_last_max_speed_cpct", "log_last_shutdown", "log_in_run",
+        # bench test functions (ecu.actuator_tests): the test running (0 none), its ticks and
+        # ms left, its level (0.01 % or mV), the last tick's request
+        "test_active", "test_ticks_left", "test_time_left_ms", "test_level_held",
+        "test_request_last",
     )  # fmt: skip
 
     def __init__(self) -> None:

@@ -105,9 +105,19 @@ def _module_ints(module: ModuleType) -> dict[str, int]:
 
 
 def _python_sections() -> list[str]:
+    from ecu import (
+        actuator_tests,
+        fixedpoint,
+        inlet,
+        limiters,
+        logbook,
+        modes,
+        params,
+        pi_design,
+        state,
+    )
     from ecu import faults as F
     from ecu import firmware as FW
-    from ecu import fixedpoint, inlet, limiters, logbook, modes, params, pi_design, state
     from ecu import start_sequencer as Q
     from protocol.e2e import E2EStatus
 
@@ -141,6 +151,20 @@ def _python_sections() -> list[str]:
         "the last shutdown's reason in the logbook (ecu.logbook SD_*)",
         ((f"ECU_SD_{n}", getattr(logbook, f"SD_{n}")) for n in logbook.SHUTDOWN_NAMES),
     )
+    out += _enum(
+        "bench test functions (ecu.actuator_tests)",
+        ((f"ECU_TEST_{n}", getattr(actuator_tests, n)) for n in actuator_tests.NAMES),
+    )
+    out += [
+        "/* the longest test of each kind, ms, and of all in ticks (ecu.actuator_tests) */",
+        *(
+            _define(f"ECU_TEST_MAX_MS_{n}", _c_int(actuator_tests.MAX_MS[k]))
+            for k, n in enumerate(actuator_tests.NAMES)
+            if k
+        ),
+        _define("ECU_TEST_MAX_TICKS", _c_int(actuator_tests.MAX_TICKS)),
+        "",
+    ]
     out += _enum(
         "controllers (ecu.params CTRL_*, in the order of ecu.params.CONTROLLERS)",
         (

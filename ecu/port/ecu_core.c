@@ -1372,6 +1372,78 @@ static void stage_pump_driver(ecu_t *e, tick_vars_t *t)
     }
 }
 
+/* bench test functions (ecu/actuator_tests.py) */
+static int32_t test_level_max(const ecu_params_t *p, int32_t test)
+{
+    if (test == ECU_TEST_STARTER) {
+        return p->seq_start_cpct;
+    }
+    return test == ECU_TEST_PRIME ? volts_q24_to_mv(p->seq_ign_v_max_q24) : 0;
+}
+
+static int test_request_ok(const ecu_params_t *p, int32_t test, int32_t level, int32_t ms)
+{
+    static const int32_t max_ms[4] = {0, ECU_TEST_MAX_MS_GLOW, ECU_TEST_MAX_MS_STARTER,
+                                      ECU_TEST_MAX_MS_PRIME};
+    if (test < ECU_TEST_GLOW || test > ECU_TEST_PRIME || ms < 1 || ms > max_ms[test]) {
+        return 0;
+    }
+    return test == ECU_TEST_GLOW || (level >= 1 && level <= test_level_max(p, test));
+}
+
+/* start, hold or end the test (allowed: OFF with no arm or stop request); the test that drives
+   the outputs this tick (ECU_TEST_NONE: none) */
+static int32_t actuator_test_step(ecu_t *e, const ecu_inputs_t *in, int allowed)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t test;
+    int fresh = in->test_request != s->test_request_last;
+    s->test_request_last = in->test_request;
+    if (!allowed || in->test_request == ECU_TEST_NONE) {
+        s->test_active = ECU_TEST_NONE;
+        s->test_ticks_left = 0;
+    } else if (fresh && test_request_ok(p, in->test_request, in->test_level, in->test_ms)) {
+        s->test_active = in->test_request;
+        s->test_level_held = in->test_level;
+        s->test_ticks_left = (in->test_ms * p->rate_hz + 999) / 1000;
+    }
+    test = s->test_active;
+    if (test < ECU_TEST_GLOW || test > ECU_TEST_PRIME || s->test_ticks_left < 1 ||
+        s->test_ticks_left > ECU_TEST_MAX_TICKS) {
+        test = ECU_TEST_NONE; /* none running (or a state no start leaves: ended) */
+        s->test_active = ECU_TEST_NONE;
+        s->test_ticks_left = 0;
+    } else {
+        s->test_ticks_left--;
+        if (s->test_ticks_left == 0) {
+            s->test_active = ECU_TEST_NONE; /* its time is up: this tick is its last */
+        }
+    }
+    s->test_time_left_ms = s->test_ticks_left * 1000 / p->rate_hz;
+    return test;
+}
+
+/* in OFF with no arm or stop request, a bench test function: the igniter, the starter at its
+   duty or the pump at its voltage, for the test's time */
+static void stage_actuator_tests(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int allowed = t->new_mode == ECU_OFF && !s->arm && !s->stop;
+    int32_t test = actuator_test_step(e, in, allowed);
+    if (test == ECU_TEST_GLOW) {
+        s->igniter = 1;
+    } else if (test == ECU_TEST_STARTER) {
+        s->starter_cpct =
+            (int32_t)clamp(s->test_level_held, 0, test_level_max(p, ECU_TEST_STARTER));
+    } else if (test == ECU_TEST_PRIME) {
+        t->pump_mv = (int32_t)clamp(s->test_level_held, 0, test_level_max(p, ECU_TEST_PRIME));
+        t->duty = pump_duty(e, t->pump_mv, s->supply_mv);
+        t->enable = 1;
+    }
+}
+
 /* pump health, the fault word, the saturation count and the output record */
 static void stage_health(ecu_t *e, const ecu_inputs_t *in, tick_vars_t *t)
 {
@@ -1498,6 +1570,7 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
         stage_limit_selection(e, &t);
     }
     stage_pump_driver(e, &t);
+    stage_actuator_tests(e, in, &t);
     stage_health(e, in, &t);
     stage_logbook(e, &t);
     e->rate_q24 = t.rate;

@@ -49,7 +49,7 @@
  * definitions (python -m ecu.port.codegen): array lengths ECU_N_THETA, ECU_PI_POINTS,
  * ECU_SCHED_POINTS, ECU_RATE_BUF_LEN; theta slots ECU_AP21..ECU_KB; modes ECU_OFF..ECU_FAULT;
  * sequencer states ECU_SEQ_*; abort reasons ECU_ABORT_*; the logbook's length ECU_LOG_ABORTS and
- * shutdown reasons ECU_SD_*; controllers ECU_CTRL_*; E2E statuses
+ * shutdown reasons ECU_SD_*; the bench test functions ECU_TEST_* and their limits; controllers ECU_CTRL_*; E2E statuses
  * ECU_E2E_* (OK: a fresh valid frame, its values are used; REPEATED, WRONGSEQUENCE, WRONGCRC:
  * rejected, the values are not used; NONEWDATA: nothing arrived); loop owners ECU_OWNER_*; fault
  * word bits ECU_FAULT_*; the ECU's frame IDs, E2E data IDs and signal ranges.
@@ -127,7 +127,8 @@ extern "C" {
     X(mode) X(faults) X(sat_events) X(ticks) \
     X(log_runs) X(log_run_time_s) X(log_run_frac_ticks) X(log_starts) \
     A(log_aborts, ECU_LOG_ABORTS) X(log_last_max_egt_dk) X(log_last_max_speed_cpct) \
-    X(log_last_shutdown) X(log_in_run)
+    X(log_last_shutdown) X(log_in_run) \
+    X(test_active) X(test_ticks_left) X(test_time_left_ms) X(test_level_held) X(test_request_last)
 
 /* ecu.firmware.EcuInputs: raw integers in the CAN contract's units */
 #define ECU_INPUT_FIELDS(X, A) \
@@ -142,7 +143,10 @@ extern "C" {
     X(stop)          /* stop request bit */ \
     X(sensor_status) /* ECU_E2E_* of the sensor frame (speed, EGT), expected every tick */ \
     X(analog_status) /* ECU_E2E_* of the analog frame (supply, current), every 50 ms */ \
-    X(demand_status) /* ECU_E2E_* of the demand frame (demand, open loop, arm, stop) */
+    X(demand_status) /* ECU_E2E_* of the demand frame (demand, open loop, arm, stop) */ \
+    X(test_request)  /* bench test function, in OFF only: ECU_TEST_* (0: none / end) */ \
+    X(test_level)    /* its level: starter duty 0.01 % (ECU_TEST_STARTER), pump mV (PRIME) */ \
+    X(test_ms)       /* its duration, ms */
 
 /* ecu.firmware.EcuOutputs */
 #define ECU_OUTPUT_FIELDS(X, A) \

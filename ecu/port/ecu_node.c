@@ -56,6 +56,7 @@ void ecu_node_init(ecu_node_t *n, ecu_t *e, const ecu_node_config_t *c)
     n->held[0].demand_cpct = n->held[0].open_loop_mv = n->held[0].tick = 0u;
     n->held[1] = n->held[0];
     n->ticks = 0u;
+    n->starter_on = 0u;
     n->late_sensor_frames = 0u;
     n->demand_waits = 0u;
     n->demand_tick = -1;
@@ -138,13 +139,13 @@ static void apply_demand(ecu_node_t *n)
 }
 
 /* _run_tick: one firmware tick, then EcuStatus and EcuTelemetry when due, EcuStarter in ARMED
- * and SHUTDOWN, EcuActuator last */
+ * and SHUTDOWN or while a bench test function drives the starter or igniter, EcuActuator last */
 static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
 {
     const ecu_outputs_t *o;
     const ecu_inputs_t *in = &n->in;
     ecu_inputs_t bench;
-    int count = 0;
+    int count = 0, drive;
     n->waiting = 0u;
     if (n->demand_pending) {
         apply_demand(n);
@@ -175,11 +176,13 @@ static int run_tick(ecu_node_t *n, ecu_can_frame_t out[ECU_NODE_MAX_OUT])
         ecu_frames_telemetry(&n->frames, n->ecu, out[count].data);
         count++;
     }
-    if (o->mode == ECU_ARMED || o->mode == ECU_SHUTDOWN) {
-        out[count].id = ECU_FRAME_STARTER;
+    drive = o->mode == ECU_OFF && (o->starter_cpct > 0 || o->igniter);
+    if (o->mode == ECU_ARMED || o->mode == ECU_SHUTDOWN || drive || n->starter_on) {
+        out[count].id = ECU_FRAME_STARTER; /* (a test's outputs, and their end, in OFF) */
         ecu_frames_starter(&n->frames, o, out[count].data);
         count++;
     }
+    n->starter_on = (uint8_t)drive;
     out[count].id = ECU_FRAME_ACTUATOR; /* ActuatorTick: o->tick, the echo of in.tick */
     ecu_frames_actuator(&n->frames, o, out[count].data);
     count++;

@@ -123,6 +123,7 @@ typedef struct {
     uint8_t sensor_seen;       /* a sensor frame has come */
     uint8_t own_clock;         /* lockstep, plant silent: ticking on ecu_node_timeout() */
     uint8_t ran;               /* a tick has run (EcuNode.ticks > 0) */
+    uint8_t starter_on;        /* a bench test drove the starter or igniter in OFF last tick */
     ecu_xcp_t *xcp;            /* the XCP slave (ecu_node_attach_xcp), or NULL */
 } ecu_node_t;
 

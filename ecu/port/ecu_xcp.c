@@ -583,6 +583,38 @@ static int take_demand(ecu_xcp_t *x)
     return 0;
 }
 
+/* BenchControl.test: a bench test function (0: end the test) at the level and for the time set */
+static int bench_test(ecu_xcp_t *x, int32_t kind)
+{
+    static const int32_t max_ms[4] = {0, ECU_TEST_MAX_MS_GLOW, ECU_TEST_MAX_MS_STARTER,
+                                      ECU_TEST_MAX_MS_PRIME};
+    const ecu_params_t *p = x->c.params;
+    int32_t top;
+    if (kind < ECU_TEST_NONE || kind > ECU_TEST_PRIME) {
+        return ERR(ECU_XCP_ERR_OUT_OF_RANGE);
+    }
+    if (kind == ECU_TEST_NONE) {
+        x->test_request = ECU_TEST_NONE;
+        return 0;
+    }
+    if (x->ecu->o.mode != ECU_OFF || can_present(x) || (x->engaged && x->arm)) {
+        return ERR(ECU_XCP_ERR_ACCESS_DENIED);
+    }
+    top = kind == ECU_TEST_STARTER ? p->seq_start_cpct
+          : kind == ECU_TEST_PRIME
+              ? (int32_t)(((int64_t)p->seq_ign_v_max_q24 * 1000 + (1 << 23)) >> 24)
+              : 0;
+    if (x->test_ms < 1 || x->test_ms > max_ms[kind] ||
+        (kind != ECU_TEST_GLOW && (x->test_level < 1 || x->test_level > top))) {
+        return ERR(ECU_XCP_ERR_OUT_OF_RANGE);
+    }
+    (void)take_demand(x);
+    x->stop_held = 0;
+    x->stop = 0;
+    x->test_request = (uint8_t)kind;
+    return 0;
+}
+
 /* _write_bench: words n from bench word `first` */
 static NOINLINE int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *data)
 {
@@ -590,10 +622,11 @@ static NOINLINE int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *d
     for (k = first; k < first + n; k++, data += 4) {
         int32_t value = (int32_t)le32(data);
         if (k == ECU_XCP_BENCH_STOP) {
-            if (value) { /* stop: always taken, held until the next arm */
+            if (value) { /* stop: always taken, held until the next arm; it ends a test */
                 x->stop_held = 1;
                 x->arm = 0;
                 x->stop = 1;
+                x->test_request = ECU_TEST_NONE;
             }
             continue;
         }
@@ -612,12 +645,13 @@ static NOINLINE int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *d
                 return ERR(ECU_XCP_ERR_ACCESS_DENIED);
             }
             x->stop_held = 0;
+            x->test_request = ECU_TEST_NONE; /* an arm ends a test */
             if (!can_present(x)) {
                 (void)take_demand(x);
                 x->arm = 1;
                 x->stop = 0;
             }
-        } else { /* throttle, 0.01 %N */
+        } else if (k == ECU_XCP_BENCH_THROTTLE) { /* 0.01 %N */
             if (value < 0 || value > x->max_cpct) {
                 return ERR(ECU_XCP_ERR_OUT_OF_RANGE);
             }
@@ -626,6 +660,20 @@ static NOINLINE int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *d
                 return r;
             }
             x->throttle_cpct = value < x->idle_cpct ? x->idle_cpct : value;
+        } else if (k == ECU_XCP_BENCH_TEST) {
+            r = bench_test(x, value);
+            if (r) {
+                return r;
+            }
+        } else { /* the next test's level or duration */
+            if (value < 0) {
+                return ERR(ECU_XCP_ERR_OUT_OF_RANGE);
+            }
+            if (k == ECU_XCP_BENCH_TEST_LEVEL) {
+                x->test_level = value;
+            } else {
+                x->test_ms = value;
+            }
         }
     }
     return 0;
@@ -659,6 +707,18 @@ const ecu_inputs_t *ecu_xcp_inputs(ecu_xcp_t *x, ecu_inputs_t *in, ecu_inputs_t 
     } else if (x->stop_held) {
         in->stop = 1;
         x->ecu->s.stop = 1;
+    }
+    if (x->test_taken && x->ecu->s.test_active == ECU_TEST_NONE) {
+        x->test_request = ECU_TEST_NONE; /* over (its time up, or ended by the firmware) */
+    }
+    x->test_taken = x->test_request != ECU_TEST_NONE;
+    in->test_request = x->test_request;
+    in->test_level = x->test_level;
+    in->test_ms = x->test_ms;
+    if (ticked != in) {
+        bench->test_request = x->test_request;
+        bench->test_level = x->test_level;
+        bench->test_ms = x->test_ms;
     }
     return ticked;
 }
@@ -720,8 +780,12 @@ static void meas_image(ecu_xcp_t *x, uint8_t img[ECU_XCP_MEAS_SIZE])
 
 static int32_t bench_word(const ecu_xcp_t *x, uint32_t k)
 {
-    return k == ECU_XCP_BENCH_ARM ? (x->engaged ? x->arm : 0)
-           : k == ECU_XCP_BENCH_STOP ? x->stop_held : x->throttle_cpct;
+    return k == ECU_XCP_BENCH_ARM        ? (x->engaged ? x->arm : 0)
+           : k == ECU_XCP_BENCH_STOP       ? x->stop_held
+           : k == ECU_XCP_BENCH_THROTTLE   ? x->throttle_cpct
+           : k == ECU_XCP_BENCH_TEST_LEVEL ? x->test_level
+           : k == ECU_XCP_BENCH_TEST_MS    ? x->test_ms
+                                           : x->ecu->s.test_active;
 }
 
 /* byte `off` of region `region` (img: the measurement image, packed by the caller) */

@@ -130,6 +130,9 @@ typedef struct {
     /* the bench demand source (ecu/service/bench_demand.py, bench_control.py) */
     int32_t can_age, throttle_cpct, idle_cpct, max_cpct, hold_ticks;
     uint8_t engaged, arm, stop, stop_held, last_mode;
+    /* the bench test function requested (ECU_TEST_*), its level and duration (bench_control.py) */
+    int32_t test_level, test_ms;
+    uint8_t test_request, test_taken;
     /* the measurement image's demand source, as of the tick it was first read in */
     uint8_t meas_source;
     int32_t meas_tick;

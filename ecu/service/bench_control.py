@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from ecu import actuator_tests as T
 from ecu import modes as M
 from ecu.firmware import Ecu, EcuInputs
 from ecu.service import bench_demand as BD
@@ -41,6 +42,12 @@ class BenchControl:
         self.demand = BD.BenchDemand(ecu.p)
         self.stop_held = False
         self.on_switch = on_switch
+        # the bench test function requested (ecu.actuator_tests), its level and duration; the
+        # request is dropped once the firmware has taken it and the test is over
+        self.test_request = T.NONE
+        self.test_level = 0
+        self.test_ms = 0
+        self._test_taken = False
 
     @property
     def source(self) -> int:
@@ -63,6 +70,15 @@ class BenchControl:
         if self.stop_held and not self.demand.engaged:
             inputs.stop = 1
             ecu.s.stop = 1
+        if self._test_taken and ecu.s.test_active == T.NONE:
+            self.test_request = T.NONE  # over (its time up, or ended by the firmware)
+        self._test_taken = ticking and self.test_request != T.NONE
+        for i in (inputs, ticked):
+            i.test_request, i.test_level, i.test_ms = (
+                self.test_request,
+                self.test_level,
+                self.test_ms,
+            )
         return ticked
 
     def _take_demand(self, what: str) -> None:
@@ -91,16 +107,55 @@ class BenchControl:
                 "arm: no valid speed and EGT readings yet (is the engine's node on the bus?)",
             )
         self.stop_held = False
+        self.test_request = T.NONE  # an arm ends a test
         if not self.demand.can_present:
             self._take_demand("arm")
             self.demand.arm = 1
             self.demand.stop = 0
 
     def stop(self) -> None:
-        """A stop request: always accepted, held until the next arm."""
+        """A stop request: always accepted, held until the next arm; it ends a test."""
         self.stop_held = True
         self.demand.arm = 0
         self.demand.stop = 1
+        self.test_request = T.NONE
+
+    def set_test(self, level: int | None = None, ms: int | None = None) -> None:
+        """The next test's level (starter duty 0.01 %, pump mV) and duration (ms), checked
+        when the test is asked for; :class:`BenchRefused` for a negative one."""
+        for name, value in (("level", level), ("ms", ms)):
+            if value is not None and value < 0:
+                raise BenchRefused("OUT_OF_RANGE", f"test {name}={value}: not negative")
+        self.test_level = self.test_level if level is None else level
+        self.test_ms = self.test_ms if ms is None else ms
+
+    def test(self, kind: int) -> None:
+        """A bench test function (ecu.actuator_tests: 1 glow plug, 2 starter spin, 3 pump
+        prime) at the level and for the time set, or 0: end the test. Refused outside OFF, with
+        the arm held or while CAN Demand frames are present (REFUSED), and beyond its limits
+        (OUT_OF_RANGE); the firmware refuses it too outside OFF."""
+        if not T.NONE <= kind <= T.PRIME:
+            raise BenchRefused("OUT_OF_RANGE", f"test={kind}: 0 (end), 1 glow, 2 starter, 3 prime")
+        if kind == T.NONE:
+            self.test_request = T.NONE
+            return
+        mode = self.ecu.out.mode
+        if mode != M.OFF:
+            raise BenchRefused("REFUSED", f"test: the ECU is in {M.NAMES[mode]}, not OFF")
+        if self.demand.can_present or (self.demand.engaged and self.demand.arm):
+            raise BenchRefused("REFUSED", "test: an arm or CAN Demand frames are present")
+        p = self.ecu.p
+        if not T.request_ok(p, kind, self.test_level, self.test_ms):
+            top = T.level_max(p, kind)
+            raise BenchRefused(
+                "OUT_OF_RANGE",
+                f"test {T.NAMES[kind]}: 1..{T.MAX_MS[kind]} ms"
+                + (f", level 1..{top}" if kind != T.GLOW else ""),
+            )
+        self._take_demand("test")
+        self.stop_held = False
+        self.demand.stop = 0
+        self.test_request = kind
 
     def throttle(self, pct: float) -> None:
         """The bench's speed demand, %N (0: idle); :class:`BenchRefused` says why not."""

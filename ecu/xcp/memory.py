@@ -7,8 +7,8 @@
 - measurement, 0x20010000: the firmware's state after its last tick (:data:`MEASUREMENTS`), each
   in its own C type (UBYTE codes and flags, 16-bit words where the CAN contract's range fits,
   int32 otherwise), at an address aligned to its size; read only;
-- bench, 0x20020000: the bench's arm, stop and throttle (:data:`BENCH`), one int32 each; a read
-  gives the bench's state, a write is the bench command;
+- bench, 0x20020000: the bench's arm, stop and throttle and its test functions (:data:`BENCH`),
+  one int32 each; a read gives the bench's state, a write is the bench command;
 - logbook, 0x20030000: the engine's logbook (ecu.logbook, :data:`LOGBOOK`), one int32 word
   each in its stored order; read only;
 - axis points, 0x08000000: the fuel schedules' breakpoints, %N corrected (Q7.24); read only;
@@ -31,6 +31,7 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ecu import actuator_tests as T
 from ecu import logbook as L
 from ecu import modes as M
 from ecu import start_sequencer as Q
@@ -145,6 +146,8 @@ MEASUREMENTS: tuple[Measurement, ...] = (
     _m("demand", S32, "speed demand in force", "%", Q24, -128, 128),
     _m("demand_source", U8, "demand source", "", 1.0, 0, 2, BD.SOURCE_NAMES),
     _m("egt_start_target", S16, "the start's EGT target on the day", "K", 0.1, 0, 3276.7),
+    _m("test_active", U8, "the bench test function running", "", 1.0, 0, 3, T.NAMES),
+    _m("test_time_left", U16, "the bench test's time left", "ms", 1.0, 0, 65535),
 )
 MEAS_INDEX = {m.name: k for k, m in enumerate(MEASUREMENTS)}
 
@@ -187,6 +190,7 @@ SOURCES: dict[str, str] = {
     "obs_speed_rate": "s.obs_v_q24", "sat_events": "out.sat_events",
     "inputs_valid": "out.inputs_valid", "demand": "s.demand_q24",
     "demand_source": DEMAND_SOURCE, "egt_start_target": "s.seq_target_dk",
+    "test_active": "s.test_active", "test_time_left": "s.test_time_left_ms",
 }  # fmt: skip
 if tuple(SOURCES) != tuple(m.name for m in MEASUREMENTS):
     raise RuntimeError("ecu.xcp.memory: SOURCES must name every measurement, in order")
@@ -245,8 +249,13 @@ BENCH: tuple[BenchWord, ...] = (
     BenchWord("bench_stop", "read: a stop held; write 1: stop (always accepted)", "", 1.0, 0, 1),
     BenchWord("bench_throttle", "read: the bench's speed demand; write: the throttle (0: idle)",
               "%", 0.01, 0, 120),
+    BenchWord("bench_test_level", "the next test's level: pump prime mV, starter duty 0.01 %",
+              "", 1.0, 0, 10000),
+    BenchWord("bench_test_ms", "the next test's duration", "ms", 1.0, 0, 15000),
+    BenchWord("bench_test", "read: the test running (0 none); write 1 glow plug, 2 starter "
+              "spin, 3 pump prime (in OFF), 0 end the test", "", 1.0, 0, 3),
 )  # fmt: skip
-BENCH_ARM, BENCH_STOP, BENCH_THROTTLE = range(3)
+BENCH_ARM, BENCH_STOP, BENCH_THROTTLE, BENCH_TEST_LEVEL, BENCH_TEST_MS, BENCH_TEST = range(6)
 
 # the fuel schedules' breakpoints: %N corrected, Q7.24
 AXIS_NAME = "sched_speed_axis"
@@ -351,10 +360,11 @@ class MemoryMap:
         self._meas_tick = -1
 
     def _bench_image(self) -> bytearray:
-        d = self.bench.demand
+        b = self.bench
+        d = b.demand
         struct.pack_into(
-            "<3i", self._bench, 0, d.arm if d.engaged else 0, int(self.bench.stop_held),
-            d.throttle_cpct,
+            "<6i", self._bench, 0, d.arm if d.engaged else 0, int(b.stop_held), d.throttle_cpct,
+            b.test_level, b.test_ms, self.ecu.s.test_active,
         )  # fmt: skip
         return self._bench
 

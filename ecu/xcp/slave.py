@@ -588,8 +588,14 @@ class XcpSlave:
                         raise XcpError(C.Err.OUT_OF_RANGE, "bench_arm: 1 arms, 0 does nothing")
                     if value:
                         bench.arm()
-                else:
+                elif k == MEM.BENCH_THROTTLE:
                     bench.throttle(value / 100)
+                elif k == MEM.BENCH_TEST_LEVEL:
+                    bench.set_test(level=value)
+                elif k == MEM.BENCH_TEST_MS:
+                    bench.set_test(ms=value)
+                else:
+                    bench.test(value)
             except BenchRefused as exc:
                 code = C.Err.OUT_OF_RANGE if exc.reason == "OUT_OF_RANGE" else C.Err.ACCESS_DENIED
                 raise XcpError(code, str(exc)) from None

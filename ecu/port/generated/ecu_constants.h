@@ -74,6 +74,20 @@ enum {
     ECU_SD_FAULT = 5
 };
 
+/* bench test functions (ecu.actuator_tests) */
+enum {
+    ECU_TEST_NONE = 0,
+    ECU_TEST_GLOW = 1,
+    ECU_TEST_STARTER = 2,
+    ECU_TEST_PRIME = 3
+};
+
+/* the longest test of each kind, ms, and of all in ticks (ecu.actuator_tests) */
+#define ECU_TEST_MAX_MS_GLOW 10000
+#define ECU_TEST_MAX_MS_STARTER 15000
+#define ECU_TEST_MAX_MS_PRIME 5000
+#define ECU_TEST_MAX_TICKS 15000
+
 /* controllers (ecu.params CTRL_*, in the order of ecu.params.CONTROLLERS) */
 enum {
     ECU_CTRL_MRAC = 0,

@@ -185,12 +185,15 @@
 #define ECU_XCP_AXIS_BASE 0x08000000u            /* the schedules' breakpoints */
 #define ECU_XCP_TEXT_BASE 0x08001000u            /* identification and names */
 #define ECU_XCP_PARAMS 117                       /* parameters (ecu.service.param_table) */
-#define ECU_XCP_MEAS_SIZE 124                    /* bytes of the measurement region */
-#define ECU_XCP_MEASUREMENTS 38
-#define ECU_XCP_BENCH_WORDS 3
+#define ECU_XCP_MEAS_SIZE 128                    /* bytes of the measurement region */
+#define ECU_XCP_MEASUREMENTS 40
+#define ECU_XCP_BENCH_WORDS 6
 #define ECU_XCP_BENCH_ARM 0
 #define ECU_XCP_BENCH_STOP 1
 #define ECU_XCP_BENCH_THROTTLE 2
+#define ECU_XCP_BENCH_TEST_LEVEL 3
+#define ECU_XCP_BENCH_TEST_MS 4
+#define ECU_XCP_BENCH_TEST 5
 #define ECU_XCP_LOG_WORDS 13                     /* the logbook's words */
 /* the logbook's words (ecu.logbook.word_names): X(member of ecu_t) */
 #define ECU_XCP_LOG_LIST(X) \
@@ -462,6 +465,8 @@ enum {
     X(116, ECU_XCP_SLONG, s.demand_q24) /* demand */ \
     B(120, ECU_XCP_UBYTE) /* demand_source */ \
     X(122, ECU_XCP_SWORD, s.seq_target_dk) /* egt_start_target */ \
+    X(124, ECU_XCP_UBYTE, s.test_active) /* test_active */ \
+    X(126, ECU_XCP_UWORD, s.test_time_left_ms) /* test_time_left */ \
 
 
 /* the run record (ecu.port.xcp_run.run_record): int32 words at these offsets */
