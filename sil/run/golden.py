@@ -9,7 +9,8 @@ Sources:
 - a scripted sequence for what the SIL never does (it arms once and runs): OFF, ARMED, RUN,
   SHUTDOWN and a latched FAULT, lost and corrupt frames, pump current faults;
 - a scripted start and stop through the start/stop sequencer (ecu.start_sequencer): starts
-  from rest, relights, stops with their cool-downs, every abort.
+  from rest, relights, stops with their cool-downs, every abort;
+- the bench test functions (ecu.actuator_tests) at rest, their refusals and ends, then a start.
 
     python -m sil.run.golden OUT_DIR [NAME ...] [--ticks N]   write the vectors (all: no NAME)
 """
@@ -374,6 +375,60 @@ def record_start_stop(ticks: int) -> Golden:
     return Golden("start-stop", compile_params(p), ecu.rows)
 
 
+# the bench tests' script: (first tick, request, level, ms, arm, stop), held from that tick on
+_BENCH_TEST_SCRIPT = (
+    (20, 1, 0, 1000, 0, 0),  # the glow plug, 1 s
+    (130, 0, 0, 0, 0, 0),
+    (140, 2, 5000, 2000, 0, 0),  # a starter spin at the start's duty, 2 s: the rotor turns
+    (350, 0, 0, 0, 0, 0),
+    (360, 3, 1500, 500, 0, 0),  # a pump prime at 1.5 V, 0.5 s
+    (420, 0, 0, 0, 0, 0),
+    (430, 2, 99999, 1000, 0, 0),  # beyond the starter's duty: refused
+    (440, 1, 0, 20000, 0, 0),  # beyond 10 s: refused
+    (450, 0, 0, 0, 0, 0),
+    (460, 2, 2000, 3000, 0, 0),  # a starter spin ended by a stop request
+    (500, 2, 2000, 3000, 0, 1),
+    (520, 0, 0, 0, 0, 0),
+    (540, 1, 0, 1000, 0, 0),  # the glow plug ended by an arm: a start from rest to RUN
+    (560, 1, 0, 1000, 1, 0),
+    (600, 3, 1500, 500, 1, 0),  # a request while ARMED: refused by the firmware
+    (900, 0, 0, 0, 0, 1),  # stop: SHUTDOWN, cool-down
+    (960, 0, 0, 0, 0, 0),
+)
+
+
+def record_bench_tests(ticks: int) -> Golden:
+    """The bench test functions (ecu.actuator_tests) on :class:`StartEngine`, with the start's
+    parameters of START_STOP_PARAMS: the glow plug, a starter spin (the rotor turns and runs
+    down), a pump prime, two requests beyond their limits, a test ended by a stop and one by an
+    arm, which starts the engine to RUN; a request in ARMED; a stop and its cool-down."""
+    p = START_STOP_PARAMS
+    ecu = RecordingEcu(p)
+    o = ecu.out
+    engine = StartEngine()
+    steps = {k: rest for k, *rest in _BENCH_TEST_SCRIPT}
+    row = [0, 0, 0, 0, 0]
+    i = EcuInputs()
+    dt = 1.0 / p.rate_hz
+    for k in range(ticks):
+        row = steps.get(k, row)
+        i.test_request, i.test_level, i.test_ms, i.arm, i.stop = row
+        i.tick = k % 65536
+        noise = (k * 7919) % 41 - 20 if engine.n_pct > 0.5 else 0
+        i.speed_rpm = max(0, round(engine.n_pct * 1125.0) + noise)
+        i.egt_dk = round(engine.egt_k * 10.0)
+        i.supply_mv = 22200
+        i.pump_ma = (1050 + 60 * o.pump_mv // 1000) if o.pump_enable else 0
+        i.demand_cpct = 4500
+        i.open_loop_mv = 0
+        i.sensor_status = E2E_OK
+        i.analog_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        i.demand_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
+        ecu.tick(i)
+        engine.step(o, dt)
+    return Golden("bench-tests", compile_params(p), ecu.rows)
+
+
 _HOT_LIMITS = """
 description = "MRAC, hot day, speed limit steps up and down fast: limit loops, EGT line, allowance"
 duration_s = 40
@@ -534,6 +589,7 @@ SOURCES: dict[str, Source] = {
     "chop-pi": _scenario("chop-pi", _CHOP_PI, 1200),
     "modes": Source(record_modes, 2400),
     "start-stop": Source(record_start_stop, 2600),
+    "bench-tests": Source(record_bench_tests, 1200),
 }
 
 
