@@ -38,6 +38,7 @@ class Service(IntEnum):
     PARAM_SAVE = 0x13  # -> {"slot", "sequence", "crc"} once written to flash (needs the unlock)
     FAULT_LOG_READ = 0x20  # {"start": i} -> {"total", "entries": [...]}
     FAULT_LOG_CLEAR = 0x21  # -> {"cleared": n}
+    LOGBOOK_READ = 0x22  # -> [the engine's logbook] (ecu.logbook.word_names order)
     UNLOCK_SEED = 0x30  # -> {"seed": s}
     UNLOCK_KEY = 0x31  # {"key": k} -> {"unlocked": true, "timeout_s"}
     ARM = 0x40  # arm request (needs the unlock)

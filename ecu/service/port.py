@@ -189,6 +189,7 @@ class ServicePort:
             Service.PARAM_SAVE: self._param_save,
             Service.FAULT_LOG_READ: self._fault_log_read,
             Service.FAULT_LOG_CLEAR: self._fault_log_clear,
+            Service.LOGBOOK_READ: self._logbook_read,
             Service.UNLOCK_SEED: self._unlock_seed,
             Service.UNLOCK_KEY: self._unlock_key,
             Service.ARM: self._arm,
@@ -455,6 +456,11 @@ class ServicePort:
         body = {"slot": slot.index, "sequence": slot.sequence, "param_crc": self.table.crc()}
         self._respond(self._save_request, Status.OK, body)
         self._writer = self._save_request = self.boot.saving = None
+
+    def _logbook_read(self, msg: Message) -> list[int]:
+        """The engine's logbook as the firmware holds it: values only, in the order of
+        ecu.logbook.word_names (names would not fit a frame)."""
+        return L.stored_words(self.ecu.s)
 
     def _fault_log_read(self, msg: Message) -> dict:
         start = _arg(msg.body, "start", int, 0)
