@@ -1,9 +1,81 @@
-"""Helpers every test folder may use, as fixtures."""
+"""Helpers every test folder may use, as fixtures: the `sil` command in a process of its own
+(``sil``, ``sil_process``), a loopback bus of a test's own (``udp_spec``, ``udp_group``), the first
+difference of two logs."""
 
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+
+SIL = (sys.executable, "-m", "sil.cli")  # the `sil` command of this interpreter
+
+
+def _sil(
+    *args: str,
+    timeout: float | None = 300,
+    env: dict[str, str] | None = None,
+    cwd: str | Path | None = None,
+    input: str | None = None,
+) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [*SIL, *args], capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd,
+        input=input,
+    )  # fmt: skip
+
+
+def _sil_process(
+    *args: str,
+    stdout: int | None = subprocess.PIPE,
+    stderr: int | None = subprocess.PIPE,
+    env: dict[str, str] | None = None,
+    cwd: str | Path | None = None,
+) -> subprocess.Popen:
+    return subprocess.Popen(
+        [*SIL, *args], stdout=stdout, stderr=stderr, text=True, env=env, cwd=cwd
+    )
+
+
+def _udp_group() -> tuple[str, int]:
+    rng = random.Random(os.getpid() ^ time.time_ns())
+    return f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", rng.randrange(20000, 60000)
+
+
+def _udp_spec() -> str:
+    group, port = _udp_group()
+    return f"udp:{group}@{port}"
+
+
+@pytest.fixture(scope="session")
+def sil() -> Callable[..., subprocess.CompletedProcess]:
+    """``sil(*args, timeout=300, env=None, cwd=None, input=None)``: the `sil` command in a
+    process of its own, run to its end, its output kept as text (``timeout=None``: no limit)."""
+    return _sil
+
+
+@pytest.fixture(scope="session")
+def sil_process() -> Callable[..., subprocess.Popen]:
+    """``sil_process(*args, stdout=PIPE, stderr=PIPE, env=None, cwd=None)``: the `sil` command
+    started in a process of its own, its output as text; the test waits for it or ends it."""
+    return _sil_process
+
+
+@pytest.fixture(scope="session")
+def udp_spec() -> Callable[[], str]:
+    """``udp_spec()``: a loopback bus spec no other test uses."""
+    return _udp_spec
+
+
+@pytest.fixture
+def udp_group() -> tuple[str, int]:
+    """A loopback multicast group and port no other test uses."""
+    return _udp_group()
 
 
 def _first_difference(a: bytes, b: bytes) -> str | None:

@@ -1,22 +1,21 @@
 """The `sil` command line: help, the protocol self-check, clear errors."""
 
+import functools
 import json
-import subprocess
-import sys
 
 import pytest
 
 from sil.cli import build_parser, main
 
 
-def _sil(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=120
-    )
+@pytest.fixture
+def sil(sil):
+    """tests/conftest.py's ``sil`` with 120 s for a command."""
+    return functools.partial(sil, timeout=120)
 
 
-def test_help_lists_every_subcommand():
-    result = _sil("--help")
+def test_help_lists_every_subcommand(sil):
+    result = sil("--help")
     assert result.returncode == 0
     sub = build_parser()._subparsers._group_actions[0]
     for name in sub.choices:
@@ -32,30 +31,30 @@ def test_every_subcommand_has_help(name, capsys):
     assert "usage: sil" in capsys.readouterr().out
 
 
-def test_selfcheck_on_the_default_bus():
-    result = _sil("selfcheck")
+def test_selfcheck_on_the_default_bus(sil):
+    result = sil("selfcheck")
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("bus: ")
     assert "self-check passed" in result.stdout
 
 
-def test_selfcheck_json():
-    result = _sil("selfcheck", "--bus", "virtual:cli_json", "--json")
+def test_selfcheck_json(sil):
+    result = sil("selfcheck", "--bus", "virtual:cli_json", "--json")
     report = json.loads(result.stdout)
     assert result.returncode == 0 and report["ok"]
     assert report["e2e_cases"]["corrupted"] == "WRONGCRC"
     assert len(report["messages"]) >= 9
 
 
-def test_bad_bus_is_one_line_and_nonzero():
-    result = _sil("selfcheck", "--bus", "nonsense:x")
+def test_bad_bus_is_one_line_and_nonzero(sil):
+    result = sil("selfcheck", "--bus", "nonsense:x")
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0
     assert "unknown interface 'nonsense'" in result.stderr
 
 
-def test_bench_codec_json():
-    result = _sil("bench", "codec", "--quick", "--json")
+def test_bench_codec_json(sil):
+    result = sil("bench", "codec", "--quick", "--json")
     figures = json.loads(result.stdout)
     assert figures["codec_encode_us"] > 0 and figures["cantools_decode_us"] > 0
 
@@ -70,12 +69,12 @@ def test_bench_codec_json():
         (("plant",), "gs_usb:0", "gs_usb driver is not installed"),
     ],
 )
-def test_a_missing_bus_driver_is_one_line_and_exit_2(tmp_path, command, spec, words):
+def test_a_missing_bus_driver_is_one_line_and_exit_2(tmp_path, command, spec, words, sil):
     log = tmp_path / "frames.log"
     log.write_text("(1.000000) can0 100#0011223344556677\n")
     args = [part.format(log=log) for part in command]
     extra = ("--out", str(tmp_path / "run")) if command[0] == "run" else ()
-    result = _sil(*args, "--bus", spec, *extra)
+    result = sil(*args, "--bus", spec, *extra)
     assert result.returncode == 2, result.stderr
     assert result.stderr.count("\n") == 1, result.stderr  # the driver's own warnings swallowed
     assert f"bus {spec}" in result.stderr and words in result.stderr
@@ -83,14 +82,14 @@ def test_a_missing_bus_driver_is_one_line_and_exit_2(tmp_path, command, spec, wo
 
 
 @pytest.mark.parametrize("events", ["{tmp}", "{tmp}/no-such-folder/events.json"])
-def test_bridge_checks_its_events_file_before_it_starts(tmp_path, events):
+def test_bridge_checks_its_events_file_before_it_starts(tmp_path, events, sil):
     import time
 
     faults = tmp_path / "faults.toml"
     faults.write_text('[[bus_fault]]\nkind = "drop"\nids = ["PlantSensors"]\nstart_s = 0\n')
     argv = ["bridge", str(faults), "--bus", "virtual:b1", "--ecu-bus", "virtual:b2"]
     t0 = time.monotonic()
-    result = _sil(*argv, "--duration", "60", "--events", events.format(tmp=tmp_path))
+    result = sil(*argv, "--duration", "60", "--events", events.format(tmp=tmp_path))
     assert result.returncode == 2 and "argument --events" in result.stderr
     assert time.monotonic() - t0 < 30  # refused at once, not after the 60 s bridge
 

@@ -24,7 +24,7 @@ from plant.fast_plant import FastPlant
 from plant.interface import PlantConfig
 from plant.node import PlantNode
 from sil.bench import port as port_bench
-from tests.port.test_sil import _run, _udp_spec
+from tests.port.test_sil import _run
 
 
 @pytest.fixture(scope="module")
@@ -166,10 +166,10 @@ def test_image_has_no_heap_and_fits_a_small_part(toolchains, link):
 @pytest.mark.slow
 @pytest.mark.parametrize("link", ["eth", "slcan"])
 def test_pil_lockstep_can_log_is_byte_identical_and_counts_instructions(
-    tmp_path, first_difference, vectors, toolchains, link
+    tmp_path, first_difference, vectors, toolchains, link, sil, udp_spec
 ):
-    pil_log = _run(tmp_path, "pil", "--bus", _udp_spec(), "--pil-link", link)
-    c_log = _run(tmp_path, "c", "--bus", _udp_spec())
+    pil_log = _run(sil, tmp_path, "pil", "--bus", udp_spec(), "--pil-link", link)
+    c_log = _run(sil, tmp_path, "c", "--bus", udp_spec())
     assert len(c_log.splitlines()) > 1000
     assert first_difference(pil_log, c_log) is None
     summary = json.loads(next(tmp_path.glob("pil-*")).joinpath("summary.json").read_text())

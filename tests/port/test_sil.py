@@ -3,10 +3,6 @@ can.log byte-identical to the Python ECU's, in lockstep over a bus and in proces
 
 import json
 import os
-import random
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -33,30 +29,13 @@ value = 0.7
 """
 
 
-def _sil(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=240,
-        env=env,
-    )
-
-
-def _udp_spec() -> str:
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    return (
-        f"udp:239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}@{rng.randrange(20000, 60000)}"
-    )
-
-
-def _run(tmp_path: Path, impl: str, *mode: str) -> bytes:
+def _run(sil, tmp_path: Path, impl: str, *mode: str) -> bytes:
     scenario = tmp_path / "short.toml"
     scenario.write_text(SCENARIO)
     out = tmp_path / f"{impl}-{'-'.join(mode) or 'lockstep'}"
-    done = _sil(
+    done = sil(
         "run", str(scenario), *mode, "--out", str(out), "--no-plots", "--seed", "3",
-        "--ecu-impl", impl,
+        "--ecu-impl", impl, timeout=240,
     )  # fmt: skip
     ecu_log = out / "ecu.log"
     assert done.returncode == 0, done.stderr + (ecu_log.read_text() if ecu_log.exists() else "")
@@ -66,27 +45,31 @@ def _run(tmp_path: Path, impl: str, *mode: str) -> bytes:
 
 
 @pytest.mark.slow
-def test_lockstep_can_log_is_byte_identical_with_the_c_ecu(tmp_path, first_difference):
-    python_log = _run(tmp_path, "python", "--bus", _udp_spec())
-    c_log = _run(tmp_path, "c", "--bus", _udp_spec())
+def test_lockstep_can_log_is_byte_identical_with_the_c_ecu(
+    tmp_path, first_difference, sil, udp_spec
+):
+    python_log = _run(sil, tmp_path, "python", "--bus", udp_spec())
+    c_log = _run(sil, tmp_path, "c", "--bus", udp_spec())
     assert len(c_log.splitlines()) > 1000
     assert first_difference(c_log, python_log) is None
 
 
-def test_inproc_can_log_is_byte_identical_with_the_c_ecu(tmp_path, first_difference):
-    python_log = _run(tmp_path, "python", "--mode", "inproc")
-    c_log = _run(tmp_path, "c", "--mode", "inproc")
+def test_inproc_can_log_is_byte_identical_with_the_c_ecu(tmp_path, first_difference, sil):
+    python_log = _run(sil, tmp_path, "python", "--mode", "inproc")
+    c_log = _run(sil, tmp_path, "c", "--mode", "inproc")
     assert first_difference(c_log, python_log) is None
 
 
-def test_sil_ecu_without_a_compiler_says_so(tmp_path):
+def test_sil_ecu_without_a_compiler_says_so(tmp_path, sil):
     env = {
         **os.environ,
         "CC": "",
         "PATH": str(tmp_path),  # no compiler on it
         "ECU_PORT_BUILD_DIR": str(tmp_path / "build"),  # nothing built yet
     }
-    done = _sil("ecu", "--bus", "virtual:port-test", "--impl", "c", "--ticks", "1", env=env)
+    done = sil(
+        "ecu", "--bus", "virtual:port-test", "--impl", "c", "--ticks", "1", env=env, timeout=240
+    )
     assert done.returncode == 2
     assert "sil ecu: --impl c: no C compiler found" in done.stderr
 

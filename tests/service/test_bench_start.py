@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import select
 import subprocess
-import sys
 import time
 
 import pytest
@@ -22,23 +21,8 @@ from protocol.codec import Codec
 pytestmark = pytest.mark.slow
 
 
-def _sil(*args: str, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        **kwargs,
-    )
-
-
-def _console(port: str, *args: str) -> dict | list:
-    done = subprocess.run(
-        [sys.executable, "-m", "sil.cli", "console", port, *args, "--json"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-    )
+def _console(sil, port: str, *args: str) -> dict | list:
+    done = sil("console", port, *args, "--json", timeout=30)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
@@ -79,51 +63,55 @@ class Frames:
                     self.modes.append(self._raw[0])
 
 
-def _until(frames: Frames, port: str, done, limit_s: float) -> dict:
+def _until(sil, frames: Frames, port: str, done, limit_s: float) -> dict:
     """Console live samples until ``done(sample)``; the last sample."""
     deadline = time.monotonic() + limit_s
     while True:
         frames.drain()
-        sample = _console(port, "live", "--samples", "1")[0]
+        sample = _console(sil, port, "live", "--samples", "1")[0]
         if done(sample) or time.monotonic() > deadline:
             return sample
         time.sleep(0.5)
 
 
-def test_console_starts_throttles_and_stops_an_engine_on_a_bench(tmp_path):
+def test_console_starts_throttles_and_stops_an_engine_on_a_bench(tmp_path, sil, sil_process):
     spec = unique_udp_spec()
     frames = Frames(spec)
-    plant = _sil("plant", "--bus", str(spec), "--realtime", "--standstill", cwd=tmp_path)
-    ecu = _sil("ecu", "--bus", str(spec), "--mode", "realtime", "--serial", "pty", cwd=tmp_path)
+    plant = sil_process("plant", "--bus", str(spec), "--realtime", "--standstill", cwd=tmp_path)
+    ecu = sil_process(
+        "ecu", "--bus", str(spec), "--mode", "realtime", "--serial", "pty", cwd=tmp_path
+    )
     try:
         port = _service_port(ecu)
-        at_rest = _until(frames, port, lambda v: v["inputs_valid"] == 1, 30)
+        at_rest = _until(sil, frames, port, lambda v: v["inputs_valid"] == 1, 30)
         assert at_rest["mode"] == M.OFF and at_rest["speed"] < 1.0
         assert at_rest["demand_source"] == 2  # NONE: no Demand frames, bench not engaged
 
         t0 = time.monotonic()
-        assert _console(port, "arm") == {"mode_before": "OFF"}
-        idle = _until(frames, port, lambda v: v["mode"] == M.RUN and v["seq_state"] == Q.RUN, 60)
+        assert _console(sil, port, "arm") == {"mode_before": "OFF"}
+        idle = _until(
+            sil, frames, port, lambda v: v["mode"] == M.RUN and v["seq_state"] == Q.RUN, 60
+        )
         start_s = time.monotonic() - t0
         assert idle["mode"] == M.RUN, idle
         assert idle["demand_source"] == 1 and idle["seq_reason"] == Q.NO_ABORT  # BENCH
-        idle = _until(frames, port, lambda v: abs(v["speed"] - v["demand"]) < 3.0, 20)
+        idle = _until(sil, frames, port, lambda v: abs(v["speed"] - v["demand"]) < 3.0, 20)
         assert 30.0 < idle["speed"] < 45.0, idle
 
         t1 = time.monotonic()
-        assert _console(port, "throttle", "70") == {"demand_pct": 70.0, "source": "BENCH"}
-        at_70 = _until(frames, port, lambda v: abs(v["speed"] - 70.0) < 1.0, 30)
+        assert _console(sil, port, "throttle", "70") == {"demand_pct": 70.0, "source": "BENCH"}
+        at_70 = _until(sil, frames, port, lambda v: abs(v["speed"] - 70.0) < 1.0, 30)
         throttle_s = time.monotonic() - t1
         assert abs(at_70["speed"] - 70.0) < 1.0 and at_70["egt"] < at_70["egt_start_limit"]
 
         t2 = time.monotonic()
-        assert _console(port, "stop") == {"mode_before": "RUN"}
-        cooled = _until(frames, port, lambda v: v["mode"] == M.OFF, 150)
+        assert _console(sil, port, "stop") == {"mode_before": "RUN"}
+        cooled = _until(sil, frames, port, lambda v: v["mode"] == M.OFF, 150)
         stop_s = time.monotonic() - t2
         assert cooled["mode"] == M.OFF and cooled["speed"] < 1.0
         assert cooled["egt"] < 373.15 + 15  # cooled under 100 degC (and its re-arm margin)
         frames.drain()
-        faults = _console(port, "faults")
+        faults = _console(sil, port, "faults")
     finally:
         for proc in (ecu, plant):
             proc.terminate()

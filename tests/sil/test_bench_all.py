@@ -3,23 +3,24 @@ docs/benchmarks.md holding exactly the figures the benches printed."""
 
 from __future__ import annotations
 
+import functools
 import json
-import subprocess
-import sys
 from pathlib import Path
+
+import pytest
 
 from sil.bench.suite import markdown, run_all, targets_of
 
 
-def _sil(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, check=False
-    )
+@pytest.fixture
+def sil(sil):
+    """tests/conftest.py's ``sil`` with no time limit of its own for a command."""
+    return functools.partial(sil, timeout=None)
 
 
-def test_all_writes_the_page_with_every_figure_and_target(tmp_path: Path) -> None:
+def test_all_writes_the_page_with_every_figure_and_target(tmp_path: Path, sil) -> None:
     page = tmp_path / "benchmarks.md"
-    done = _sil("bench", "all", "--only", "codec,ecu", "--markdown", str(page), "--json")
+    done = sil("bench", "all", "--only", "codec,ecu", "--markdown", str(page), "--json")
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert result["mode"] == "quick" and result["machine"]["cores"] >= 1
@@ -55,8 +56,8 @@ def test_targets_are_read_from_the_benches_verdicts() -> None:
     }
 
 
-def test_options_of_all_are_checked() -> None:
-    assert _sil("bench", "all", "--only", "codec,nope").returncode == 2
-    assert _sil("bench", "codec", "--markdown", "x.md").returncode == 2
-    missing = _sil("bench", "all", "--only", "codec", "--markdown", "/no/such/dir/b.md")
+def test_options_of_all_are_checked(sil) -> None:
+    assert sil("bench", "all", "--only", "codec,nope").returncode == 2
+    assert sil("bench", "codec", "--markdown", "x.md").returncode == 2
+    missing = sil("bench", "all", "--only", "codec", "--markdown", "/no/such/dir/b.md")
     assert missing.returncode == 2 and "no such folder" in missing.stderr

@@ -2,11 +2,10 @@
 short is an error naming the file and its line or byte, after the frames before it; a frame of
 one of our messages with a wrong length is reported as such, not as an unknown ID."""
 
+import functools
 import gzip
 import json
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import can
@@ -75,7 +74,7 @@ def _last_record_span(data: bytes, fmt: str) -> tuple[int, int, int]:
 
 
 @pytest.mark.parametrize("fmt", [f for f in WRITERS if f != "blf"])
-def test_a_text_log_cut_in_its_last_record_names_the_line_and_keeps_the_rest(tmp_path, fmt):
+def test_a_text_log_cut_in_its_last_record_names_the_line_and_keeps_the_rest(tmp_path, fmt, sil):
     full = _write(tmp_path / f"full.{WRITERS[fmt][1]}", fmt, _messages())
     assert detect_format(full) == (fmt, False)
     assert len(list(read_frames(full))) == FRAMES  # the whole file reads without error
@@ -94,17 +93,17 @@ def test_a_text_log_cut_in_its_last_record_names_the_line_and_keeps_the_rest(tmp
         assert got[-1].data == _messages()[-2].data
         assert str(error).startswith(f"{cut_path}: line {line}: ")
     assert len(cuts) >= 20
-    _commands_report(cut_path, f"{cut_path}: line {line}: ", FRAMES - 1)
+    _commands_report(sil, cut_path, f"{cut_path}: line {line}: ", FRAMES - 1)
 
 
-def _commands_report(path: Path, where: str, frames: int) -> None:
+def _commands_report(sil, path: Path, where: str, frames: int) -> None:
     """`sil replay --dry-run` reports what it read, then the error (exit 1); `sil identify`
     refuses the file (exit 2); both name the file and the position."""
-    dry = _sil("replay", "--dry-run", "--json", str(path))
+    dry = sil("replay", "--dry-run", "--json", str(path))
     assert dry.returncode == 1 and dry.stderr.startswith(f"sil replay: {where}")
     report = json.loads(dry.stdout)
     assert report["frames"] == frames and report["error"].startswith(where)
-    ident = _sil("identify", str(path))
+    ident = sil("identify", str(path))
     assert ident.returncode == 2 and ident.stderr.startswith(f"sil identify: {where}")
 
 
@@ -117,7 +116,7 @@ def test_an_asc_log_without_its_end_of_trigger_block_is_truncated(tmp_path):
     assert len(got) == FRAMES and "truncated ASC: it ends without 'End TriggerBlock'" in str(error)
 
 
-def test_a_blf_log_cut_anywhere_names_the_byte(tmp_path):
+def test_a_blf_log_cut_anywhere_names_the_byte(tmp_path, sil):
     data = _write(tmp_path / "full.blf", "blf", _messages()).read_bytes()
     cut = tmp_path / "cut.blf"
     for size in range(len(data) - 1, 143, -7):  # every 7th size down to the file header
@@ -128,7 +127,8 @@ def test_a_blf_log_cut_anywhere_names_the_byte(tmp_path):
     cut.write_bytes(data[:-1])
     _, error = _read_until_error(cut)
     assert str(error).startswith(f"{cut}: byte {len(data) - 1}: truncated BLF: the header says")
-    _commands_report(cut, f"{cut}: byte {len(data) - 1}: ", FRAMES)  # (its container was whole)
+    # (its container was whole)
+    _commands_report(sil, cut, f"{cut}: byte {len(data) - 1}: ", FRAMES)
 
 
 @pytest.mark.parametrize("fmt", list(WRITERS))
@@ -147,17 +147,17 @@ def test_a_gzipped_log_cut_short_is_an_error_after_what_it_held(tmp_path, fmt):
     assert len(got) > 100 or fmt == "blf"  # (BLF: its one compressed container is cut)
 
 
-def _sil(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=120
-    )
+@pytest.fixture
+def sil(sil):
+    """tests/conftest.py's ``sil`` with 120 s for a command."""
+    return functools.partial(sil, timeout=120)
 
 
 WRONG = "wrong length for PlantSensors (0x100): got 5, expected 8"
 
 
 @pytest.mark.parametrize("fmt", list(WRITERS))
-def test_a_frame_of_ours_with_a_wrong_length_is_reported_as_such(tmp_path, fmt):
+def test_a_frame_of_ours_with_a_wrong_length_is_reported_as_such(tmp_path, fmt, sil):
     path = _write(tmp_path / f"short.{WRITERS[fmt][1]}", fmt, _messages(short_at=10))
     # python-can reads the frame back as written: 5 bytes of PlantSensors' ID
     frame = [m for m in read_frames(path)][10]
@@ -165,7 +165,7 @@ def test_a_frame_of_ours_with_a_wrong_length_is_reported_as_such(tmp_path, fmt):
     assert frame.arbitration_id == db.get_message_by_name("PlantSensors").frame_id
     assert len(frame.data) == 5 and db.get_message_by_name("PlantSensors").length == 8
     position = "frame 11" if fmt == "blf" else None
-    result = _sil("replay", "--dry-run", "--json", str(path))
+    result = sil("replay", "--dry-run", "--json", str(path))
     assert result.returncode == 1
     report = json.loads(result.stdout)
     assert report["wrong_length"] == {WRONG: 1}
@@ -182,15 +182,15 @@ def test_a_frame_of_ours_with_a_wrong_length_is_reported_as_such(tmp_path, fmt):
         text = path.read_text(encoding="latin-1").splitlines()
         number = int(where.group(1).removeprefix("line "))
         assert re.search(r"(^|[^0-9A-Fa-f])(0x)?0*100\b", text[number - 1]), text[number - 1]
-    text_report = _sil("replay", "--dry-run", str(path))
+    text_report = sil("replay", "--dry-run", str(path))
     assert f"(wrong length for PlantSensors (0x100): got 5, expected 8) {frame.data.hex()}" in (
         text_report.stdout
     )
     # the ECU replay and identification refuse it, naming the same place
-    into = _sil("replay", "--into-ecu", "--scenario", "thesis-5.4-staircase", str(path))
+    into = sil("replay", "--into-ecu", "--scenario", "thesis-5.4-staircase", str(path))
     assert into.returncode == 1
     assert into.stderr.startswith(f"sil replay: {path}: {where.group(1)}: {WRONG}")
-    ident = _sil("identify", str(path))
+    ident = sil("identify", str(path))
     assert ident.returncode == 2
     assert ident.stderr.startswith(f"sil identify: {path}: {where.group(1)}: {WRONG}")
 

@@ -10,8 +10,6 @@ import io
 import json
 import random
 import re
-import subprocess
-import sys
 import time
 from contextlib import redirect_stderr
 from datetime import UTC, datetime
@@ -48,12 +46,6 @@ time_s = 12
 target = "PUMP_EFFECTIVENESS"
 value = 0.9
 """
-
-
-def _sil(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=300
-    )
 
 
 def _our_log(path: Path, ticks: int = 50, t0: float = 0.0) -> Path:
@@ -241,7 +233,7 @@ def _trace(path: Path) -> tuple[dict[str, int], np.ndarray]:
 
 
 @pytest.mark.slow
-def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path):
+def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path, sil):
     """A run (in process) from rest, with a fault and a stop; `sil log convert` makes its MF4;
     asammdf's MDF.extract_bus_logging decodes it with the DBC, and every signal at every tick
     it was sent is trace.csv's value there (the trace holds a tick's last frame), within half
@@ -250,9 +242,9 @@ def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path):
     scenario = tmp_path / "short.toml"
     scenario.write_text(SCENARIO)
     out = tmp_path / "run"
-    done = _sil("run", str(scenario), "--mode", "inproc", "--out", str(out), "--no-plots")
+    done = sil("run", str(scenario), "--mode", "inproc", "--out", str(out), "--no-plots")
     assert done.returncode == 0, done.stderr
-    converted = _sil("log", "convert", str(out / "can.log"), str(out / "can.mf4"), "--json")
+    converted = sil("log", "convert", str(out / "can.log"), str(out / "can.mf4"), "--json")
     assert converted.returncode == 0, converted.stderr
     report = json.loads(converted.stdout)
     assert report["start_from"] == "the run's start (run.json)"
@@ -293,12 +285,12 @@ def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path):
     mdf.close()
 
     # back to candump: can.log, byte for byte
-    assert _sil("log", "convert", str(out / "can.mf4"), str(tmp_path / "back.log")).returncode == 0
+    assert sil("log", "convert", str(out / "can.mf4"), str(tmp_path / "back.log")).returncode == 0
     assert (tmp_path / "back.log").read_bytes() == (out / "can.log").read_bytes()
 
 
 @pytest.mark.slow
-def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
+def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path, sil):
     """`sil run --log-format mf4` writes can.mf4 beside can.log, starting at the run's
     wall-clock start (and a run into the folder without it clears it). --dry-run of it reports
     what the can.log gives; --into-ecu of it finds no difference; back to candump it is can.log.
@@ -307,7 +299,7 @@ def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
     identify and convert refuse it: exit 2)."""
     out = tmp_path / "run"
     before = time.time()
-    done = _sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots",
+    done = sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots",
                 "--log-format", "mf4")  # fmt: skip
     assert done.returncode == 0, done.stderr
     m = asammdf.MDF(out / "can.mf4")
@@ -315,15 +307,15 @@ def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
     m.close()
     assert (out / "run.json").stat().st_mtime <= start <= (out / "summary.json").stat().st_mtime
     assert before < start
-    assert _sil("log", "convert", str(out / "can.mf4"), str(tmp_path / "back.log")).returncode == 0
+    assert sil("log", "convert", str(out / "can.mf4"), str(tmp_path / "back.log")).returncode == 0
     assert (tmp_path / "back.log").read_bytes() == (out / "can.log").read_bytes()
-    dry_log = _sil("replay", "--dry-run", "--json", str(out / "can.log"))
-    dry_mf4 = _sil("replay", "--dry-run", "--json", str(out / "can.mf4"))
+    dry_log = sil("replay", "--dry-run", "--json", str(out / "can.log"))
+    dry_mf4 = sil("replay", "--dry-run", "--json", str(out / "can.mf4"))
     assert dry_mf4.returncode == 0, dry_mf4.stderr
     assert json.loads(dry_mf4.stdout) == json.loads(dry_log.stdout)
-    text = _sil("replay", "--dry-run", str(out / "can.mf4")).stdout.splitlines()
-    assert text[0] == _sil("replay", "--dry-run", str(out / "can.log")).stdout.splitlines()[0]
-    into = _sil("replay", "--into-ecu", "--json", str(out / "can.mf4"))
+    text = sil("replay", "--dry-run", str(out / "can.mf4")).stdout.splitlines()
+    assert text[0] == sil("replay", "--dry-run", str(out / "can.log")).stdout.splitlines()[0]
+    into = sil("replay", "--into-ecu", "--json", str(out / "can.mf4"))
     assert into.returncode == 0, into.stderr
     result = json.loads(into.stdout)
     assert result["frames_compared"] > 1000 and result["frames_differing"] == 0
@@ -333,7 +325,7 @@ def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
     cut = tmp_path / "cut.mf4"
     cut.write_bytes(data[:-100])
     where = f"{cut}: byte {len(data) - 100}: truncated MF4"
-    dry = _sil("replay", "--dry-run", "--json", str(cut))
+    dry = sil("replay", "--dry-run", "--json", str(cut))
     assert dry.returncode == 1 and dry.stderr.startswith(f"sil replay: {where}")
     assert len(dry.stderr.splitlines()) == 1
     assert json.loads(dry.stdout)["error"].startswith(where)
@@ -341,7 +333,7 @@ def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
         args = {"replay": ("--into-ecu", "--scenario", "accel-idle-to-max"), "identify": (),
                 "log": ("convert",)}[command]  # fmt: skip
         extra = (str(tmp_path / "x.log"),) if command == "log" else ()
-        result = _sil(command, *args, str(cut), *extra)
+        result = sil(command, *args, str(cut), *extra)
         name = "log convert" if command == "log" else command
         assert result.returncode == code, (command, result.stderr)
         assert result.stderr.startswith(f"sil {name}: {where}"), result.stderr
@@ -349,7 +341,7 @@ def test_a_runs_mf4_replays_as_the_log_it_came_from(tmp_path):
     assert not (tmp_path / "x.log").exists()
 
     # the next run into the folder, without --log-format mf4, leaves no MF4 of the last one
-    done = _sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots")
+    done = sil("run", "accel-idle-to-max", "--mode", "inproc", "--out", str(out), "--no-plots")
     assert done.returncode == 0, done.stderr
     assert not (out / "can.mf4").exists()
 

@@ -1,9 +1,8 @@
 """Log reading and replay: foreign logs in dry run, damaged files, real-time playback."""
 
+import functools
 import gzip
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import can
@@ -18,10 +17,10 @@ FOREIGN = Path(__file__).resolve().parents[3] / "shared" / "data" / "foreign-log
 FOREIGN_LOGS = sorted(p for p in FOREIGN.glob("*") if p.suffix != ".md")
 
 
-def _sil(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=120
-    )
+@pytest.fixture
+def sil(sil):
+    """tests/conftest.py's ``sil`` with 120 s for a command."""
+    return functools.partial(sil, timeout=120)
 
 
 def _our_log(path: Path, ticks: int = 50) -> Path:
@@ -44,8 +43,8 @@ def test_foreign_logs_are_there():
 
 
 @pytest.mark.parametrize("path", FOREIGN_LOGS, ids=lambda p: p.name)
-def test_foreign_logs_dry_run_without_error(path):
-    result = _sil("replay", "--dry-run", "--json", str(path))
+def test_foreign_logs_dry_run_without_error(path, sil):
+    result = sil("replay", "--dry-run", "--json", str(path))
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     assert report["frames"] > 0 and report["decoded"] == {}  # none carries our messages
@@ -66,7 +65,7 @@ def test_format_is_detected_from_content_not_name(tmp_path):
     assert sum(1 for _ in read_frames(ours)) == 100
 
 
-def test_truncated_and_corrupt_files_name_the_position(tmp_path):
+def test_truncated_and_corrupt_files_name_the_position(tmp_path, sil):
     blf = (FOREIGN / "issue_1905.blf").read_bytes()
     (tmp_path / "short.blf").write_bytes(blf[:300])
     with pytest.raises(LogReadError, match=r"short.blf: byte 300: truncated BLF"):
@@ -78,13 +77,13 @@ def test_truncated_and_corrupt_files_name_the_position(tmp_path):
     ):
         list(read_frames(tmp_path / "cut.log"))
     (tmp_path / "noise.log").write_text("(0.1) vcan0 100#00\nsomething else\n")
-    result = _sil("replay", "--dry-run", str(tmp_path / "noise.log"))
+    result = sil("replay", "--dry-run", str(tmp_path / "noise.log"))
     assert result.returncode == 1
     assert "noise.log: line 2: not a candump -L line" in result.stderr
     assert "frames: 1" in result.stdout  # what was read is reported first
 
 
-def test_bad_crc_repeats_and_gaps_are_counted_not_fatal(tmp_path):
+def test_bad_crc_repeats_and_gaps_are_counted_not_fatal(tmp_path, sil):
     path = _our_log(tmp_path / "damaged.log", ticks=30)
     lines = path.read_text().splitlines()
     flipped = lines[10][:-1] + ("0" if lines[10][-1] != "0" else "1")
@@ -92,7 +91,7 @@ def test_bad_crc_repeats_and_gaps_are_counted_not_fatal(tmp_path):
     lines.insert(20, lines[19])  # a repeated frame
     del lines[40]  # a lost frame
     path.write_text("\n".join(lines) + "\n")
-    report = json.loads(_sil("replay", "--dry-run", "--json", str(path)).stdout)
+    report = json.loads(sil("replay", "--dry-run", "--json", str(path)).stdout)
     problems = report["e2e_problems"]
     assert problems["PlantSensors"]["WRONGCRC"] == 1
     assert sum(problems["EcuActuator"].values()) >= 1 or sum(problems["PlantSensors"].values()) > 1

@@ -1,11 +1,11 @@
 """Results never stale: a run into a folder of an earlier one removes what that one wrote (and
 only that), its summary states its status first, and `sil compare` refuses incomplete runs."""
 
+import functools
 import json
 import math
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -37,20 +37,20 @@ def _scenario(tmp_path: Path, name: str, duration: float = 2.0, window: float = 
     return path
 
 
-def _sil(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
+@pytest.fixture
+def sil(sil):
+    """tests/conftest.py's ``sil`` with 240 s for a command unless a test gives its own."""
+    return functools.partial(sil, timeout=240)
 
 
 def _summary(out: Path) -> dict:
     return json.loads((out / "summary.json").read_text())
 
 
-def _good_run(tmp_path: Path, out: Path) -> None:
+def _good_run(sil, tmp_path: Path, out: Path) -> None:
     """A completed in-process run with plots and every extra log format, and two files of the
     user's own in its folder."""
-    result = _sil(
+    result = sil(
         "run", str(_scenario(tmp_path, "good")), "--mode", "inproc", "--out", str(out),
         "--log-format", "asc", "--log-format", "blf",
     )  # fmt: skip
@@ -72,11 +72,11 @@ def _as_it_was(out: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(out.iterdir())}
 
 
-def test_a_run_refused_for_a_bad_parameter_leaves_the_folder_as_it_was(tmp_path):
+def test_a_run_refused_for_a_bad_parameter_leaves_the_folder_as_it_was(tmp_path, sil):
     out = tmp_path / "run"
-    _good_run(tmp_path, out)
+    _good_run(sil, tmp_path, out)
     before = _as_it_was(out)
-    bad = _sil(
+    bad = sil(
         "run", str(_scenario(tmp_path, "bad", window=1000.0)), "--mode", "inproc",
         "--out", str(out),
     )  # fmt: skip
@@ -87,23 +87,23 @@ def test_a_run_refused_for_a_bad_parameter_leaves_the_folder_as_it_was(tmp_path)
     assert _summary(out)["status"] == "completed"
 
 
-def test_a_refused_scenario_file_leaves_the_folder_as_it_was(tmp_path):
+def test_a_refused_scenario_file_leaves_the_folder_as_it_was(tmp_path, sil):
     out = tmp_path / "run"
-    _good_run(tmp_path, out)
+    _good_run(sil, tmp_path, out)
     before = _as_it_was(out)
     broken = tmp_path / "broken.toml"
     broken.write_text("duration_s = 5\n[controller]\nkind = 'fuzzy'\n[command]\n")
-    result = _sil("run", str(broken), "--out", str(out))
+    result = sil("run", str(broken), "--out", str(out))
     assert result.returncode == 2 and "field 'controller.kind'" in result.stderr
     assert len(result.stderr.splitlines()) == 1
     assert _as_it_was(out) == before
 
 
-def test_a_run_failing_once_set_up_began_is_marked_failed(tmp_path, monkeypatch):
+def test_a_run_failing_once_set_up_began_is_marked_failed(tmp_path, monkeypatch, sil):
     from sil.run import runner
 
     out = tmp_path / "run"
-    _good_run(tmp_path, out)
+    _good_run(sil, tmp_path, out)
 
     def no_plant(*args, **kwargs):
         raise ValueError("no plant today")
@@ -119,12 +119,12 @@ def test_a_run_failing_once_set_up_began_is_marked_failed(tmp_path, monkeypatch)
     assert list(summary)[:2] == ["status", "abort_reason"]
     assert summary["status"] == "failed"
     assert summary["abort_reason"] == "no plant today (before the run began)"
-    refused = _sil("compare", str(out), str(out))
+    refused = sil("compare", str(out), str(out))
     assert refused.returncode == 2
     assert f"{out}: incomplete run (status failed: " in refused.stderr
     assert len(refused.stderr.splitlines()) == 1
     # nothing recorded: not comparable even when incomplete runs are allowed
-    allowed = _sil("compare", str(out), str(out), "--allow-incomplete")
+    allowed = sil("compare", str(out), str(out), "--allow-incomplete")
     assert allowed.returncode == 2 and f"{out}: no trace.csv (status failed" in allowed.stderr
 
 
@@ -134,14 +134,11 @@ def _load(path: Path):
     return scenario.load(str(path))
 
 
-def _start(tmp_path: Path, out: Path) -> subprocess.Popen:
+def _start(sil_process, tmp_path: Path, out: Path) -> subprocess.Popen:
     """A long in-process run without plots or extra formats, once it has written some trace."""
-    proc = subprocess.Popen(
-        [
-            sys.executable, "-m", "sil.cli", "run", str(_scenario(tmp_path, "long", 3000.0)),
-            "--mode", "inproc", "--out", str(out), "--no-plots",
-        ],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    proc = sil_process(
+        "run", str(_scenario(tmp_path, "long", 3000.0)), "--mode", "inproc", "--out", str(out),
+        "--no-plots",
     )  # fmt: skip
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
@@ -155,11 +152,11 @@ def _start(tmp_path: Path, out: Path) -> subprocess.Popen:
 
 
 @pytest.mark.slow
-def test_an_interrupted_run_is_marked_aborted_and_compare_refuses_it(tmp_path):
+def test_an_interrupted_run_is_marked_aborted_and_compare_refuses_it(tmp_path, sil, sil_process):
     out, good = tmp_path / "run", tmp_path / "good"
-    _good_run(tmp_path, out)
-    _good_run(tmp_path, good)
-    proc = _start(tmp_path, out)
+    _good_run(sil, tmp_path, out)
+    _good_run(sil, tmp_path, good)
+    proc = _start(sil_process, tmp_path, out)
     proc.send_signal(signal.SIGINT)
     proc.communicate(timeout=60)
     assert proc.returncode == 1
@@ -170,13 +167,13 @@ def test_an_interrupted_run_is_marked_aborted_and_compare_refuses_it(tmp_path):
     _only_users_files_and(out, "scenario.toml", "run.json", "summary.json", "can.log", "trace.csv")
     frames = list(can.CanutilsLogReader(str(out / "can.log")))
     assert len(frames) == summary["frames"] > 1000
-    refused = _sil("compare", str(good), str(out))
+    refused = sil("compare", str(good), str(out))
     assert refused.returncode == 2
     assert refused.stderr == (
         f"sil compare: {out}: incomplete run (status aborted: interrupted (Ctrl-C)); "
         "--allow-incomplete compares what it recorded\n"
     )
-    marked = _sil("compare", str(good), str(out), "--allow-incomplete", "--json")
+    marked = sil("compare", str(good), str(out), "--allow-incomplete", "--json")
     assert marked.returncode == 1
     table = json.loads(marked.stdout)
     assert table["b"] == "long (INCOMPLETE)" and table["a"] == "good"
@@ -186,10 +183,10 @@ def test_an_interrupted_run_is_marked_aborted_and_compare_refuses_it(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_run_killed_outright_still_says_running(tmp_path):
+def test_a_run_killed_outright_still_says_running(tmp_path, sil, sil_process):
     out = tmp_path / "run"
-    _good_run(tmp_path, out)
-    proc = _start(tmp_path, out)
+    _good_run(sil, tmp_path, out)
+    proc = _start(sil_process, tmp_path, out)
     proc.kill()
     proc.communicate(timeout=60)
     assert _summary(out)["status"] == "running"
@@ -197,12 +194,12 @@ def test_a_run_killed_outright_still_says_running(tmp_path):
     _only_users_files_and(
         out, "scenario.toml", "run.json", "summary.json", "can.log", "trace.csv", ".lock"
     )
-    refused = _sil("compare", str(out), str(out))
+    refused = sil("compare", str(out), str(out))
     assert refused.returncode == 2
     assert "status running: the run is still going or was killed" in refused.stderr
 
 
-def test_compare_refuses_a_folder_without_a_run(tmp_path):
+def test_compare_refuses_a_folder_without_a_run(tmp_path, sil):
     (tmp_path / "empty").mkdir()
     (tmp_path / "odd").mkdir()
     (tmp_path / "odd" / "summary.json").write_text("[1, 2]")
@@ -211,7 +208,7 @@ def test_compare_refuses_a_folder_without_a_run(tmp_path):
         ("empty", "no summary.json"),
         ("odd", "no 'status' field"),
     ):
-        result = _sil("compare", str(tmp_path / folder), str(tmp_path / folder))
+        result = sil("compare", str(tmp_path / folder), str(tmp_path / folder))
         assert result.returncode == 2 and why in result.stderr, result.stderr
         assert str(tmp_path / folder) in result.stderr
 

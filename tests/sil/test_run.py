@@ -1,11 +1,10 @@
 """sil run end to end: in one process and as processes over a bus; determinism; robustness."""
 
+import functools
 import json
 import os
-import random
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -44,16 +43,10 @@ def _scenario(tmp_path: Path, duration: float = 3.0) -> Path:
     return path
 
 
-def _udp_spec() -> str:
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    group = f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}"
-    return f"udp:{group}@{rng.randrange(20000, 60000)}"
-
-
-def _sil(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
+@pytest.fixture
+def sil(sil):
+    """tests/conftest.py's ``sil`` with 240 s for a command unless a test gives its own."""
+    return functools.partial(sil, timeout=240)
 
 
 def _no_nodes_left(spec: str) -> bool:
@@ -61,9 +54,9 @@ def _no_nodes_left(spec: str) -> bool:
     return found.stdout.strip() == ""
 
 
-def test_inproc_run_writes_everything(tmp_path):
+def test_inproc_run_writes_everything(tmp_path, sil):
     out = tmp_path / "run"
-    result = _sil(
+    result = sil(
         "run",
         str(_scenario(tmp_path)),
         "--mode",
@@ -117,13 +110,13 @@ def test_inproc_run_writes_everything(tmp_path):
 
 
 @pytest.mark.slow
-def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path, first_difference):
+def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path, first_difference, sil, udp_spec):
     scenario = _scenario(tmp_path)
     logs = []
     for i in range(2):
         out = tmp_path / f"run{i}"
-        spec = _udp_spec()
-        result = _sil(
+        spec = udp_spec()
+        result = sil(
             "run", str(scenario), "--bus", spec, "--out", str(out), "--no-plots", "--seed", "7"
         )
         assert result.returncode == 0, result.stderr + (out / "ecu.log").read_text()
@@ -138,7 +131,7 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path, first_differe
     # the in-process run goes through the same codec and lockstep rules: the same frames
     out = tmp_path / "inproc"
     assert (
-        _sil(
+        sil(
             "run", str(scenario), "--mode", "inproc", "--out", str(out), "--no-plots", "--seed", "7"
         ).returncode
         == 0
@@ -146,10 +139,10 @@ def test_lockstep_over_udp_is_reproducible_byte_for_byte(tmp_path, first_differe
     assert first_difference((out / "can.log").read_bytes(), logs[0]) is None
 
 
-def test_real_time_run_is_paced_by_the_wall_clock_and_reports_jitter(tmp_path):
+def test_real_time_run_is_paced_by_the_wall_clock_and_reports_jitter(tmp_path, sil, udp_spec):
     out = tmp_path / "rt"
-    result = _sil(
-        "run", str(_scenario(tmp_path)), "--mode", "realtime", "--bus", _udp_spec(),
+    result = sil(
+        "run", str(_scenario(tmp_path)), "--mode", "realtime", "--bus", udp_spec(),
         "--out", str(out), "--no-plots",
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
@@ -166,25 +159,12 @@ def test_real_time_run_is_paced_by_the_wall_clock_and_reports_jitter(tmp_path):
     assert not list(out.glob(".*-stats.json"))  # taken into the summary
 
 
-def _start_run(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path]:
+def _start_run(sil_process, tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path]:
     out = tmp_path / "run"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "sil.cli",
-            "run",
-            str(_scenario(tmp_path, duration=300)),
-            "--bus",
-            spec,
-            "--out",
-            str(out),
-            "--no-plots",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    proc = sil_process(
+        "run", str(_scenario(tmp_path, duration=300)), "--bus", spec, "--out", str(out),
+        "--no-plots",
+    )  # fmt: skip
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         trace = out / "trace.csv"
@@ -206,9 +186,11 @@ def _kill_node(spec: str, node: str) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("victim", ["plant", "ecu"])
-def test_a_killed_node_aborts_the_run_and_keeps_the_records(tmp_path, victim):
-    spec = _udp_spec()
-    proc, out = _start_run(tmp_path, spec)
+def test_a_killed_node_aborts_the_run_and_keeps_the_records(
+    tmp_path, victim, sil_process, udp_spec
+):
+    spec = udp_spec()
+    proc, out = _start_run(sil_process, tmp_path, spec)
     _kill_node(spec, victim)
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 1
@@ -233,9 +215,9 @@ def test_a_killed_node_aborts_the_run_and_keeps_the_records(tmp_path, victim):
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_everything_and_keeps_the_records(tmp_path):
-    spec = _udp_spec()
-    proc, out = _start_run(tmp_path, spec)
+def test_ctrl_c_stops_everything_and_keeps_the_records(tmp_path, sil_process, udp_spec):
+    spec = udp_spec()
+    proc, out = _start_run(sil_process, tmp_path, spec)
     proc.send_signal(signal.SIGINT)
     proc.communicate(timeout=60)
     assert proc.returncode == 1
@@ -244,21 +226,21 @@ def test_ctrl_c_stops_everything_and_keeps_the_records(tmp_path):
     assert _no_nodes_left(spec)
 
 
-def test_bad_scenario_is_refused_before_anything_starts(tmp_path):
+def test_bad_scenario_is_refused_before_anything_starts(tmp_path, sil):
     bad = tmp_path / "bad.toml"
     bad.write_text("duration_s = 5\n[controller]\nkind = 'fuzzy'\n[command]\n")
-    result = _sil("run", str(bad), "--out", str(tmp_path / "out"))
+    result = sil("run", str(bad), "--out", str(tmp_path / "out"))
     assert result.returncode == 2
     assert "bad.toml: field 'controller.kind'" in result.stderr
     assert not (tmp_path / "out").exists()
 
 
-def test_a_bad_parameter_is_refused_before_any_process_or_file(tmp_path):
-    spec = _udp_spec()
+def test_a_bad_parameter_is_refused_before_any_process_or_file(tmp_path, sil, udp_spec):
+    spec = udp_spec()
     bad = tmp_path / "bad.toml"
     text = SCENARIO.format(duration=3.0).replace("rate_window_s = 0.05", "rate_window_s = 1000.0")
     bad.write_text(text)
-    result = _sil("run", str(bad), "--out", str(tmp_path / "out"), "--bus", spec)
+    result = sil("run", str(bad), "--out", str(tmp_path / "out"), "--bus", spec)
     assert result.returncode == 2
     assert "rate_window_s=1000.0: must span at least two ticks" in result.stderr
     assert len(result.stderr.splitlines()) == 1
@@ -266,21 +248,21 @@ def test_a_bad_parameter_is_refused_before_any_process_or_file(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def test_replay_into_the_ecu_finds_no_difference_and_then_the_changed_parameter(tmp_path):
+def test_replay_into_the_ecu_finds_no_difference_and_then_the_changed_parameter(tmp_path, sil):
     out = tmp_path / "run"
     assert (
-        _sil(
+        sil(
             "run", str(_scenario(tmp_path)), "--mode", "inproc", "--out", str(out), "--no-plots"
         ).returncode
         == 0
     )
-    same = _sil("replay", str(out / "can.log"), "--into-ecu", "--json")
+    same = sil("replay", str(out / "can.log"), "--into-ecu", "--json")
     assert same.returncode == 0, same.stderr
     report = json.loads(same.stdout)
     assert report["ticks"] == 301 and report["frames_compared"] > 600
     assert report["frames_differing"] == 0 and report["first_divergent_tick"] is None
     assert report["frames_missing"] == report["frames_extra"] == 0
-    changed = _sil(
+    changed = sil(
         "replay",
         str(out / "can.log"),
         "--into-ecu",
@@ -297,7 +279,7 @@ def test_replay_into_the_ecu_finds_no_difference_and_then_the_changed_parameter(
     assert json.loads((tmp_path / "cmp" / "report.json").read_text()) == report
 
 
-def test_commissioning_from_identify_reaches_the_ecu(tmp_path):
+def test_commissioning_from_identify_reaches_the_ecu(tmp_path, sil):
     commission = tmp_path / "engine.json"
     commission.write_text(
         json.dumps(
@@ -312,7 +294,7 @@ def test_commissioning_from_identify_reaches_the_ecu(tmp_path):
         )
     )
     out = tmp_path / "run"
-    result = _sil(
+    result = sil(
         "run",
         str(_scenario(tmp_path, duration=2.0)),
         "--mode",
@@ -331,7 +313,7 @@ def test_commissioning_from_identify_reaches_the_ecu(tmp_path):
     assert trace["Gain_Kx1"][30] == pytest.approx(-4.809, rel=0.02)
     assert trace["Gain_Kr"][30] == pytest.approx(5.185, rel=0.02)
     commission.write_text('{"format": "turbojet-sil commissioning 1", "Lambda": -1}')
-    bad = _sil(
+    bad = sil(
         "run",
         str(_scenario(tmp_path)),
         "--mode",
@@ -344,7 +326,7 @@ def test_commissioning_from_identify_reaches_the_ecu(tmp_path):
     assert bad.returncode == 2 and "engine.json: field 'trim_N_pct'" in bad.stderr
 
 
-def test_compare_two_runs(tmp_path):
+def test_compare_two_runs(tmp_path, sil):
     mrac = _scenario(tmp_path)
     pid = tmp_path / "pid.toml"
     pid.write_text(
@@ -352,12 +334,12 @@ def test_compare_two_runs(tmp_path):
     )
     for name, path in (("a", mrac), ("b", pid)):
         assert (
-            _sil(
+            sil(
                 "run", str(path), "--mode", "inproc", "--out", str(tmp_path / name), "--no-plots"
             ).returncode
             == 0
         )
-    result = _sil("compare", str(tmp_path / "a"), str(tmp_path / "b"), "--json")
+    result = sil("compare", str(tmp_path / "a"), str(tmp_path / "b"), "--json")
     assert result.returncode == 0, result.stderr
     table = json.loads(result.stdout)
     rows = {r["field"]: (r["a"], r["b"]) for r in table["rows"]}
@@ -365,7 +347,7 @@ def test_compare_two_runs(tmp_path):
     b = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert rows["tracking_rms_pct"] == (a["tracking_rms_pct"], b["tracking_rms_pct"])
     assert (tmp_path / "b" / "compare.png").stat().st_size > 10_000
-    missing = _sil("compare", str(tmp_path / "a"), str(tmp_path / "nowhere"))
+    missing = sil("compare", str(tmp_path / "a"), str(tmp_path / "nowhere"))
     assert missing.returncode == 2 and "nowhere: no such folder" in missing.stderr
 
 
@@ -404,15 +386,14 @@ def test_an_open_thermocouple_reading_its_burnout_value_is_flagged(tmp_path):
     assert flagged and 1.0 < flagged[0] <= 1.0 + EcuParams().egt_fault_time_s + 0.02
 
 
-def test_a_node_that_cannot_come_up_says_why_in_the_abort(tmp_path):
+def test_a_node_that_cannot_come_up_says_why_in_the_abort(tmp_path, sil, udp_spec):
     # no QEMU on the PATH: the ECU node of --ecu-impl pil stops before it is ready
-    spec = _udp_spec()
+    spec = udp_spec()
     out = tmp_path / "out"
     env = {**os.environ, "PATH": str(tmp_path)}
-    result = subprocess.run(
-        [sys.executable, "-m", "sil.cli", "run", str(_scenario(tmp_path)), "--out", str(out),
-         "--bus", spec, "--ecu-impl", "pil"],
-        capture_output=True, text=True, timeout=120, env=env,
+    result = sil(
+        "run", str(_scenario(tmp_path)), "--out", str(out), "--bus", spec, "--ecu-impl", "pil",
+        timeout=120, env=env,
     )  # fmt: skip
     assert result.returncode == 1
     summary = json.loads((out / "summary.json").read_text())

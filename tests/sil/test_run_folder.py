@@ -11,7 +11,6 @@ import json
 import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -97,7 +96,7 @@ def test_a_folder_that_cannot_be_made_is_refused_and_nothing_is_left(tmp_path, c
         run_folder.FolderLock(Path("/sys/kernel/no-such/run"))
 
 
-def test_a_folder_being_written_is_locked_naming_the_other_run(tmp_path, capsys):
+def test_a_folder_being_written_is_locked_naming_the_other_run(tmp_path, capsys, sil):
     out, good = tmp_path / "run", tmp_path / "good"
     scenario = str(_scenario(tmp_path))
     code, _, err = _main(["run", scenario, "--mode", "inproc", "--out", str(good), "--no-plots"],
@@ -116,11 +115,8 @@ def test_a_folder_being_written_is_locked_naming_the_other_run(tmp_path, capsys)
             assert len(err.splitlines()) == 1 and f"--out {out}: the folder is in use by " \
                 f"another run (pid {os.getpid()})" in err  # fmt: skip
         assert _contents(out) == before
-        other = subprocess.run(  # a run in another process is refused at once as well
-            [sys.executable, "-m", "sil.cli", "run", scenario, "--mode", "inproc", "--out",
-             str(out)],
-            capture_output=True, text=True, timeout=120,
-        )  # fmt: skip
+        # a run in another process is refused at once as well
+        other = sil("run", scenario, "--mode", "inproc", "--out", str(out), timeout=120)
         assert other.returncode == 2
         assert other.stderr == (
             f"sil run: --out {out}: the folder is in use by another run (pid {os.getpid()}); "
@@ -228,15 +224,9 @@ def small_disk(tmp_path):
         subprocess.run(["umount", "-l", str(disk)], check=False)
 
 
-def _sil(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=300
-    )
-
-
-def test_a_full_disk_names_the_file_and_leaves_no_empty_file(tmp_path, small_disk):
+def test_a_full_disk_names_the_file_and_leaves_no_empty_file(tmp_path, small_disk, sil):
     out = small_disk / "run"
-    ran = _sil("run", str(_scenario(tmp_path, 60.0)), "--mode", "inproc", "--out", str(out))
+    ran = sil("run", str(_scenario(tmp_path, 60.0)), "--mode", "inproc", "--out", str(out))
     assert ran.returncode == 1 and "Traceback" not in ran.stderr
     reason = f"{out / 'can.log'}: cannot write: No space left on device"
     assert ran.stderr.splitlines() == [f"sil run: aborted: {reason}"]
@@ -247,14 +237,14 @@ def test_a_full_disk_names_the_file_and_leaves_no_empty_file(tmp_path, small_dis
     assert not [p for p in out.iterdir() if p.suffix == ".png" or p.name.startswith(".tmp")]
     # two good runs elsewhere, compared onto the full disk; a replay's report there
     good = tmp_path / "good"
-    assert _sil("run", str(_scenario(tmp_path)), "--mode", "inproc", "--out", str(good),
+    assert sil("run", str(_scenario(tmp_path)), "--mode", "inproc", "--out", str(good),
                 "--no-plots").returncode == 0  # fmt: skip
-    compared = _sil("compare", str(good), str(good), "--out", str(small_disk))
+    compared = sil("compare", str(good), str(good), "--out", str(small_disk))
     assert compared.returncode == 1
     assert compared.stderr.splitlines() == [
         f"sil compare: {small_disk / 'compare.png'}: cannot write: No space left on device"
     ]
-    replayed = _sil("replay", str(good / "can.log"), "--into-ecu", "--out", str(small_disk))
+    replayed = sil("replay", str(good / "can.log"), "--into-ecu", "--out", str(small_disk))
     assert replayed.returncode == 1
     assert replayed.stderr.splitlines()[-1].startswith(f"sil replay: {small_disk / 'report.json'}")
     assert "cannot write: No space left on device" in replayed.stderr

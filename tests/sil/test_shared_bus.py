@@ -2,10 +2,8 @@
 
 import json
 import os
-import random
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -42,23 +40,13 @@ def env(tmp_path, monkeypatch) -> dict[str, str]:
     return {**os.environ}
 
 
-def _spec() -> str:
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    group = f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}"
-    return f"udp:{group}@{rng.randrange(20000, 60000)}"
-
-
-def _run(tmp_path: Path, name: str, spec: str, env: dict, duration: float) -> subprocess.Popen:
+def _run(
+    sil_process, tmp_path: Path, name: str, spec: str, env: dict, duration: float
+) -> subprocess.Popen:
     scenario = tmp_path / f"short-{duration:g}.toml"
     scenario.write_text(SCENARIO.format(duration=duration))
     args = ["run", str(scenario), "--bus", spec, "--out", str(tmp_path / name), "--no-plots"]
-    return subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", *args, "--seed", "7"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
+    return sil_process(*args, "--seed", "7", stdout=subprocess.DEVNULL, env=env)
 
 
 def _summary(tmp_path: Path, name: str) -> dict:
@@ -66,12 +54,12 @@ def _summary(tmp_path: Path, name: str) -> dict:
 
 
 @pytest.mark.slow
-def test_two_runs_on_one_bus_each_log_what_a_run_alone_logs(tmp_path, env):
-    spec = _spec()
-    solo = _run(tmp_path, "solo", spec, env, 30.0)
+def test_two_runs_on_one_bus_each_log_what_a_run_alone_logs(tmp_path, env, sil_process, udp_spec):
+    spec = udp_spec()
+    solo = _run(sil_process, tmp_path, "solo", spec, env, 30.0)
     assert solo.wait(120) == 0, solo.stderr.read()
     started = time.monotonic()
-    runs = {name: _run(tmp_path, name, spec, env, 30.0) for name in ("a", "b")}
+    runs = {name: _run(sil_process, tmp_path, name, spec, env, 30.0) for name in ("a", "b")}
     for name, proc in runs.items():
         assert proc.wait(120) == 0, f"{name}: {proc.stderr.read()}"
     elapsed = time.monotonic() - started
@@ -99,9 +87,9 @@ def test_two_runs_on_one_bus_each_log_what_a_run_alone_logs(tmp_path, env):
 
 
 @pytest.mark.slow
-def test_a_killed_run_gives_its_tag_back(tmp_path, env):
-    spec = _spec()
-    proc = _run(tmp_path, "killed", spec, env, 600.0)
+def test_a_killed_run_gives_its_tag_back(tmp_path, env, sil_process, udp_spec):
+    spec = udp_spec()
+    proc = _run(sil_process, tmp_path, "killed", spec, env, 600.0)
     deadline = time.monotonic() + 60
     while not tag_file(spec, 0).exists():  # the run's claim (this test's folder: nobody else's)
         assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()

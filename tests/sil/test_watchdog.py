@@ -6,11 +6,9 @@ reason; no child outlives the run."""
 
 import json
 import os
-import random
 import re
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -34,13 +32,6 @@ step_s = 1
 """
 
 
-def _udp_spec() -> str:
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    return (
-        f"udp:239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}@{rng.randrange(20000, 60000)}"
-    )
-
-
 def _pids(pattern: str) -> list[int]:
     found = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True)
     return [int(p) for p in found.stdout.split()]
@@ -54,18 +45,14 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def _start(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, list[int]]:
+def _start(sil_process, tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, list[int]]:
     """A 3000 s lockstep run over the udp bus (a minute or more: its nodes are still running when
     the recorder, at the lowest priority, has written the first trace), once it is going; with its
     children's PIDs."""
     path = tmp_path / "long.toml"
     path.write_text(SCENARIO)
     out = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", "run", str(path), "--bus", spec, "--out", str(out),
-         "--no-plots"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    proc = sil_process("run", str(path), "--bus", spec, "--out", str(out), "--no-plots")
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
         trace = out / "trace.csv"
@@ -105,9 +92,9 @@ def _ended(proc: subprocess.Popen, out: Path, spec: str, children: list[int]) ->
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("victim", "name"), [("plant", "plant"), ("ecu", "ECU")])
-def test_a_stopped_node_aborts_the_run_naming_it(tmp_path, victim, name):
-    spec = _udp_spec()
-    proc, out, children = _start(tmp_path, spec)
+def test_a_stopped_node_aborts_the_run_naming_it(tmp_path, victim, name, sil_process, udp_spec):
+    spec = udp_spec()
+    proc, out, children = _start(sil_process, tmp_path, spec)
     (pid,) = _pids(f"sil.cli {victim} --bus {spec}")
     os.kill(pid, signal.SIGSTOP)
     stopped = time.monotonic()
@@ -129,9 +116,9 @@ def test_a_stopped_node_aborts_the_run_naming_it(tmp_path, victim, name):
 
 
 @pytest.mark.slow
-def test_sigterm_ends_the_run_as_ctrl_c_does_with_its_own_reason(tmp_path):
-    spec = _udp_spec()
-    proc, out, children = _start(tmp_path, spec)
+def test_sigterm_ends_the_run_as_ctrl_c_does_with_its_own_reason(tmp_path, sil_process, udp_spec):
+    spec = udp_spec()
+    proc, out, children = _start(sil_process, tmp_path, spec)
     proc.send_signal(signal.SIGTERM)
     summary = _ended(proc, out, spec, children)
     assert summary["abort_reason"] == "terminated (SIGTERM)"
@@ -157,15 +144,13 @@ def test_the_watchdog_names_the_node_silent_too_long():
     assert dog.silent({2: 10.5}, now=11.2) == "the plant sent no frame for 1.2 s (stopped or stuck)"
 
 
-def _stopped_before_ready(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, Path, float]:
+def _stopped_before_ready(
+    sil_process, tmp_path: Path, spec: str
+) -> tuple[subprocess.Popen, Path, float]:
     """A lockstep run whose plant process is stopped (SIGSTOP) as soon as it exists, before it
     is ready; with the time it was stopped."""
     out = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", "run", "start-nominal", "--bus", spec, "--out",
-         str(out), "--no-plots"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    proc = sil_process("run", "start-nominal", "--bus", spec, "--out", str(out), "--no-plots")
     deadline = time.monotonic() + 60
     while not (found := _pids(f"sil.cli plant --bus {spec}")):
         if time.monotonic() > deadline or proc.poll() is not None:
@@ -177,9 +162,9 @@ def _stopped_before_ready(tmp_path: Path, spec: str) -> tuple[subprocess.Popen, 
 
 
 @pytest.mark.slow
-def test_a_node_stopped_before_it_is_ready_ends_the_run_naming_it(tmp_path, udp_spec):
+def test_a_node_stopped_before_it_is_ready_ends_the_run_naming_it(tmp_path, udp_spec, sil_process):
     spec = udp_spec()
-    proc, out, stopped = _stopped_before_ready(tmp_path, spec)
+    proc, out, stopped = _stopped_before_ready(sil_process, tmp_path, spec)
     assert not (out / ".plant-ready").exists()  # stopped while it was starting
     try:
         _, stderr = proc.communicate(timeout=30)

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import os
-import random
+import functools
 import struct
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -102,23 +100,10 @@ def rig_factory():
     return SlaveRig
 
 
-def _sil(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "sil.cli", *args], capture_output=True, text=True, timeout=timeout
-    )
-
-
 @pytest.fixture(scope="session")
-def sil():
-    """``sil(*args, timeout=...)``: the `sil` command in a process of its own, output kept."""
-    return _sil
-
-
-@pytest.fixture
-def udp_group() -> tuple[str, int]:
-    """A loopback multicast group and port no other test uses."""
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    return f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", rng.randrange(20000, 60000)
+def sil(sil):
+    """tests/conftest.py's ``sil``, 120 s for a command unless a test gives its own timeout."""
+    return functools.partial(sil, timeout=120)
 
 
 def pyxcp_master(
@@ -245,10 +230,10 @@ def read_a2l(path: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def a2l(tmp_path_factory) -> dict:
+def a2l(tmp_path_factory, sil) -> dict:
     """The A2L `sil a2l` writes, as pya2ldb reads it."""
     path = tmp_path_factory.mktemp("a2l") / "turbojet_ecu.a2l"
-    done = _sil("a2l", "--out", str(path))
+    done = sil("a2l", "--out", str(path))
     assert done.returncode == 0, done.stderr
     return read_a2l(path)
 

@@ -9,11 +9,7 @@ time). (b) `sil xcp record` against a real-time ECU at rest: the channels, units
 from __future__ import annotations
 
 import math
-import os
-import random
 import socket
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -57,18 +53,11 @@ UNITS = {"ticks": "", "mode": "", "speed_rpm": "rpm", "egt": "K", "pump_voltage"
          "pump_duty": "%", "supply": "V", "speed_ref": "%", "ap21": "1/s2"}  # fmt: skip
 
 
-def _a2l(tmp: Path) -> Path:
+def _a2l(sil, tmp: Path) -> Path:
     path = tmp / "turbojet_ecu.a2l"
-    done = subprocess.run(
-        [sys.executable, "-m", "sil.cli", "a2l", "--out", str(path)], capture_output=True
-    )
+    done = sil("a2l", "--out", str(path), timeout=None)
     assert done.returncode == 0, done.stderr
     return path
-
-
-def _group() -> tuple[str, int]:
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    return f"239.255.{rng.randrange(1, 255)}.{rng.randrange(1, 255)}", rng.randrange(20000, 60000)
 
 
 def _trace(path: Path) -> tuple[dict[str, int], dict[int, list[float]]]:
@@ -81,12 +70,12 @@ def _trace(path: Path) -> tuple[dict[str, int], dict[int, list[float]]]:
     return column, rows
 
 
-def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path):
-    a2l_path = _a2l(tmp_path)
+def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path, sil, udp_group):
+    a2l_path = _a2l(sil, tmp_path)
     a2l = xcp_record.read_a2l(a2l_path)
     names = ["ticks", "mode", *EVERY_TICK, "speed_ref", "ap21"]
     measurements = xcp_record.pick(a2l, names)
-    group, port = _group()
+    group, port = udp_group
     bus = LoopbackUdpMulticastBus(group, port)
     bus.socket.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, 256 << 20)  # the run's bursts
     stop = threading.Event()
@@ -168,28 +157,20 @@ def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path):
     m.close()
 
 
-def _sil(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-
-
-def test_sil_xcp_record_writes_the_a2ls_names_units_and_conversions(tmp_path):
-    a2l_path = _a2l(tmp_path)
-    group, port = _group()
+def test_sil_xcp_record_writes_the_a2ls_names_units_and_conversions(
+    tmp_path, sil, sil_process, udp_group
+):
+    a2l_path = _a2l(sil, tmp_path)
+    group, port = udp_group
     bus = f"udp:{group}@{port}"
-    plant = _sil("plant", "--bus", bus, "--realtime", "--standstill")
-    ecu = _sil("ecu", "--bus", bus, "--mode", "realtime")
+    plant = sil_process("plant", "--bus", bus, "--realtime", "--standstill")
+    ecu = sil_process("ecu", "--bus", bus, "--mode", "realtime")
     out = tmp_path / "rest.mf4"
     try:
-        done = subprocess.run(
-            [sys.executable, "-m", "sil.cli", "xcp", "record", "--bus", bus, "--a2l",
-             str(a2l_path), "--measure", "ticks", "mode", "egt", "supply", "--measure",
-             "speed_rpm", "ap21", "--seconds", "2", "--out", str(out), "--connect-timeout", "60"],
-            capture_output=True, text=True, timeout=180,
+        done = sil(
+            "xcp", "record", "--bus", bus, "--a2l", str(a2l_path), "--measure", "ticks", "mode",
+            "egt", "supply", "--measure", "speed_rpm", "ap21", "--seconds", "2", "--out", str(out),
+            "--connect-timeout", "60", timeout=180,
         )  # fmt: skip
     finally:
         for proc in (ecu, plant):
@@ -224,8 +205,8 @@ def test_sil_xcp_record_writes_the_a2ls_names_units_and_conversions(tmp_path):
     m.close()
 
 
-def test_unknown_measurements_and_unreadable_a2ls_are_refused_in_one_line(tmp_path):
-    a2l_path = _a2l(tmp_path)
+def test_unknown_measurements_and_unreadable_a2ls_are_refused_in_one_line(tmp_path, sil):
+    a2l_path = _a2l(sil, tmp_path)
     bad = tmp_path / "bad.a2l"
     bad.write_text(a2l_path.read_text()[:20000])
     for a2l, measure, expected in (
@@ -233,10 +214,9 @@ def test_unknown_measurements_and_unreadable_a2ls_are_refused_in_one_line(tmp_pa
         (bad, "egt", f"--a2l {bad}: pya2ldb's parser: "),
         (tmp_path / "none.a2l", "egt", "no such file"),
     ):
-        done = subprocess.run(
-            [sys.executable, "-m", "sil.cli", "xcp", "record", "--bus", "virtual:none", "--a2l",
-             str(a2l), "--measure", measure, "--seconds", "1", "--out", str(tmp_path / "x.mf4")],
-            capture_output=True, text=True, timeout=120,
+        done = sil(
+            "xcp", "record", "--bus", "virtual:none", "--a2l", str(a2l), "--measure", measure,
+            "--seconds", "1", "--out", str(tmp_path / "x.mf4"), timeout=120,
         )  # fmt: skip
         assert done.returncode == 2, done.stderr
         assert done.stdout == ""

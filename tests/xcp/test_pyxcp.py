@@ -20,7 +20,6 @@ import os
 import select
 import struct
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -43,15 +42,6 @@ DAQ_NAMES = (
     "pump_enable", "supply", "pump_current", "pump_health", "owner", "inputs_valid", "ap21",
     "ap22", "lambda", "theta21", "kx1", "kr",
 )  # fmt: skip
-
-
-def _sil(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
 
 
 def _lines_until(proc: subprocess.Popen, *prefixes: str, timeout: float = 90) -> dict[str, str]:
@@ -82,8 +72,9 @@ class Bench:
     'slcan' (the ECU behind a pty, joined to the plant's loopback bus by :class:`SlcanHub`)."""
 
     def __init__(self, link: str, tmp: Path, udp_group: tuple[str, int], tools,  # noqa: ANN001
-                 impl: str = "python") -> None:  # fmt: skip
+                 sil_process, impl: str = "python") -> None:  # fmt: skip
         self.link, self.tmp, self.tools, self.impl = link, tmp, tools, impl
+        self.sil_process = sil_process
         self.group, self.port = udp_group
         self.hub = None
         self.stats = tmp / "ecu.json"
@@ -91,13 +82,13 @@ class Bench:
     def __enter__(self) -> Bench:
         udp = f"udp:{self.group}@{self.port}"
         ecu_bus = udp if self.link == "udp" else f"slcan-device:{self.tmp / 'ecu.tty'}"
-        self.plant = _sil("plant", "--bus", udp, "--realtime", "--standstill")
+        self.plant = self.sil_process("plant", "--bus", udp, "--realtime", "--standstill")
         extra = {
             "python": ("--serial", "pty", "--flash", str(self.tmp / "flash.bin")),
             "c": ("--flash", str(self.tmp / "flash.bin")),
             "pil": (),
         }[self.impl]
-        self.ecu = _sil(
+        self.ecu = self.sil_process(
             "ecu", "--bus", ecu_bus, "--impl", self.impl, "--mode", "realtime", *extra,
             "--stats-file", str(self.stats),
         )  # fmt: skip
@@ -150,12 +141,12 @@ def _refusal(x, address: int, data: bytes) -> str:  # noqa: ANN001
     ("impl", "link"), [("python", "udp"), ("python", "slcan"), ("c", "udp"), ("pil", "udp")]
 )
 def test_pyxcp_calibrates_and_measures_a_realtime_ecu(
-    impl, link, tmp_path, udp_group, a2l, xcp_tools
+    impl, link, tmp_path, udp_group, a2l, xcp_tools, sil_process
 ):
     params = EcuParams()
     by_name = {m["name"]: m for m in a2l["measurements"]}
     daq = xcp_tools.daq([(n, by_name[n]["address"], by_name[n]["type"]) for n in DAQ_NAMES])
-    with Bench(link, tmp_path, udp_group, xcp_tools, impl) as bench:
+    with Bench(link, tmp_path, udp_group, xcp_tools, sil_process, impl) as bench:
         with bench.master() as x:
             _calibrate(x, bench, a2l, params)
         # a second connection: a DAQ list of 20 measurements on the control tick, their types
