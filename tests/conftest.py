@@ -96,7 +96,9 @@ def first_difference() -> Callable[[bytes, bytes], str | None]:
 # The fast tier (`python3 dev.py test --quick`, the marker expression "not slow and not vcan and
 # not machine_speed") leaves out what flies whole runs, starts node processes or QEMU, runs a
 # bench or a long fuzz: every test of these modules is marked slow (a test elsewhere carries its
-# own @pytest.mark.slow). The whole suite (`python3 dev.py test`) runs them all.
+# own @pytest.mark.slow, or is named in SLOW_TESTS below), and every test that asserts the
+# machine's pace is marked machine_speed (MACHINE_SPEED_TESTS). The whole suite
+# (`python3 dev.py test`) runs them all.
 SLOW_MODULES = frozenset(
     {
         "campaign/test_bridge.py",
@@ -141,10 +143,66 @@ SLOW_MODULES = frozenset(
         "sil/test_mdf.py",
     }
 )
+# Single tests of the modules the fast tier keeps, marked slow here ("module::test" for every
+# case of a test, "module::test[id]" for one case): whole runs in processes of their own and long
+# fuzzes whose behaviour a faster test of the fast tier checks as well.
+SLOW_TESTS = frozenset(
+    {
+        # a whole run in a process onto a small tmpfs; the fast tier keeps the runs that cannot
+        # write a plot or their summary (test_a_plot_..., test_a_summary_...)
+        "sil/test_run_folder.py::test_a_full_disk_names_the_file_and_leaves_no_empty_file",
+        # 100k ticks under tracemalloc; test_tracemalloc_sees_no_growth_from_ecu_lines stays
+        "ecu/test_allocation_and_integers.py::test_100k_ticks_do_not_grow_allocated_blocks",
+        # the plant and the ECU as processes through the adapter's pty; the adapter's frames both
+        # ways and a lockstep run over a bus (protocol/test_node.py, test_run_bus.py) stay
+        "protocol/test_slcan_device.py::"
+        "test_a_lockstep_plant_flies_the_ecu_through_the_adapter_as_over_a_bus",
+        # hypothesis, 20 odd values for each of the 100 and more options;
+        # test_the_fuzz_covers_the_commands_options stays
+        "test_cli_options_fuzz.py::test_an_odd_value_is_taken_or_refused_naming_the_option",
+        # 3000 examples each; test_rounding_ties_go_to_even and the C slave's writes stay
+        "xcp/test_c_slave.py::test_products_and_quotients_are_the_hosts_doubles",
+        "xcp/test_c_slave.py::test_rounding_to_an_integer_is_pythons_round",
+        # the same writes at other rates and presets; [default] stays
+        "xcp/test_c_slave.py::test_every_parameter_is_written_alike[reproducing]",
+        "xcp/test_c_slave.py::test_every_parameter_is_written_alike[64Hz]",
+        "xcp/test_c_slave.py::test_every_parameter_is_written_alike[250Hz]",
+    }
+)
+# Tests that assert a figure of the machine's pace (a rate, a real-time factor, microseconds per
+# tick): a loaded or slow machine fails them with nothing wrong in the code.
+MACHINE_SPEED_TESTS = frozenset(
+    {
+        "plant/test_steady_line_and_bench.py::test_sil_bench_plant_reports_both_plants",
+        "service/test_bench.py::test_bench_service_quick",
+        "sil/test_bench.py::test_sil_bench_reports_every_run_and_the_loop_without_start_up",
+    }
+)
 TESTS = Path(__file__).resolve().parent
 
 
+def _named_tests_missing() -> list[str]:
+    """Entries of SLOW_TESTS and MACHINE_SPEED_TESTS whose module does not define the test (a
+    renamed test would otherwise leave its tier unnoticed)."""
+    missing = []
+    for entry in sorted(SLOW_TESTS | MACHINE_SPEED_TESTS):
+        module, _, test = entry.partition("::")
+        path = TESTS / module
+        name = test.split("[", 1)[0]
+        if not path.is_file() or f"def {name}(" not in path.read_text():
+            missing.append(entry)
+    return missing
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    missing = _named_tests_missing()
+    if missing:
+        raise pytest.UsageError(f"tests/conftest.py names tests that are not there: {missing}")
     for item in items:
-        if item.path.relative_to(TESTS).as_posix() in SLOW_MODULES:
+        module = item.path.relative_to(TESTS).as_posix()
+        test = f"{module}::{getattr(item, 'originalname', item.name)}"
+        case = f"{module}::{item.name}"
+        if module in SLOW_MODULES or test in SLOW_TESTS or case in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)
+        if test in MACHINE_SPEED_TESTS or case in MACHINE_SPEED_TESTS:
+            item.add_marker(pytest.mark.machine_speed)
