@@ -1,6 +1,7 @@
 """The ground-support page in a real browser (headless Chromium) against a plant and an ECU
 running in real time: the dashboard's speed follows the engine (read from the bus by the test
-itself), start brings the engine to idle, a throttle change moves it, a refused parameter write
+itself), a test function at rest spins the rotor for its time, start brings the engine to idle, a
+throttle change moves it, a test function is refused while it runs, a refused parameter write
 shows the ECU's reason, stop cools it, the logbook counts the run, a recording is written.
 Screenshots of each page go to $GSU_SCREENSHOTS (docs/gsu/ for the docs) or the test's folder."""
 
@@ -136,6 +137,22 @@ def test_a_run_from_the_page(bench, browser, tmp_path) -> None:  # noqa: ANN001
         _wait("a locked ECU refuses", lambda: "locked" in run_msg.inner_text(), 10, page)
         page.get_by_test_id("unlock").click()
         _wait("unlocked", lambda: "unlocked" in page.get_by_test_id("link-ecu").inner_text(), 10)
+
+        # a test function at rest: the starter spins the shaft for its time, then the ECU ends it
+        page.goto(bench.url + "#tests")
+        page.locator("#starter-level").fill("25")
+        page.locator("#starter-s").fill("2")
+        spun_from = time.time()
+        page.get_by_test_id("test-starter").click()
+        active = page.get_by_test_id("test-active")
+        _wait("the starter test runs", lambda: active.inner_text() == "STARTER", 5, page)
+        _wait("the ECU ends it", lambda: active.inner_text() == "NONE", 8, page)
+        assert time.time() - spun_from >= 2.0
+        assert max(watch.speeds_since(spun_from)) > 1.0  # %N: the starter turned the rotor
+        _wait("the rotor at rest again", lambda: max(watch.speeds_since(time.time() - 0.5),
+              default=1) < 0.5, 60, page)  # fmt: skip
+
+        page.goto(bench.url + "#run")
         page.get_by_test_id("start").click()
         assert page.get_by_test_id("confirm").is_visible()
         page.get_by_test_id("start-confirm").click()
@@ -157,8 +174,9 @@ def test_a_run_from_the_page(bench, browser, tmp_path) -> None:  # noqa: ANN001
         # test functions are refused while the engine runs
         page.goto(bench.url + "#tests")
         page.get_by_test_id("test-glow").click()
-        _wait("the test refused", lambda: "refused" in page.get_by_test_id("test-msg").inner_text(),
-              10, page)  # fmt: skip
+        test_msg = page.get_by_test_id("test-msg")
+        _wait("the test refused", lambda: "refused" in test_msg.inner_text(), 10, page)
+        assert "glow test: the ECU's state refuses it (ERR_ACCESS_DENIED)" in test_msg.inner_text()
         _shot(page, shots, "tests")
 
         # a refused parameter write shows the ECU's reason

@@ -226,9 +226,15 @@ class XcpLink:
         if test not in TESTS:
             raise Refused(f"{test}: no such test function (one of {', '.join(TESTS)})")
         level_raw = level * 1000 if test == "prime" else level * 100  # mV, 0.01 %
-        self.bench_raw("bench_test_level", round(level_raw))
-        self.bench_raw("bench_test_ms", round(seconds * 1000))
-        self.bench_raw("bench_test", TESTS[test])
+        try:
+            self.bench_raw("bench_test_level", round(level_raw))
+            self.bench_raw("bench_test_ms", round(seconds * 1000))
+            self.bench_raw("bench_test", TESTS[test])
+        except Refused as exc:  # named after the test rather than the bench word
+            what = {"bench_test_level": "its level", "bench_test_ms": "its time"}
+            word, _, why = str(exc).partition(": ")
+            part = what.get(word.split(" = ")[0])
+            raise Refused(f"{test} test{', ' + part if part else ''}: {why}", exc.code) from None
 
     def bench_raw(self, name: str, raw: int) -> None:
         c = self.a2l.characteristics.get(name)

@@ -65,6 +65,11 @@ function fmt(value, digits) {
   return typeof value === "number" ? value.toFixed(digits) : (value ?? "-");
 }
 
+// an enumeration as the A2L names it (the server gives the name; a bare number by ``names``)
+function named(value, names) {
+  return typeof value === "string" ? value : (names[value] ?? "-");
+}
+
 function render() {
   pending = false;
   stats.drawn += 1;
@@ -95,10 +100,10 @@ function render() {
   $("abort").textContent = s.abort_reason ?? "-";
   $("owner").textContent = s.owner ?? "-";
   $("health").textContent = fmt(s.pump_health_pct, 1);
-  $("demand-source").textContent = ["CAN", "BENCH", "NONE"][s.x_demand_source] ?? "-";
+  $("demand-source").textContent = named(s.x_demand_source, ["CAN", "BENCH", "NONE"]);
   $("faults").textContent = (s.faults && s.faults.length) ? s.faults.join(", ") : "none";
   $("bench-throttle").textContent = fmt(s.x_bench_throttle, 1);
-  $("test-active").textContent = ["none", "glow plug", "starter", "pump prime"][s.x_test_active] ?? "-";
+  $("test-active").textContent = named(s.x_test_active, ["NONE", "GLOW", "STARTER", "PRIME"]);
   $("test-left").textContent = fmt(
     typeof s.x_test_time_left === "number" ? s.x_test_time_left / 1000 : undefined, 1);
   $("record-state").textContent = s.recording ? `recording: ${s.recorded_frames} frames` : "not recording";
