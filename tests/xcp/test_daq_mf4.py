@@ -20,6 +20,7 @@ import pytest
 from protocol.udp_loopback import LoopbackUdpMulticastBus
 from sil import scenario
 from sil.record import xcp_record
+from sil.record.a2l import read_a2l
 from sil.run.runner import RunOptions
 from sil.run.runner import run as run_scenario
 
@@ -72,7 +73,7 @@ def _trace(path: Path) -> tuple[dict[str, int], dict[int, list[float]]]:
 
 def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path, sil, udp_group):
     a2l_path = _a2l(sil, tmp_path)
-    a2l = xcp_record.read_a2l(a2l_path)
+    a2l = read_a2l(a2l_path)
     names = ["ticks", "mode", *EVERY_TICK, "speed_ref", "ap21"]
     measurements = xcp_record.pick(a2l, names)
     group, port = udp_group
