@@ -7,7 +7,6 @@ Screenshots of each page go to $GSU_SCREENSHOTS (docs/gsu/ for the docs) or the 
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import threading
@@ -221,21 +220,6 @@ def test_a_run_from_the_page(bench, browser, tmp_path) -> None:  # noqa: ANN001
         written = list(bench.folder.glob("gsu-*.mf4"))
         assert len(written) == 1 and written[0].stat().st_size > 100_000
 
-        page.goto(bench.url + "#dashboard")
-        page.wait_for_timeout(3000)
-        stats = page.evaluate(
-            "() => ({rate: window.gsuStats.renders.length, latencies: window.gsuStats.latencies})"
-        )
-        latencies = sorted(stats["latencies"])
-        figures = {
-            "updates_per_s": stats["rate"],
-            "latency_ms_median": latencies[len(latencies) // 2],
-            "latency_ms_p95": latencies[int(len(latencies) * 0.95)],
-            "latency_ms_max": latencies[-1],
-        }
-        (tmp_path / "page_figures.json").write_text(json.dumps(figures, indent=1))
-        print("gsu page:", json.dumps(figures))
-        assert figures["updates_per_s"] >= 10
     finally:
         page.close()
         watch.close()
