@@ -74,3 +74,15 @@ def test_the_chart_samples_at_ten_hertz_and_a_recording_keeps_every_frame() -> N
     kept = live.stop_recording()
     assert kept == frames[101:]
     assert [m.timestamp for m in kept] == pytest.approx([10.0 + k * 0.01 for k in range(101, 300)])
+
+
+def test_a_start_aborted_is_logged_with_its_reason() -> None:
+    codec, live = Codec(), Live()
+    starter = {"IgniterOn": 0, "StarterTick": 0, "StarterDuty": 40.0, "SequencerState": 1}
+    live.feed(_frame(codec, "EcuStarter", {**starter, "AbortReason": 6}), 1.0)  # the last start's
+    live.feed(_frame(codec, "EcuStarter", {**starter, "AbortReason": 0}), 2.0)
+    live.feed(_frame(codec, "EcuStarter", {**starter, "AbortReason": 1}), 3.0)
+    live.feed(_frame(codec, "EcuStarter", {**starter, "AbortReason": 1}), 3.01)
+    assert [(e["wall_s"], e["bits"]) for e in live.faults_seen()] == [
+        (3.0, ["START_ABORT_IGNITION_TIMEOUT"])
+    ]

@@ -1,6 +1,6 @@
 """The engine's live values from the CAN contract's frames, as the ground-support page shows
 them: the latest of each signal, a 60 s history at 10 Hz for the chart, and the faults seen
-with a snapshot of the values at that moment.
+(a fault bit that rose, a start aborted) with a snapshot of the values at that moment.
 
 Frames come from any bus (:meth:`Live.feed`, called by the bus reader); values are decoded with
 the DBC (cantools), enumerations by its value tables. Speed and EGT are the sensor frames the
@@ -111,6 +111,8 @@ class Live:
                 self.values[key] = value if isinstance(value, int | float) else str(value)
             if message.name == "EcuStatus":
                 self._status(now_s)
+            if message.name == "EcuStarter":
+                self._abort(now_s)
             if message.name == "PlantSensors":
                 self.values["speed_pct"] = self.values["speed_rpm"] / RPM_PER_PCT
                 self.values["frame_s"] = now_s
@@ -129,6 +131,17 @@ class Live:
         if new:
             snapshot = {k: v for k, v in self.values.items() if not k.startswith("_")}
             self.fault_log.append(FaultEntry(now_s, faults.names(new), word, snapshot))
+
+    def _abort(self, now_s: float) -> None:
+        """A start aborted: the starter frame's abort reason changed to one (its first value
+        is the last start's, from before the page watched)."""
+        reason = self.values.get("abort_reason")
+        before = self.values.get("_abort_before", reason)
+        self.values["_abort_before"] = reason
+        if reason != before and reason not in ("NONE", 0):
+            snapshot = {k: v for k, v in self.values.items() if not k.startswith("_")}
+            word = int(self.values.get("fault_word", 0))
+            self.fault_log.append(FaultEntry(now_s, [f"START_ABORT_{reason}"], word, snapshot))
 
     def _sample(self, now_s: float) -> list:
         v = self.values
