@@ -104,3 +104,30 @@ def test_sil_gsu_listens_on_the_loopback_unless_told() -> None:
     gsu.add_arguments(parser)
     assert parser.parse_args(["--bus", "udp:239.255.7.7"]).listen == "127.0.0.1"
     assert parser.parse_args(["--bus", "vcan", "--listen", "0.0.0.0"]).listen == "0.0.0.0"
+
+
+def test_sil_gsu_refuses_bad_input_with_exit_2(sil, tmp_path, udp_spec) -> None:  # noqa: ANN001
+    cases = [
+        (["--a2l", str(tmp_path / "none.a2l")], "none.a2l: no such file"),
+        (["--out", str(tmp_path / "nowhere")], "nowhere: not a folder"),
+        (["--port", "70000"], "--port"),
+    ]
+    for args, said in cases:
+        done = sil("gsu", "--bus", udp_spec(), *args, timeout=60)
+        assert done.returncode == 2 and said in done.stderr, (args, done.stderr)
+    done = sil("gsu", "--bus", "nosuchinterface:x", timeout=60)
+    assert done.returncode == 2 and "nosuchinterface" in done.stderr
+    (tmp_path / "bad.a2l").write_text('ASAP2_VERSION 1 71\n/begin PROJECT p ""\n')
+    done = sil("gsu", "--bus", udp_spec(), "--a2l", str(tmp_path / "bad.a2l"), timeout=60)
+    assert done.returncode == 2 and "bad.a2l" in done.stderr, done.stderr
+
+
+def test_sil_gsu_says_when_its_port_is_taken(sil, udp_spec) -> None:  # noqa: ANN001
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = sil("gsu", "--bus", udp_spec(), "--port", str(port), timeout=60)
+    assert done.returncode == 2 and f"cannot listen on 127.0.0.1:{port}" in done.stderr
