@@ -304,3 +304,10 @@ def _c_bench_test(slave, level: int, ms: int) -> None:  # noqa: ANN001
                          (MEM.BENCH_TEST, T.STARTER)):  # fmt: skip
         request(C.Cmd.SET_MTA, 0, 0, 0, struct.pack("<I", MEM.bench_address(index)))
         assert request(C.Cmd.DOWNLOAD, 4, struct.pack("<i", value)) == b"\xff"
+
+
+def test_the_stage_is_on_the_checked_firmware_path():
+    """The no-allocation and integer-only checks run over the test functions' module."""
+    from tests.ecu.test_allocation_and_integers import FIRMWARE_MODULES
+
+    assert "actuator_tests" in FIRMWARE_MODULES
