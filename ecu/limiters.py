@@ -137,9 +137,23 @@ def select_voltage(
         s.v_applied_q24 = v_speed
         return v_speed
     v_prev = s.v_applied_q24
-    v = v_speed
-    owner = OWNER_SPEED
-    by_line = 0
+    v, owner = egt_limits(s, p, v_prev, v_speed, egt_err_q24, egt_ok)
+    v, owner, by_line = accel_limits(s, p, v_prev, v, owner, n_q24, rate_q24)
+    v, owner = decel_limits(s, p, v_prev, v, owner, n_q24, rate_q24)
+    v_lim = clamp(v, p.v_min_q24, p.v_max_q24)
+    s.v_saturated = 1 if v_lim != v else 0  # at a voltage limit (the slew alone is not)
+    v_lim = clamp(v_lim, v_prev - p.v_slew_q24, v_prev + p.v_slew_q24)
+    s.owner = owner
+    s.line_owns = by_line if owner == OWNER_ACCEL else 0
+    s.v_applied_q24 = v_lim
+    return v_lim
+
+
+def egt_limits(
+    s: EcuState, p: FirmwareParams, v_prev: int, v_speed: int, egt_err_q24: int, egt_ok: int
+) -> tuple[int, int]:
+    """The speed control's voltage under the EGT limit loop and the EGT line: (v, owner)."""
+    v, owner = v_speed, OWNER_SPEED
     if egt_ok:
         e = egt_err_q24
         if e < p.egt_engage_q24:
@@ -147,13 +161,20 @@ def select_voltage(
                 v_prev, e, s.egt_e_prev_q24, p.egt_kp_q24, p.egt_ki_dt_q24, s.owner == OWNER_EGT
             )
             if v_egt < v:
-                v = v_egt
-                owner = OWNER_EGT
+                v, owner = v_egt, OWNER_EGT
         s.egt_e_prev_q24 = e
     v_egt_line = egt_line_v(s, p, v_prev) if p.fuel_schedules_on else None
     if egt_ok and v_egt_line is not None and v_egt_line < v:
-        v = v_egt_line
-        owner = OWNER_EGT
+        v, owner = v_egt_line, OWNER_EGT
+    return v, owner
+
+
+def accel_limits(
+    s: EcuState, p: FirmwareParams, v_prev: int, v: int, owner: int, n_q24: int, rate_q24: int
+) -> tuple[int, int, int]:
+    """``v`` under the acceleration rate loop, the overspeed loop and the acceleration line:
+    (v, owner, 1 if the line owns)."""
+    by_line = 0
     rate_owned = s.owner == OWNER_ACCEL and not s.line_owns  # the rate loop, not the line
     ndot_max = p.accel_max_q24
     if p.fuel_schedules_on:  # the acceleration schedule, under the overall limit
@@ -162,8 +183,7 @@ def select_voltage(
     if e < p.rate_engage_q24:
         v_acc = _loop(v_prev, e, s.acc_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24, rate_owned)
         if v_acc < v:
-            v = v_acc
-            owner = OWNER_ACCEL
+            v, owner = v_acc, OWNER_ACCEL
     s.acc_e_prev_q24 = e
     e = sub_sat(p.n_limit_q24, n_q24)
     if e < p.n_limit_engage_q24:
@@ -176,39 +196,35 @@ def select_voltage(
             s.owner == OWNER_NLIMIT,
         )
         if v_nl < v:
-            v = v_nl
-            owner = OWNER_NLIMIT
+            v, owner = v_nl, OWNER_NLIMIT
     s.nlim_e_prev_q24 = e
     if p.fuel_schedules_on:
         # the line's fuel with the pump as estimated, within schedule_pump_range (the estimator
         # learns the pump while the line holds it: a weak pump's line rises)
         v_line = schedule_v(s, p, p.accel_line_q24, n_q24, p.sched_lam_lo_q24, p.sched_lam_hi_q24)
         if v_line < v:
-            v = v_line
-            owner = OWNER_ACCEL
-            by_line = 1
+            v, owner, by_line = v_line, OWNER_ACCEL, 1
+    return v, owner, by_line
+
+
+def decel_limits(
+    s: EcuState, p: FirmwareParams, v_prev: int, v: int, owner: int, n_q24: int, rate_q24: int
+) -> tuple[int, int]:
+    """``v`` over the deceleration rate loop and the deceleration floor: (v, owner)."""
     e = add_sat(rate_q24, p.decel_max_q24)  # margin above the deceleration limit
     if e < p.rate_engage_q24:
         v_dec = _loop(
             v_prev, -e, -s.dec_e_prev_q24, p.rate_kp_q24, p.rate_ki_dt_q24, s.owner == OWNER_DECEL
         )
         if v_dec > v:
-            v = v_dec
-            owner = OWNER_DECEL
+            v, owner = v_dec, OWNER_DECEL
     s.dec_e_prev_q24 = e
     if p.fuel_schedules_on:
         # one-sided: a weaker pump raises the floor, an estimate over Lambda_c never lowers it
         v_floor = schedule_v(s, p, p.decel_floor_q24, n_q24, p.sched_lam_lo_q24, p.lambda_comm_q24)
         if v_floor > v:
-            v = v_floor
-            owner = OWNER_DECEL
-    v_lim = clamp(v, p.v_min_q24, p.v_max_q24)
-    s.v_saturated = 1 if v_lim != v else 0  # at a voltage limit (the slew alone is not)
-    v_lim = clamp(v_lim, v_prev - p.v_slew_q24, v_prev + p.v_slew_q24)
-    s.owner = owner
-    s.line_owns = by_line if owner == OWNER_ACCEL else 0
-    s.v_applied_q24 = v_lim
-    return v_lim
+            v, owner = v_floor, OWNER_DECEL
+    return v, owner
 
 
 def reset_loops(s: EcuState, v_q24: int) -> None:

@@ -555,23 +555,14 @@ static int32_t egt_line_v(ecu_t *e, int32_t v_prev, int *on)
                         div_trunc(e, ((int64_t)vf - p->pump_dead_q24) * limit_rise_dk, rise_dk));
 }
 
-static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, int egt_ok,
-                              int32_t n_q24, int32_t rate_q24)
+/* the speed control's voltage under the EGT limit loop and the EGT line (owner set) */
+static int32_t egt_limits(ecu_t *e, int32_t v_prev, int32_t v_speed, int32_t egt_err_q24,
+                          int egt_ok, int32_t *owner)
 {
     const ecu_params_t *p = e->p;
     ecu_state_t *s = &e->s;
-    int32_t v_prev, v, owner, err, v_loop, v_lim, ndot_max, by_line = 0;
-    int rate_owned;
-    if (!p->limiters_on) {
-        s->owner = ECU_OWNER_SPEED;
-        s->v_saturated = 0;
-        s->line_owns = 0;
-        s->v_applied_q24 = v_speed;
-        return v_speed;
-    }
-    v_prev = s->v_applied_q24;
-    v = v_speed;
-    owner = ECU_OWNER_SPEED;
+    int32_t v = v_speed, err, v_loop;
+    *owner = ECU_OWNER_SPEED;
     if (egt_ok) {
         err = egt_err_q24;
         if (err < p->egt_engage_q24) {
@@ -579,7 +570,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
                                 s->owner == ECU_OWNER_EGT);
             if (v_loop < v) {
                 v = v_loop;
-                owner = ECU_OWNER_EGT;
+                *owner = ECU_OWNER_EGT;
             }
         }
         s->egt_e_prev_q24 = err;
@@ -589,11 +580,22 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         v_loop = egt_line_v(e, v_prev, &on);
         if (egt_ok && on && v_loop < v) {
             v = v_loop;
-            owner = ECU_OWNER_EGT;
+            *owner = ECU_OWNER_EGT;
         }
     }
-    rate_owned = s->owner == ECU_OWNER_ACCEL && !s->line_owns; /* the rate loop, not the line */
-    ndot_max = p->accel_max_q24;
+    return v;
+}
+
+/* v under the acceleration rate loop, the overspeed loop and the acceleration line (owner
+ * and by_line, 1 if the line owns, set) */
+static int32_t accel_limits(ecu_t *e, int32_t v_prev, int32_t v, int32_t *owner, int32_t n_q24,
+                            int32_t rate_q24, int32_t *by_line)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t err, v_loop, ndot_max = p->accel_max_q24;
+    int rate_owned = s->owner == ECU_OWNER_ACCEL && !s->line_owns; /* the rate loop, not the line */
+    *by_line = 0;
     if (p->fuel_schedules_on) { /* the acceleration schedule, under the overall limit */
         int32_t sched = schedule_at(e, p->accel_rate_q24, n_q24);
         ndot_max = sched < ndot_max ? sched : ndot_max;
@@ -604,7 +606,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
                             rate_owned);
         if (v_loop < v) {
             v = v_loop;
-            owner = ECU_OWNER_ACCEL;
+            *owner = ECU_OWNER_ACCEL;
         }
     }
     s->acc_e_prev_q24 = err;
@@ -614,7 +616,7 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
                             p->n_limit_ki_dt_q24, s->owner == ECU_OWNER_NLIMIT);
         if (v_loop < v) {
             v = v_loop;
-            owner = ECU_OWNER_NLIMIT;
+            *owner = ECU_OWNER_NLIMIT;
         }
     }
     s->nlim_e_prev_q24 = err;
@@ -624,17 +626,26 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         v_loop = schedule_v(e, p->accel_line_q24, n_q24, p->sched_lam_lo_q24, p->sched_lam_hi_q24);
         if (v_loop < v) {
             v = v_loop;
-            owner = ECU_OWNER_ACCEL;
-            by_line = 1;
+            *owner = ECU_OWNER_ACCEL;
+            *by_line = 1;
         }
     }
-    err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above the decel limit */
+    return v;
+}
+
+/* v over the deceleration rate loop and the deceleration floor (owner set) */
+static int32_t decel_limits(ecu_t *e, int32_t v_prev, int32_t v, int32_t *owner, int32_t n_q24,
+                            int32_t rate_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t v_loop, err = sat32(e, (int64_t)rate_q24 + p->decel_max_q24); /* margin above it */
     if (err < p->rate_engage_q24) {
         v_loop = limit_loop(e, v_prev, -(int64_t)err, -(int64_t)s->dec_e_prev_q24, p->rate_kp_q24,
                             p->rate_ki_dt_q24, s->owner == ECU_OWNER_DECEL);
         if (v_loop > v) {
             v = v_loop;
-            owner = ECU_OWNER_DECEL;
+            *owner = ECU_OWNER_DECEL;
         }
     }
     s->dec_e_prev_q24 = err;
@@ -643,9 +654,31 @@ static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, in
         v_loop = schedule_v(e, p->decel_floor_q24, n_q24, p->sched_lam_lo_q24, p->lambda_comm_q24);
         if (v_loop > v) {
             v = v_loop;
-            owner = ECU_OWNER_DECEL;
+            *owner = ECU_OWNER_DECEL;
         }
     }
+    return v;
+}
+
+/* min/max selection, voltage limits and slew; sets owner, v_saturated, line_owns (the
+ * acceleration line, not its rate loop, owns) and v_applied_q24 */
+static int32_t select_voltage(ecu_t *e, int32_t v_speed, int32_t egt_err_q24, int egt_ok,
+                              int32_t n_q24, int32_t rate_q24)
+{
+    const ecu_params_t *p = e->p;
+    ecu_state_t *s = &e->s;
+    int32_t v_prev, v, owner, v_lim, by_line;
+    if (!p->limiters_on) {
+        s->owner = ECU_OWNER_SPEED;
+        s->v_saturated = 0;
+        s->line_owns = 0;
+        s->v_applied_q24 = v_speed;
+        return v_speed;
+    }
+    v_prev = s->v_applied_q24;
+    v = egt_limits(e, v_prev, v_speed, egt_err_q24, egt_ok, &owner);
+    v = accel_limits(e, v_prev, v, &owner, n_q24, rate_q24, &by_line);
+    v = decel_limits(e, v_prev, v, &owner, n_q24, rate_q24);
     v_lim = (int32_t)clamp(v, p->v_min_q24, p->v_max_q24);
     s->v_saturated = v_lim != v ? 1 : 0;
     v_lim = (int32_t)clamp(v_lim, (int64_t)v_prev - p->v_slew_q24, (int64_t)v_prev + p->v_slew_q24);

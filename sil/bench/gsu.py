@@ -36,6 +36,10 @@ SECONDS, QUICK_S = 30.0, 10.0
 START_S = 60.0  # from standstill to RUN, at most
 PIL_BUILD_S = 300.0  # the firmware image is compiled at its first use
 TARGETS = {"updates_per_s": 10.0, "latency_p95_ms": 100.0}
+TARGET_TEXT = {
+    "targets": f"the page: >= {TARGETS['updates_per_s']:g} screen updates a second and frame to "
+    f"screen p95 <= {TARGETS['latency_p95_ms']:g} ms, with the Python ECU (quick) or each ECU"
+}
 CHROMIUM = "/usr/bin/chromium"
 # a browser on a machine with no network: nothing of its own on the network, no sandbox as root
 CHROMIUM_ARGS = (
