@@ -2,11 +2,13 @@
 running in real time: the dashboard's speed follows the engine (read from the bus by the test
 itself), a test function at rest spins the rotor for its time, start brings the engine to idle, a
 throttle change moves it, a test function is refused while it runs, a refused parameter write
-shows the ECU's reason, stop cools it, the logbook counts the run, a recording is written.
+shows the ECU's reason, the parameter file goes out and comes back in through the ECU's checks,
+stop cools it, the logbook counts the run, a recording is written.
 Screenshots of each page go to $GSU_SCREENSHOTS (docs/gsu/ for the docs) or the test's folder."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import threading
@@ -106,6 +108,32 @@ def _follows(page, watch: BusWatch) -> None:  # noqa: ANN001
         time.sleep(0.3)
 
 
+def _export_and_import(page, bench, tmp_path: Path) -> None:  # noqa: ANN001
+    """The parameter file exported holds the ECU's values; imported with one value changed, one
+    over its limit and one name this ECU has not, it writes the first, shows the ECU's refusal
+    of the second and names the third."""
+    with page.expect_download() as download:
+        page.get_by_test_id("export").click()
+    exported = json.loads(Path(download.value.path()).read_text())
+    on_ecu = {row["name"]: row["value"] for row in bench.api("/api/params")}
+    assert {k: v["value"] for k, v in exported["parameters"].items()} == on_ecu
+    assert exported["parameters"]["egt_limit_k"] == {"value": on_ecu["egt_limit_k"], "unit": "K"}
+    edited = dict(exported, parameters={**exported["parameters"],
+                                        "egt_limit_k": {"value": 1230.0, "unit": "K"},
+                                        "egt_kp": {"value": 5.0, "unit": "V/K"},
+                                        "no_such_parameter": {"value": 1.0}})  # fmt: skip
+    path = tmp_path / "engine.json"
+    path.write_text(json.dumps(edited))
+    page.get_by_test_id("import").set_input_files(str(path))
+    message = page.get_by_test_id("params-msg")
+    _wait("the import", lambda: "engine.json: 1 written" in message.inner_text(), 30, page)
+    assert "refused: egt_kp = 5: outside its limits [0, 1] V/K (ERR_OUT_OF_RANGE)" in \
+        message.inner_text()  # fmt: skip
+    assert "not in this ECU: no_such_parameter" in message.inner_text()
+    after = {row["name"]: row["value"] for row in bench.api("/api/params")}
+    assert after["egt_limit_k"] == pytest.approx(1230.0) and after["egt_kp"] == on_ecu["egt_kp"]
+
+
 def test_a_run_from_the_page(bench, browser, tmp_path) -> None:  # noqa: ANN001
     shots = Path(os.environ.get("GSU_SCREENSHOTS") or tmp_path)
     shots.mkdir(parents=True, exist_ok=True)
@@ -189,6 +217,7 @@ def test_a_run_from_the_page(bench, browser, tmp_path) -> None:  # noqa: ANN001
         assert "ERR_OUT_OF_RANGE" in message.inner_text()
         page.get_by_test_id("param-input-egt_limit_k").scroll_into_view_if_needed()
         _shot(page, shots, "parameters")
+        _export_and_import(page, bench, tmp_path)
 
         # stop cools it
         page.goto(bench.url + "#run")

@@ -202,8 +202,9 @@ function shown(value) {
     : (typeof value === "number" ? String(+value.toPrecision(6)) : "-");
 }
 
-async function loadParams() {
-  say("params-msg", "reading from the ECU ...", true);
+// the parameters read from the ECU into the table (``quiet``: the message line is left as it is)
+async function loadParams(quiet) {
+  if (!quiet) say("params-msg", "reading from the ECU ...", true);
   let rows;
   try { rows = await api("/api/params"); } catch (err) { say("params-msg", err.message, false); return; }
   const body = $("params-body");
@@ -225,7 +226,7 @@ async function loadParams() {
     tr.querySelector("button").onclick = () => writeParam(p, tr, msg);
     body.append(tr, msg);
   }
-  say("params-msg", `${rows.length} parameters`, true);
+  if (!quiet) say("params-msg", `${rows.length} parameters`, true);
 }
 
 async function writeParam(p, tr, msg) {
@@ -243,7 +244,7 @@ async function writeParam(p, tr, msg) {
   }
 }
 
-$("params-reload").onclick = loadParams;
+$("params-reload").onclick = () => loadParams(false);
 $("params-filter").oninput = () => {
   const f = $("params-filter").value.toLowerCase();
   for (const tr of $("params-body").querySelectorAll("tr[data-name]")) {
@@ -276,7 +277,7 @@ $("import").onchange = async () => {
     say("params-msg", `${file.name}: ${answer.written.length} written` +
       (refused ? `; refused: ${refused}` : "") +
       (answer.unknown.length ? `; not in this ECU: ${answer.unknown.join(", ")}` : ""), !refused);
-    loadParams();
+    loadParams(true);
   }
   $("import").value = "";
 };
