@@ -9,7 +9,6 @@ import os
 import select
 import struct
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -20,14 +19,6 @@ from ecu import modes as M
 from tests.xcp.conftest import read_a2l
 
 pytestmark = pytest.mark.slow
-
-
-def _sil(*args: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "sil.cli", *args],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
 
 
 def _wait_for_line(proc: subprocess.Popen, prefix: bytes, timeout: float = 90) -> None:
@@ -48,11 +39,12 @@ def _wait_for_line(proc: subprocess.Popen, prefix: bytes, timeout: float = 90) -
 class Ecu:
     """`sil ecu --impl IMPL --flash FLASH` in real time beside a plant at rest."""
 
-    def __init__(self, impl: str, flash: Path, udp_group: tuple[str, int]) -> None:
+    def __init__(self, impl: str, flash: Path, udp_group: tuple[str, int], sil_process) -> None:  # noqa: ANN001
         bus = f"udp:{udp_group[0]}@{udp_group[1]}"
-        self.plant = _sil("plant", "--bus", bus, "--realtime", "--standstill")
-        self.ecu = _sil("ecu", "--bus", bus, "--impl", impl, "--mode", "realtime",
-                        "--flash", str(flash))  # fmt: skip
+        quiet = {"stdout": subprocess.DEVNULL}
+        self.plant = sil_process("plant", "--bus", bus, "--realtime", "--standstill", **quiet)
+        self.ecu = sil_process("ecu", "--bus", bus, "--impl", impl, "--mode", "realtime",
+                               "--flash", str(flash), **quiet)  # fmt: skip
         _wait_for_line(self.ecu, b"xcp: ")
 
     def close(self) -> None:
@@ -82,7 +74,7 @@ def _until(x, m: dict, wanted: int, timeout: float = 20) -> None:  # noqa: ANN00
 
 @pytest.mark.parametrize("impl", ["python", "c"])
 def test_pyxcp_runs_a_test_and_reads_the_logbook_over_a_restart(
-    impl, tmp_path, udp_group, sil, xcp_tools
+    impl, tmp_path, udp_group, sil, sil_process, xcp_tools
 ):
     a2l_path = tmp_path / "ecu.a2l"
     done = sil("a2l", "--impl", impl, "--out", str(a2l_path))
@@ -91,7 +83,7 @@ def test_pyxcp_runs_a_test_and_reads_the_logbook_over_a_restart(
     meas = {m["name"]: m for m in a2l["measurements"]}
     bench = {c["name"]: c for c in a2l["characteristics"] if c["name"].startswith("bench_")}
     flash = tmp_path / "flash.bin"
-    ecu = Ecu(impl, flash, udp_group)
+    ecu = Ecu(impl, flash, udp_group, sil_process)
     try:
         with xcp_tools.master("turbojet_udp", udp_group[0], port=udp_group[1]) as x:
             x.connect()
@@ -117,7 +109,7 @@ def test_pyxcp_runs_a_test_and_reads_the_logbook_over_a_restart(
             x.disconnect()
     finally:
         ecu.close()
-    ecu = Ecu(impl, flash, udp_group)  # power-up on the same flash image
+    ecu = Ecu(impl, flash, udp_group, sil_process)  # power-up on the same flash image
     try:
         with xcp_tools.master("turbojet_udp", udp_group[0], port=udp_group[1]) as x:
             x.connect()
