@@ -358,14 +358,7 @@ def record_start_stop(ticks: int) -> Golden:
     dt = 1.0 / p.rate_hz
     for k in range(ticks):
         next(script)
-        i.tick = k % 65536
-        noise = (k * 7919) % 41 - 20 if engine.n_pct > 0.5 else 0  # a still rotor reads 0
-        i.speed_rpm = max(0, round(engine.n_pct * 1125.0) + noise)
-        i.egt_dk = round(engine.egt_k * 10.0)
-        i.supply_mv = 22200
-        i.pump_ma = (1050 + 60 * o.pump_mv // 1000) if o.pump_enable else 0
-        i.demand_cpct = 4500
-        i.open_loop_mv = 0
+        _engine_inputs(i, k, engine, o)
         i.arm, i.stop = cmd["arm"], cmd["stop"]
         i.sensor_status = E2E_OK if cmd["sensors"] else E2E_NONEWDATA
         i.analog_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
@@ -373,6 +366,19 @@ def record_start_stop(ticks: int) -> Golden:
         ecu.tick(i)
         engine.step(o, dt)
     return Golden("start-stop", compile_params(p), ecu.rows)
+
+
+def _engine_inputs(i: EcuInputs, k: int, engine: StartEngine, o) -> None:  # noqa: ANN001 (EcuOutputs)
+    """Tick ``k``'s readings of ``engine`` (a still rotor reads 0, a turning one has noise), a
+    steady supply, the pump's current as the ECU drives it, a 45 %N demand."""
+    i.tick = k % 65536
+    noise = (k * 7919) % 41 - 20 if engine.n_pct > 0.5 else 0
+    i.speed_rpm = max(0, round(engine.n_pct * 1125.0) + noise)
+    i.egt_dk = round(engine.egt_k * 10.0)
+    i.supply_mv = 22200
+    i.pump_ma = (1050 + 60 * o.pump_mv // 1000) if o.pump_enable else 0
+    i.demand_cpct = 4500
+    i.open_loop_mv = 0
 
 
 # the bench tests' script: (first tick, request, level, ms, arm, stop), held from that tick on
@@ -413,14 +419,7 @@ def record_bench_tests(ticks: int) -> Golden:
     for k in range(ticks):
         row = steps.get(k, row)
         i.test_request, i.test_level, i.test_ms, i.arm, i.stop = row
-        i.tick = k % 65536
-        noise = (k * 7919) % 41 - 20 if engine.n_pct > 0.5 else 0
-        i.speed_rpm = max(0, round(engine.n_pct * 1125.0) + noise)
-        i.egt_dk = round(engine.egt_k * 10.0)
-        i.supply_mv = 22200
-        i.pump_ma = (1050 + 60 * o.pump_mv // 1000) if o.pump_enable else 0
-        i.demand_cpct = 4500
-        i.open_loop_mv = 0
+        _engine_inputs(i, k, engine, o)
         i.sensor_status = E2E_OK
         i.analog_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
         i.demand_status = E2E_OK if k % 5 == 0 else E2E_NONEWDATA
