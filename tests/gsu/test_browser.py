@@ -15,9 +15,12 @@ import threading
 import time
 from pathlib import Path
 
+import msgpack
 import pytest
 
 from ecu.firmware import RPM_PER_PCT
+from ecu.service import storage
+from ecu.service.param_table import BY_NAME
 from protocol.bus import open_bus
 from protocol.dbc import load_database
 
@@ -215,9 +218,15 @@ def test_a_run_from_the_page(bench, browser, tmp_path) -> None:  # noqa: ANN001
         _wait("the refusal", lambda: "refused" in message.inner_text(), 10, page)
         assert "outside its limits [800, 1400] K" in message.inner_text()
         assert "ERR_OUT_OF_RANGE" in message.inner_text()
-        page.get_by_test_id("param-input-egt_limit_k").scroll_into_view_if_needed()
+        page.locator("#params-filter").fill("egt")  # (the table's filter: the EGT's parameters)
         _shot(page, shots, "parameters")
+        page.locator("#params-filter").fill("")
         _export_and_import(page, bench, tmp_path)
+        page.get_by_test_id("store").click()
+        stored = page.get_by_test_id("params-msg")
+        _wait("the set stored to flash", lambda: stored.inner_text() == "stored to flash", 30, page)
+        in_flash = msgpack.unpackb(storage.load(bench.folder / "ecu.flash").payload)
+        assert in_flash["egt_limit_k"] == BY_NAME["egt_limit_k"].to_raw(1230.0)
 
         # stop cools it
         page.goto(bench.url + "#run")

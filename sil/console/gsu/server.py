@@ -71,7 +71,7 @@ class Gsu:
         try:
             polled = self.link.read_measurements([n for n in POLLED if n != "bench_throttle"])
             c = self.link.a2l.characteristics
-            for name in ("bench_throttle", "egt_limit_k", "egt_start_limit_k"):
+            for name in ("bench_throttle", "egt_limit_k", "start_egt_limit_k"):
                 if name in c:
                     polled[name] = self.link.read_characteristic(c[name])
             self.polled = polled

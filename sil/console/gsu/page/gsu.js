@@ -88,8 +88,8 @@ function render() {
   const limit = s.x_egt_limit_k;
   $("egt").classList.toggle("hot", typeof limit === "number" && s.egt_k > limit);
   $("egt-limit").textContent = fmt(limit, 0);
-  $("egt-start").textContent = fmt(
-    typeof s.x_egt_start_target === "number" ? s.x_egt_start_target : undefined, 0);
+  $("egt-start").textContent = fmt(s.x_start_egt_limit_k, 0);
+  $("egt-target").textContent = fmt(s.x_egt_start_target, 0);
   $("pump").textContent = fmt(s.pump_v, 2);
   $("pump-duty").textContent = fmt(s.pump_duty_pct, 1);
   $("pump-enable").textContent = s.pump_enable ? "enabled" : "off";
