@@ -41,14 +41,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def run(args: argparse.Namespace) -> int:
+def text_for(impl: str, rate_hz: int | None, ids: tuple[int, int] | None) -> str:
+    """The A2L of the ECU implementation ``impl`` (its slave's limits) at ``rate_hz``, with the
+    XCP identifiers ``ids`` (None: the DBC's)."""
     from ecu.port.xcp import header_limits
     from ecu.xcp.a2l import a2l_text
     from ecu.xcp.slave import Limits
     from protocol.dbc import xcp_frame_ids
 
-    limits = Limits() if args.impl == "python" else header_limits()
-    text = a2l_text(args.rate, args.xcp_ids or xcp_frame_ids(), limits)
+    limits = Limits() if impl == "python" else header_limits()
+    return a2l_text(rate_hz, ids or xcp_frame_ids(), limits)
+
+
+def run(args: argparse.Namespace) -> int:
+    text = text_for(args.impl, args.rate, args.xcp_ids)
     if args.out is None:
         sys.stdout.write(text)
         return 0

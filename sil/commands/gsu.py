@@ -14,6 +14,7 @@ import tempfile
 from pathlib import Path
 
 from sil import validation
+from sil.commands import a2l as a2l_command
 from sil.run.node_options import xcp_ids
 from sil.validation import option
 
@@ -70,15 +71,9 @@ def _a2l(args: argparse.Namespace):  # noqa: ANN202 (sil.record.a2l.A2l)
 
     if args.a2l is not None:
         return read_a2l(args.a2l)
-    from ecu.port.xcp import header_limits
-    from ecu.xcp.a2l import a2l_text
-    from ecu.xcp.slave import Limits
-    from protocol.dbc import xcp_frame_ids
-
-    limits = Limits() if args.impl == "python" else header_limits()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "turbojet_ecu.a2l"
-        path.write_text(a2l_text(100, args.xcp_ids or xcp_frame_ids(), limits), "latin-1")
+        path.write_text(a2l_command.text_for(args.impl, None, args.xcp_ids), "latin-1")
         return read_a2l(path)
 
 
@@ -127,8 +122,7 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         server.server_close()
-        written = app.close()
-        if written is not None:
-            print(f"{prefix}: recording written: {written['path']} ({written['frames']} frames)",
-                  file=sys.stderr)  # fmt: skip
+        said = app.close()
+        if said is not None:
+            print(f"{prefix}: {said}", file=sys.stderr)
     return 0

@@ -10,6 +10,7 @@ import threading
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -131,3 +132,25 @@ def test_sil_gsu_says_when_its_port_is_taken(sil, udp_spec) -> None:  # noqa: AN
         port = taken.getsockname()[1]
         done = sil("gsu", "--bus", udp_spec(), "--port", str(port), timeout=60)
     assert done.returncode == 2 and f"cannot listen on 127.0.0.1:{port}" in done.stderr
+
+
+def test_a_recording_that_cannot_be_written_is_kept(tmp_path) -> None:  # noqa: ANN001
+    import can
+
+    from sil.console.gsu.live import Live
+    from sil.console.gsu.server import Gsu
+    from sil.console.gsu.xcp_link import Refused
+
+    gsu = Gsu(Live(), None, tmp_path / "gone", TOKEN)  # type: ignore[arg-type]
+    frames = [can.Message(arbitration_id=0x100 + k, data=bytes(8), is_extended_id=False)
+              for k in range(5)]  # fmt: skip
+    gsu.record_start()
+    for k, frame in enumerate(frames[:3]):
+        gsu.live.feed(frame, 1e9 + k)
+    with pytest.raises(Refused, match="gone/gsu-.*cannot write.*the recording goes on"):
+        gsu.record_stop()
+    for k, frame in enumerate(frames[3:], 3):
+        gsu.live.feed(frame, 1e9 + k)
+    gsu.out_dir = tmp_path
+    done = gsu.record_stop()
+    assert done["frames"] == 5 and Path(done["path"]).parent == tmp_path

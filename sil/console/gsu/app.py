@@ -18,7 +18,7 @@ import can
 from protocol.bus import open_bus
 from sil.console.gsu.live import Live
 from sil.console.gsu.server import Gsu, serve
-from sil.console.gsu.xcp_link import XcpLink
+from sil.console.gsu.xcp_link import Refused, XcpLink
 from sil.record.a2l import A2l
 
 READ_TIMEOUT_S = 0.1
@@ -68,13 +68,16 @@ class App:
         self.start()
         return serve(self.gsu, host, port)
 
-    def close(self) -> dict | None:
-        """Stop; a recording under way is written first (returned)."""
+    def close(self) -> str | None:
+        """Stop; a recording under way is written first (what became of it is returned)."""
         self.gsu.stop()
-        written = None
-        with contextlib.suppress(Exception):
-            if self.gsu.live.recorder is not None:
-                written = self.gsu.record_stop()
+        said = None
+        if self.gsu.live.recorder is not None:
+            try:
+                done = self.gsu.record_stop()
+                said = f"recording written: {done['path']} ({done['frames']} frames)"
+            except Refused as exc:
+                said = f"recording not written: {exc}"
         self._running.clear()
         for thread in self._threads:
             thread.join(timeout=2.0)
@@ -82,4 +85,4 @@ class App:
         for bus in (self.live_bus, self.xcp_bus):
             with contextlib.suppress(Exception):
                 bus.shutdown()
-        return written
+        return said

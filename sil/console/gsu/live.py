@@ -73,13 +73,14 @@ class Live:
     values: dict = field(default_factory=dict)
     frames: int = 0
     undecodable: int = 0
-    last_frame_s: float = 0.0  # wall clock of the newest frame
     status_s: float = 0.0  # wall clock of the newest EcuStatus
     history: deque = field(default_factory=lambda: deque(maxlen=int(HISTORY_S * HISTORY_HZ)))
     fault_log: deque = field(default_factory=lambda: deque(maxlen=FAULT_LOG_MAX))
     recorder: list[can.Message] | None = None
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _next_sample_s: float = 0.0
+    _fault_word: int = 0  # the last status frame's fault word
+    _abort: object = None  # the last starter frame's abort reason (None: none seen yet)
     _ids: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -93,7 +94,6 @@ class Live:
         now_s = time.time() if now_s is None else now_s
         with self._lock:
             self.frames += 1
-            self.last_frame_s = now_s
             if self.recorder is not None:
                 msg.timestamp = now_s  # (the nodes' own stamps may count simulated time)
                 self.recorder.append(msg)
@@ -112,7 +112,7 @@ class Live:
             if message.name == "EcuStatus":
                 self._status(now_s)
             if message.name == "EcuStarter":
-                self._abort(now_s)
+                self._abort_seen(now_s)
             if message.name == "PlantSensors":
                 self.values["speed_pct"] = self.values["speed_rpm"] / RPM_PER_PCT
                 self.values["frame_s"] = now_s
@@ -122,26 +122,24 @@ class Live:
 
     def _status(self, now_s: float) -> None:
         word = int(self.values.get("fault_word", 0))
-        before = int(self.values.get("_fault_word_before", 0))
-        new = word & ~before
-        self.values["_fault_word_before"] = word
+        new = word & ~self._fault_word & ~INFORMATION
+        self._fault_word = word
         self.values["faults"] = faults.names(word)
         self.status_s = now_s
-        new &= ~INFORMATION
         if new:
-            snapshot = {k: v for k, v in self.values.items() if not k.startswith("_")}
-            self.fault_log.append(FaultEntry(now_s, faults.names(new), word, snapshot))
+            self._log(now_s, faults.names(new))
 
-    def _abort(self, now_s: float) -> None:
+    def _abort_seen(self, now_s: float) -> None:
         """A start aborted: the starter frame's abort reason changed to one (its first value
         is the last start's, from before the page watched)."""
         reason = self.values.get("abort_reason")
-        before = self.values.get("_abort_before", reason)
-        self.values["_abort_before"] = reason
-        if reason != before and reason not in ("NONE", 0):
-            snapshot = {k: v for k, v in self.values.items() if not k.startswith("_")}
-            word = int(self.values.get("fault_word", 0))
-            self.fault_log.append(FaultEntry(now_s, [f"START_ABORT_{reason}"], word, snapshot))
+        before, self._abort = self._abort, reason
+        if before is not None and reason != before and reason not in ("NONE", 0):
+            self._log(now_s, [f"START_ABORT_{reason}"])
+
+    def _log(self, now_s: float, bits: list[str]) -> None:
+        word = int(self.values.get("fault_word", 0))
+        self.fault_log.append(FaultEntry(now_s, bits, word, dict(self.values)))
 
     def _sample(self, now_s: float) -> list:
         v = self.values
@@ -157,7 +155,7 @@ class Live:
         """What the page shows now, as plain JSON values."""
         now_s = time.time() if now_s is None else now_s
         with self._lock:
-            out = {k: v for k, v in self.values.items() if not k.startswith("_")}
+            out = dict(self.values)
             out["frames"] = self.frames
             out["undecodable"] = self.undecodable
             out["ecu_silent"] = now_s - self.status_s > SILENT_S
@@ -176,12 +174,13 @@ class Live:
                 for e in self.fault_log
             ]
 
-    def start_recording(self) -> bool:
-        """Keep every frame from now on; False if a recording is already under way."""
+    def start_recording(self, kept: list[can.Message] | None = None) -> bool:
+        """Keep every frame from now on (after ``kept``, the frames of a recording that could
+        not be written); False if a recording is already under way."""
         with self._lock:
             if self.recorder is not None:
                 return False
-            self.recorder = []
+            self.recorder = kept if kept is not None else []
             return True
 
     def stop_recording(self) -> list[can.Message] | None:

@@ -23,29 +23,21 @@ from importlib import resources
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
+from protocol import strict_json
 from sil.console.gsu.live import Live
 from sil.console.gsu.xcp_link import Refused, XcpLink
 from sil.record import mdf
 
 STREAM_HZ = 20.0
 POLL_S = 0.5  # the values read over XCP for the dashboard, this often
-POLLED = ("egt_start_target", "demand_source", "test_active", "test_time_left", "bench_throttle")
+# what the dashboard reads over XCP: measurements, and characteristics (the limits, the bench's)
+POLLED = ("egt_start_target", "demand_source", "test_active", "test_time_left")
+POLLED_CHARACTERISTICS = ("bench_throttle", "egt_limit_k", "start_egt_limit_k")
 LOGBOOK_PREFIX = "log_"
 BENCH_PREFIX = "bench_"  # the A2L's bench commands: not parameters of the engine
 PARAM_FILE = "turbojet-gsu parameters"
 MAX_BODY = 1 << 20
 STATIC = ("index.html", "gsu.js", "gsu.css")
-
-
-def _clean(value: object) -> object:
-    """JSON without NaN or infinities."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    return value
 
 
 class Gsu:
@@ -57,9 +49,7 @@ class Gsu:
         self.out_dir = out_dir
         self.token = token
         self.polled: dict = {}
-        self.limits: dict = {}
         self.recordings: list[dict] = []
-        self.errors: list[str] = []
         self._stop = threading.Event()
 
     # -- the slow values, over XCP -------------------------------------------------------------
@@ -69,9 +59,9 @@ class Gsu:
 
     def poll(self) -> None:
         try:
-            polled = self.link.read_measurements([n for n in POLLED if n != "bench_throttle"])
+            polled = self.link.read_measurements(list(POLLED))
             c = self.link.a2l.characteristics
-            for name in ("bench_throttle", "egt_limit_k", "start_egt_limit_k"):
+            for name in POLLED_CHARACTERISTICS:
                 if name in c:
                     polled[name] = self.link.read_characteristic(c[name])
             self.polled = polled
@@ -86,7 +76,7 @@ class Gsu:
         out.update({f"x_{k}": v for k, v in self.polled.items()})
         out["xcp"] = self.link.status()
         out["sent_s"] = time.time()
-        return _clean(out)
+        return out
 
     # -- parameters ----------------------------------------------------------------------------
     def parameters(self) -> list[dict]:
@@ -111,7 +101,7 @@ class Gsu:
                     "error": problem,
                 }
             )
-        return _clean(rows)
+        return rows
 
     def write_parameter(self, name: str, value: object) -> dict:
         c = self.link.a2l.characteristics.get(name)
@@ -169,7 +159,7 @@ class Gsu:
         names = [n for n in self.link.a2l.measurements if n.startswith(LOGBOOK_PREFIX)]
         if not names:
             raise Refused("this ECU's A2L has no logbook")
-        return _clean(self.link.read_measurements(names))
+        return self.link.read_measurements(names)
 
     # -- recording -----------------------------------------------------------------------------
     def record_start(self) -> dict:
@@ -187,7 +177,11 @@ class Gsu:
         path = self.out_dir / f"gsu-{stamp}.mf4"
         table = mdf.FrameTable.of(frames)
         base = mdf.time_base(float(table.t[0]), None, lambda: (time.time(), "the page"))
-        mdf.write_bus_log(path, table, base, note="recorded from the ground-support page")
+        try:
+            mdf.write_bus_log(path, table, base, note="recorded from the ground-support page")
+        except (OSError, mdf.MdfUnavailable) as exc:  # (WriteError names the file)
+            self.live.start_recording(frames)  # nothing lost: the recording goes on
+            raise Refused(f"{exc}; the recording goes on, stop it again to write it") from None
         done = {"path": str(path), "frames": len(frames), "bytes": path.stat().st_size}
         self.recordings.append(done)
         return done
@@ -214,7 +208,7 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
             self.wfile.write(body)
 
         def _json(self, status: int, value: object, extra: dict | None = None) -> None:
-            body = json.dumps(_clean(value), allow_nan=False).encode()
+            body = strict_json.dumps(value).encode()
             self._send(status, body, "application/json", extra)
 
         def _refuse(self, status: int, message: str) -> None:
@@ -295,7 +289,7 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
             next_s = time.monotonic()
             try:
                 while not gsu._stop.is_set():
-                    data = json.dumps(gsu.state(), allow_nan=False)
+                    data = strict_json.dumps(gsu.state())
                     self.wfile.write(f"data: {data}\n\n".encode())
                     self.wfile.flush()
                     next_s += period
