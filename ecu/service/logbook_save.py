@@ -77,10 +77,6 @@ class LogbookSaver:
             self.failures += 1
             self.on_end(None)
 
-    @property
-    def saving(self) -> bool:
-        return self.writer is not None
-
 
 def boot_saver(ecu: Any, boot: Any) -> LogbookSaver:
     """The saver of a node whose saves share ``boot`` (ecu.service.port.Boot) with the service

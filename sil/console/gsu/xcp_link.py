@@ -17,7 +17,7 @@ import logging
 import struct
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import can
 
@@ -29,11 +29,10 @@ CONNECT_TIMEOUT_S = 3.0
 STORE_TIMEOUT_S = 10.0
 SIZES = {"UBYTE": "<B", "SBYTE": "<b", "UWORD": "<H", "SWORD": "<h", "ULONG": "<I", "SLONG": "<i"}
 TESTS = {"glow": 1, "starter": 2, "prime": 3}
-# what an XCP error means for a write of each kind
+# what an XCP error means for a command of each kind (a parameter's OUT_OF_RANGE: its limits)
 MEANING = {
     "parameter": {
         Err.ACCESS_LOCKED: "the ECU is locked: unlock it first",
-        Err.OUT_OF_RANGE: "outside its limits",
         Err.ACCESS_DENIED: "the ECU refuses to change it while the engine runs",
         Err.VERIFY: "the ECU's parameter checks refuse the set (a table that falls or crosses)",
         Err.WRITE_PROTECTED: "read only",
@@ -120,8 +119,9 @@ class XcpLink:
         return self._x
 
     @contextlib.contextmanager
-    def _command(self, kind: str, what: str) -> Iterator[object]:
-        """One command on the session; its refusal as :class:`Refused`."""
+    def _command(self, kind: str, what: str, meaning: dict | None = None) -> Iterator[object]:
+        """One command on the session; its refusal as :class:`Refused`, the error explained by
+        ``meaning`` (error -> text) or :data:`MEANING` of ``kind``."""
         from pyxcp.types import XcpResponseError, XcpTimeoutError
 
         with self._lock:
@@ -129,10 +129,10 @@ class XcpLink:
                 yield self._session()
             except XcpResponseError as exc:
                 code = int(exc.get_error_code())
-                meaning = MEANING.get(kind, {}).get(code, "refused")
+                said = {**MEANING.get(kind, {}), **(meaning or {})}.get(code, "refused")
                 if code == Err.ACCESS_LOCKED:
                     self.unlocked = False
-                raise Refused(f"{what}: {meaning} ({error_name(code)})", code) from None
+                raise Refused(f"{what}: {said} ({error_name(code)})", code) from None
             except (XcpTimeoutError, OSError, can.CanError) as exc:
                 self._drop()
                 raise Refused(f"{what}: the ECU did not answer ({type(exc).__name__})") from None
@@ -184,23 +184,17 @@ class XcpLink:
     def write_characteristic(self, c: Characteristic, values: list[float], kind: str) -> None:
         """Write ``values`` (physical) whole; :class:`Refused` with the ECU's reason."""
         raws = [c.to_raw(v) for v in values]
-        fmt = SIZES[c.datatype]
         what = f"{c.name} = {', '.join(f'{v:g}' for v in values)}"
-        for raw in raws:
-            lo, hi = (-(2**31), 2**31 - 1) if fmt == "<i" else (0, 2 ** (8 * struct.calcsize(fmt)))
-            if not lo <= raw <= hi:
-                raise Refused(f"{what}: not a value its type holds")
-        data = b"".join(struct.pack(fmt, r) for r in raws)
         try:
-            with self._command(kind, what) as x:
-                x.push(c.address, 0, data)  # DOWNLOAD, with DOWNLOAD_NEXT beyond one frame
-        except Refused as exc:
-            if kind == "parameter" and exc.code == Err.OUT_OF_RANGE:
-                limits = f"its limits [{c.lower:g}, {c.upper:g}] {c.unit}".rstrip()
-                raise Refused(str(exc).replace("its limits", limits), exc.code) from None
-            raise
+            data = b"".join(struct.pack(SIZES[c.datatype], r) for r in raws)
+        except struct.error:
+            raise Refused(f"{what}: not a value its type ({c.datatype}) holds") from None
+        limits = f"outside its limits [{c.lower:g}, {c.upper:g}] {c.unit}".rstrip()
+        meaning = {Err.OUT_OF_RANGE: limits} if kind == "parameter" else None
+        with self._command(kind, what, meaning) as x:
+            x.push(c.address, 0, data)  # DOWNLOAD, with DOWNLOAD_NEXT beyond one frame
 
-    def store(self, progress: Callable[[], None] | None = None) -> None:
+    def store(self) -> None:
         """STORE_CAL_REQ and wait for the ECU to finish it."""
         with self._command("store", "store to flash") as x:
             x.setRequest(0x01, 0)
@@ -209,8 +203,6 @@ class XcpLink:
                 if time.monotonic() > deadline:
                     raise Refused(f"store to flash: not done within {STORE_TIMEOUT_S:g} s")
                 time.sleep(0.05)
-                if progress is not None:
-                    progress()
 
     # -- the bench -----------------------------------------------------------------------------
     def bench(self, name: str, value: float) -> None:
