@@ -20,11 +20,20 @@ answers go out first); its DAQ lists are sampled after the tick and their DTOs g
 the tick's own frames. In lockstep the engine frames are then those of a node without a master.
 Before the first sensor frame (no tick runs yet) it is served as the frames come.
 
+Another ECU on the bus (:meth:`EcuNode.watch_bus`): a bus never hands a node its own frames
+(SocketCAN does not loop a socket's frames back to it, the loopback multicast bus drops its
+own), so a frame of an ID this ECU sends is another sender's: another ECU answering on the same
+bus. Watched, the node listens for :data:`LISTEN_S` before its first tick in real time; one that
+hears another ECU before it has flown for :data:`YOUNG_S` stays silent from then on
+(``refused`` says why), and one that has flown longer reports it (``report``, the service
+port's fault log) and goes on flying its engine.
+
 The node reuses its buffers: nothing it keeps grows per frame or per tick.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -47,6 +56,11 @@ _TELEMETRY_FIELDS = (
 )  # fmt: skip
 TELEMETRY_COUNT = 13  # EcuTelemetry mux indices 0..12 (DBC)
 RECEIVED = ("PlantSensors", "PlantAnalog", "Demand")  # the frames the ECU node takes
+SENT = ("EcuActuator", "EcuStarter", "EcuStatus", "EcuTelemetry")  # the frames it sends
+LISTEN_S = 0.03  # watched, real time: the node listens this long before its first tick (a
+# flying ECU sends EcuActuator every period; the engine's pump watchdog waits 10 periods)
+YOUNG_S = 0.5  # another ECU heard before the node has flown this long: the node stays silent
+QUIET_S = 1.0  # another ECU heard again after this long unheard: reported again
 
 
 def _clamp(x: int, lo: int, hi: int) -> int:
@@ -59,6 +73,58 @@ def _ahead(tick: int, now: int) -> bool:
 
 
 SERVICE_IDLE_POLL_S = 0.02  # lockstep with no plant yet: the service port's poll period
+
+
+class OtherEcuWatch:
+    """Another ECU on the bus, told by the frames of the IDs this ECU sends (see the module
+    docstring); shared by the Python and the C node. ``report(text)`` is told when another ECU
+    is first heard, and again once heard after QUIET_S unheard."""
+
+    def __init__(
+        self, codec: Codec, rate_hz: int, lockstep: bool, report: Callable[[str], None]
+    ) -> None:
+        self.names = {codec[m].frame_id: m for m in SENT}
+        self.young_ticks = math.ceil(YOUNG_S * rate_hz)
+        self.listen_periods = 0 if lockstep else math.ceil(LISTEN_S * rate_hz)  # before tick 0
+        self.quiet_ticks = max(1, math.ceil(QUIET_S * rate_hz))
+        self.report = report
+        self.frames = 0  # another ECU's frames heard
+        self.reports = 0
+        self.refused: str | None = None  # why the node stays silent, once it does
+        self._last_tick = 0
+
+    def period(self) -> bool:
+        """Real time, one period of the node's clock: True while the node only listens (before
+        its first tick) or stays silent (refused)."""
+        if self.listen_periods > 0:
+            self.listen_periods -= 1
+            return True
+        return self.refused is not None
+
+    def heard(self, frame_id: int, ticks: int) -> None:
+        """A frame of one of this ECU's IDs, heard after ``ticks`` ticks of the node's."""
+        self.frames += 1
+        what = f"{self.names[frame_id]} (0x{frame_id:03X})"
+        if self.refused is None and ticks < self.young_ticks:
+            self.refused = (
+                f"another ECU is on the bus: its {what} heard before this ECU flew the engine; "
+                "this ECU stays silent (one ECU per bus)"
+            )
+            self.reports += 1
+            self.report(self.refused)
+        elif self.refused is None and (
+            self.reports == 0 or ticks - self._last_tick > self.quiet_ticks
+        ):
+            self.reports += 1
+            self.report(
+                f"another ECU is on the bus: {what} from another sender; this ECU goes on "
+                "flying the engine (one ECU per bus: stop the other)"
+            )
+        self._last_tick = ticks
+
+    def summary(self) -> dict:
+        """The run summary's figures: another ECU's frames heard, and whether this one refused."""
+        return {"other_ecu_frames": self.frames, "other_ecu_refused": self.refused is not None}
 
 
 class EcuNode:
@@ -127,6 +193,22 @@ class EcuNode:
         self.logbook_saver: LogbookSaver | None = None
         self._xcp_send: Callable[[bytes], None] | None = None
         self._xcp_send_for: SendFn | None = None
+        self.watch: OtherEcuWatch | None = None  # another ECU on the bus (watch_bus), or None
+        self._codec = codec
+
+    def watch_bus(self, report: Callable[[str], None]) -> None:
+        """Watch for another ECU on the bus (see the module docstring): its frames are heard
+        from now on; ``report(text)`` says what was heard and what this ECU does, and the
+        service port's fault log has it; a refusal ends the node."""
+
+        def other_ecu(text: str) -> None:
+            report(text)
+            if self.service is not None:
+                self.service.note_other_ecu()
+            self.finished = self.finished or watch.refused is not None
+
+        self.watch = watch = OtherEcuWatch(self._codec, self.rate_hz, self.lockstep, other_ecu)
+        self.frame_ids = (*self.frame_ids, *watch.names)
 
     def attach_xcp(self, slave: XcpSlave) -> None:
         """Put an XCP slave on the node: its command frames are heard from now on."""
@@ -146,6 +228,11 @@ class EcuNode:
         pass
 
     def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        watch = self.watch
+        if watch is not None and (frame_id in watch.names or watch.refused is not None):
+            if frame_id in watch.names:
+                watch.heard(frame_id, self.ticks)
+            return  # (a node that refused takes nothing more)
         i = self.i
         if frame_id == self.sensors.frame_id:
             self.sensor_seen = True
@@ -246,6 +333,8 @@ class EcuNode:
         so that the firmware counts the lost sensor frames and reacts within its ticks; or,
         with no plant heard yet, serve the service port with the engine stopped (no tick runs:
         a real ECU answers its port before its engine turns)."""
+        if self.watch is not None and self.watch.refused is not None:
+            return
         if self.waiting:
             self.demand_waits += 1
             self._run_tick(send)
@@ -260,7 +349,10 @@ class EcuNode:
                 self.xcp.serve(self._xcp_sender(send))
 
     def on_period(self, send: SendFn) -> None:
-        """Real time: one tick per period of the node's own clock."""
+        """Real time: one tick per period of the node's own clock (watched: none while it
+        listens for another ECU, or once it refused)."""
+        if self.watch is not None and self.watch.period():
+            return
         self.tick = self.ticks % TICK_MODULO
         self._run_tick(send)
 

@@ -15,8 +15,12 @@ from enum import StrEnum
 
 
 class FaultKind(StrEnum):
+    """Each kind's value is its name in scenario files and FaultInject frames (the DBC's
+    FaultTarget, in lower case); PUMP_DRY and PUMP_STALL are the plant's own (no frame carries
+    them)."""
+
     PUMP_EFFECTIVENESS = "pump_effectiveness"  # value: delivered / new-pump fuel, in [0, 1]
-    PUMP_WEAR = "pump_wear"  # value: effectiveness lost per second (gradual wear)
+    PUMP_WEAR = "pump_wear_rate"  # value: effectiveness lost per second (gradual wear)
     PUMP_DRY = "pump_dry"  # runs dry: no fuel, friction current only
     PUMP_STALL = "pump_stall"  # gears seized: no fuel, driver trips, no current
     COMPRESSOR_EFFICIENCY = "compressor_efficiency"  # value: health scalar
@@ -25,9 +29,9 @@ class FaultKind(StrEnum):
     TURBINE_FLOW = "turbine_flow"
     SPEED_DROPOUT = "speed_dropout"  # speed reads 0
     SPEED_STUCK = "speed_stuck"  # speed holds its last reading
-    SPEED_NOISE_BURST = "speed_noise_burst"  # value: extra noise, rpm (1 sigma)
+    SPEED_NOISE_BURST = "speed_noise"  # value: extra noise, rpm (1 sigma)
     EGT_OPEN_CIRCUIT = "egt_open_circuit"  # thermocouple reads its upscale burnout value
-    BATTERY_VOLTAGE = "battery_voltage"  # value: new open-circuit battery voltage, V
+    BATTERY_VOLTAGE = "supply_voltage"  # value: new open-circuit battery voltage, V
     AMBIENT_TEMPERATURE = "ambient_temperature"  # value: new ambient temperature T0, K
     STARTER_FAILURE = "starter_failure"  # value: torque left / a new starter's (0: dead motor)
     IGNITER_FAILURE = "igniter_failure"  # the glow plug is open: nothing lights

@@ -11,6 +11,13 @@ tells the run's frames from another sender's of the same IDs (a replay of a log 
 bus, a device): those are dropped and counted too (``other_sender_frames``, per ID), and the
 frames of a lockstep turn are held until the turn's last frame.
 
+Where the bus names each frame's sender (the loopback bus, :mod:`protocol.udp_loopback`),
+:meth:`RunBus.admit` makes the run's senders, once known, the only ones heard: a frame of any other
+sender is dropped and counted as another sender's, whatever it carries, before any rule of the
+sequence is asked; only the XCP transport's frames (a master's, the sequence's ``exempt``) are
+heard from any sender. Elsewhere (SocketCAN, an adapter) a CAN frame carries no sender and the
+sequence's rules are all there is (``sender`` is None).
+
 It offers what the node drivers use (:mod:`protocol.node`: ``send_frame``, ``recv_frame``,
 ``recv_frames`` where the wrapped bus has them) and the plain ``send``/``recv`` of any bus.
 """
@@ -19,11 +26,13 @@ from __future__ import annotations
 
 import struct
 import time
-from collections import deque
+from collections import Counter, deque
+from collections.abc import Collection
 
 import can
 
-from protocol.run_sequence import RunSequence
+from protocol.dbc import xcp_frame_ids
+from protocol.run_sequence import FIRST_KEPT, RunSequence
 from protocol.run_tag import DBC_ID_MASK, split_id, wire_id
 
 SIMRUN_ID = 2032  # the DBC's SimRun: RunId u32, RunTick u32, little-endian
@@ -53,6 +62,10 @@ class RunBus(can.BusABC):
         self._relax = False  # relax() was asked for
         self.foreign_frames = 0  # other runs' frames (see stats for another sender's)
         self._foreign: dict[int, set[int]] = {}  # foreign tag -> RunIds of its beacons
+        self.senders: frozenset[str] | None = None  # the run's senders, once admitted
+        self._open: frozenset[int] = frozenset()  # ... and the IDs heard from any sender
+        self._others: Counter[int] = Counter()  # without a sequence: other senders', per ID
+        self._first_others: list[str] = []
         self._recv_frames = getattr(bus, "recv_frames", None)
         self.channel_info = f"run tag {tag} on {bus.channel_info}"
         super().__init__(channel=getattr(bus, "channel", None))
@@ -64,15 +77,74 @@ class RunBus(can.BusABC):
         """Other runs heard: one per RunId of their beacons (one per tag without a beacon)."""
         return sum(max(1, len(ids)) for ids in self._foreign.values())
 
+    @property
+    def sender(self) -> str | None:
+        """The token naming this node's frames on the bus, or None where frames carry no
+        sender."""
+        return getattr(self.bus, "token", None)
+
+    def admit(self, senders: Collection[str]) -> bool:
+        """Hear only the frames of ``senders`` (the run's, by their tokens) from now on, and the
+        XCP transport's of any sender; False where the bus cannot tell senders apart."""
+        admit = getattr(self.bus, "admit", None)
+        if admit is None or self.sender is None:
+            return False
+        self.senders = frozenset(senders)
+        if self.sequence is not None:
+            self._open = self.sequence.exempt
+        else:
+            self._open = frozenset(xcp_frame_ids())
+        admit(self.senders, self._other_sender)
+        return True
+
+    def hold(self, timeout: float) -> None:
+        """Wait ``timeout`` seconds, holding what comes meanwhile where the bus can (heard later,
+        once the run's senders are admitted), so that the node's queue does not overflow."""
+        hold = getattr(self.bus, "hold", None)
+        if hold is None:
+            time.sleep(timeout)
+        else:
+            hold(timeout)
+
+    def _other_sender(self, sender: str, got: Frame) -> bool:
+        """A frame of a sender that is not the run's: heard if it is the XCP transport's, else
+        counted as another sender's (another run's, by its tag, as such) and dropped."""
+        if type(got) is not tuple and (got.is_error_frame or got.is_remote_frame or got.is_fd):
+            return False
+        own = self._own(got)
+        if own is None:
+            return False
+        frame_id, data = own if type(own) is tuple else (own.arbitration_id, bytes(own.data))
+        if frame_id in self._open:
+            return True
+        why = f"sent by {sender}, not a sender of the run"
+        if self.sequence is not None:
+            self.sequence.drop(frame_id, data, why)
+            return False
+        self._others[frame_id] += 1
+        if len(self._first_others) < FIRST_KEPT:
+            self._first_others.append(f"0x{frame_id:03X} {bytes(data).hex()}: {why}")
+        return False
+
     def stats(self) -> dict:
         """``foreign_frames``: every frame dropped, other runs' and another sender's;
-        ``foreign_runs``; with a sequence, another sender's frames alone, per ID."""
-        other = self.sequence.stats() if self.sequence is not None else {}
+        ``foreign_runs``; another sender's frames alone, per ID (with a sequence, or once the
+        run's senders are admitted)."""
+        other = self.sequence.stats() if self.sequence is not None else self._other_stats()
         return {
             "run_tag": self.tag,
             "foreign_frames": self.foreign_frames + other.get("other_sender_frames", 0),
             "foreign_runs": self.foreign_runs,
             **other,
+        }
+
+    def _other_stats(self) -> dict:
+        if self.senders is None:
+            return {}
+        return {
+            "other_sender_frames": sum(self._others.values()),
+            "other_sender_ids": {f"0x{i:03X}": n for i, n in sorted(self._others.items())},
+            **({"other_sender_first": list(self._first_others)} if self._first_others else {}),
         }
 
     # -- sending --------------------------------------------------------------------------------

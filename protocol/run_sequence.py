@@ -44,7 +44,9 @@ every node of the run, and :class:`RunSequence` keeps a node to it (``strict``):
    turn kept, and a last frame of the turn after come), the turn is closed without it (a
    resync).
 
-Frames that fail are dropped and counted per ID (:attr:`RunSequence.foreign`). The command node's
+Frames that fail are dropped and counted per ID (:attr:`RunSequence.foreign`), as are those the
+bus itself names as another sender's (:meth:`RunSequence.drop`: on the loopback bus, a sender
+that is not a node of the run, :mod:`protocol.run_bus`). The command node's
 frames (Demand, FaultInject) are not turn-bound: they are checked by 1 and 3 and passed at once.
 Frames of no message of the run (the XCP transport's, ``exempt``) pass unchecked; with
 ``strict``, frames of IDs outside the contract are foreign.
@@ -186,7 +188,7 @@ class RunSequence:
         """The node sent a frame: its own PlantSensors or EcuActuator moves the turn on. The
         frames to hand to the node now (its peer's that came early, none in lockstep)."""
         m = self.messages.get(frame_id)
-        if m is None or not m.ends_turn:
+        if m is None or not m.ends_turn or not self.strict:  # (without strict: no turns)
             return []
         if m.role != self.turn:  # its peer's last frame was lost: past that turn first
             self._skip_turn()
@@ -200,13 +202,13 @@ class RunSequence:
         ``data`` its DBC ID and payload) if it is the run's and is not held, with the turn's
         held frames when it ends the turn; none if it is foreign or held."""
         if frame_id in self.own_ids:
-            self._drop(frame_id, data, "an ID this node sends")
+            self.drop(frame_id, data, "an ID this node sends")
             return []
         if not self.strict or frame_id in self.exempt:
             return [frame]
         m = self.messages.get(frame_id)
         if m is None:
-            self._drop(frame_id, data, "no message of the run")
+            self.drop(frame_id, data, "no message of the run")
             return []
         if m.role != COMMAND and m.role != self.turn:
             return self._come_early(m, frame, data)
@@ -216,7 +218,7 @@ class RunSequence:
         # rule 5: out of its message's sequence is the run's still where its tick proves it, or
         # (held to the turn's end) where no frame of the message in sequence comes in the turn
         if why is not None and not (in_step and (m.tick_shift != NO_TICK or m.role != COMMAND)):
-            self._drop(frame_id, data, why)
+            self.drop(frame_id, data, why)
             return []
         if m.role == COMMAND or m.ends_turn:
             return self._end_turn(m, frame, data, why)
@@ -244,11 +246,11 @@ class RunSequence:
         ``EARLY_MAX``), else dropped."""
         last = self.tick - (m.role == ECU)  # the tick of its sender's last turn
         if last >= 0 and last % m.every == 0 and self._taken_at.get(m.frame_id) != last:
-            self._drop(m.frame_id, data, f"after the {m.role}'s turn of tick {last} ended")
+            self.drop(m.frame_id, data, f"after the {m.role}'s turn of tick {last} ended")
             return []  # (due then, and none came: it is that turn's, late)
         why, _ = self._misfit(m, data, (m.role, last + 1))  # checked as the next turn's, now
         if why is not None or len(self._early) >= EARLY_MAX:
-            self._drop(m.frame_id, data, f"before its turn: {why or 'too many before it'}")
+            self.drop(m.frame_id, data, f"before its turn: {why or 'too many before it'}")
             return []
         self._early.append((frame, m.frame_id, bytes(data)))
         return []
@@ -319,7 +321,8 @@ class RunSequence:
             ahead % self.demand_every == 0 and 1 <= j <= LOST_DEMANDS and data[1] & 0x0F == counter
         )
 
-    def _drop(self, frame_id: int, data: bytes | bytearray, why: str) -> None:
+    def drop(self, frame_id: int, data: bytes | bytearray, why: str) -> None:
+        """A frame of another sender: counted, and kept with ``why`` if among the first."""
         self.foreign[frame_id] += 1
         if len(self.first) < FIRST_KEPT:
             self.first.append(f"0x{frame_id:03X} {bytes(data).hex()} at tick {self.tick}: {why}")
@@ -356,12 +359,12 @@ class RunSequence:
             candidates = in_sequence or positions  # (rule 5: only when none is in sequence)
             for i in positions:
                 if held[i][3] is not None and in_sequence:
-                    self._drop(frame_id, held[i][2], held[i][3])
+                    self.drop(frame_id, held[i][2], held[i][3])
             if len(candidates) > 1:
                 self.ties += 1
                 best = self._nearest(frame_id, [held[i][2] for i in candidates])
                 for i in candidates[:best] + candidates[best + 1 :]:
-                    self._drop(frame_id, held[i][2], "a second frame of its message in the turn")
+                    self.drop(frame_id, held[i][2], "a second frame of its message in the turn")
                 candidates = [candidates[best]]
             taken.add(candidates[0])
             self._take(self.messages[frame_id], held[candidates[0]][2], held[candidates[0]][3])

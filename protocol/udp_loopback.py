@@ -17,6 +17,12 @@ but:
   connected, accepts datagrams only from the group address, which sends none;
 - does not hear its own frames (multicast loopback delivers them to the sender too): each bus
   marks what it sends with a channel token of its own and drops frames that carry it;
+- hears, once told who they are (:meth:`~LoopbackUdpMulticastBus.admit`), only the senders of a
+  run: each datagram names its sender by that token, so a frame of any other sender (a second
+  ECU, a replay of a log) is handed to a hook, which keeps it (an XCP master's) or counts it
+  and drops it, whatever it carries; until it is told, it can hold what comes
+  (:meth:`~LoopbackUdpMulticastBus.hold`: a node waiting to start, whose queue would overflow
+  with other runs' traffic), and hears it later by the same rules;
 - filters by frame ID in the kernel: :meth:`~can.BusABC.set_filters` attaches a socket filter
   (classic BPF, :func:`kernel_filter`) that drops datagrams whose ID matches no filter before
   they are queued, so a node is not woken for frames it does not want (python-can's software
@@ -39,7 +45,8 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Callable, Collection, Sequence
 
 import can
 import msgpack
@@ -74,12 +81,14 @@ _TAIL = b"\xa5is_fd\xc2\xaebitrate_switch\xc2\xb5error_state_indicator\xc2"
 _STAMP_END = len(_STAMP) + 8
 _TAIL_START, _DATA_8 = -len(_TAIL), -len(_TAIL) - 8  # where the tail and 8 bytes of data start
 _KNOWN_MAX = 1024  # datagram middles cached per bus (senders times frame IDs)
+HELD_MAX = 200_000  # datagrams held at most (hold): about 30 MB; past that they wait in the kernel
 PRECISE_WAIT_S = 0.02  # shorter receive timeouts wait in epoll, not in SO_RCVTIMEO
 
 # classic BPF opcodes (<linux/filter.h>)
 _LD_W, _LD_H, _LD_B, _LD_LEN = 0x20, 0x28, 0x30, 0x80
 _JA, _JEQ, _JGE, _AND, _TAX, _TXA, _RET = 0x05, 0x15, 0x35, 0x54, 0x07, 0x87, 0x06
 _ACCEPT, _DROP = "accept", "drop"
+Frame = tuple[int, bytes] | can.Message | None
 
 
 class _LoopbackSocket:
@@ -219,9 +228,38 @@ class LoopbackUdpMulticastBus(can.BusABC):
         self._known: dict[bytes, int] = {}  # datagram middle -> frame ID, or -1: skipped
         self._heads: dict[tuple[int, int], bytes] = {}  # (frame ID, length) -> datagram head
         self._token = f"udp-{os.urandom(6).hex()}"
+        self._admitted: frozenset[str] | None = None  # the senders heard (None: every one)
+        self._on_other: Callable[[str, tuple[int, bytes] | can.Message], bool] | None = None
+        self._held: deque[bytes] = deque()  # datagrams read by hold(), heard first
         self._can_protocol = can.CanProtocol.CAN_20
         self.channel_info = f"udp loopback multicast {channel}:{port}"
         super().__init__(channel, **kwargs)
+
+    @property
+    def token(self) -> str:
+        """This bus's sender token: every datagram it sends names it."""
+        return self._token
+
+    def admit(
+        self,
+        senders: Collection[str],
+        on_other: Callable[[str, tuple[int, bytes] | can.Message], bool] | None = None,
+    ) -> None:
+        """From now on hear only the frames of ``senders`` (tokens of other buses): any other
+        sender's frame that passes the filters is given with its sender's token to
+        ``on_other``, and heard only if that returns True (without it: dropped)."""
+        self._admitted = frozenset(senders)
+        self._on_other = on_other
+        self._known = {}  # (verdicts learned before: of any sender)
+
+    def hold(self, timeout: float) -> None:
+        """Read the datagrams that come within ``timeout`` seconds without hearing them yet: the
+        receives hear them first, in order, by the rules then in force (:meth:`admit`)."""
+        deadline = time.monotonic() + timeout
+        while len(self._held) < HELD_MAX and self._wait(max(0.0, deadline - time.monotonic())):
+            self._held.append(self._read(MAX_DATAGRAM)[0])
+            if time.monotonic() >= deadline:
+                return
 
     # -- sending --------------------------------------------------------------------------------
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
@@ -284,6 +322,8 @@ class LoopbackUdpMulticastBus(can.BusABC):
         wait is the kernel's (SO_RCVTIMEO): one system call per datagram. SO_RCVTIMEO counts in
         scheduler ticks (it ends up to 4-10 ms late), so a wait shorter than ``PRECISE_WAIT_S``
         (a real-time node waiting for its next period) is an epoll wait, to the millisecond."""
+        if self._held:
+            return self._held.popleft()
         flags = 0
         if timeout is not None and timeout < PRECISE_WAIT_S:
             if timeout > 0.0 and not self._wait(timeout):
@@ -305,7 +345,9 @@ class LoopbackUdpMulticastBus(can.BusABC):
         """Every frame queued that passes the filters, as :meth:`recv_frame` gives them, after
         waiting up to ``timeout`` seconds for the first datagram (none came, or none passed:
         an empty list). The recorder's path: one wake-up for all the frames queued."""
-        frames = []
+        frames = [f for datagram in self._held if (f := self._frame(datagram)) is not None]
+        self._held.clear()
+        timeout = 0.0 if frames else timeout
         poll, recv = self._poll.poll, self._socket.recv
         try:
             while poll(timeout):
@@ -334,10 +376,20 @@ class LoopbackUdpMulticastBus(can.BusABC):
         frame = _classical_standard(fields)
         if frame is None:
             msg = self._message(fields, time.time())
-            return msg if self._matches_filters(msg) else None
+            return self._admitted_only(fields, msg) if self._matches_filters(msg) else None
         accepted = self._accepts(frame[0])
+        if accepted and self._admitted_only(fields, frame) is None:
+            return None
         self._learn(datagram, fields.get("channel"), frame, accepted)
         return frame if accepted else None
+
+    def _admitted_only(self, fields: dict, frame: tuple[int, bytes] | can.Message) -> Frame:
+        """``frame`` if its sender is heard (:meth:`admit`) or the hook keeps it, else None."""
+        sender = fields.get("channel")
+        if self._admitted is None or sender in self._admitted:
+            return frame
+        keep = self._on_other is not None and self._on_other(str(sender), frame)
+        return frame if keep else None
 
     def _learn(
         self, datagram: bytes, channel: object, frame: tuple[int, bytes], accepted: bool
@@ -351,13 +403,19 @@ class LoopbackUdpMulticastBus(can.BusABC):
             self._known[middle] = frame_id if accepted else -1
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if not self._wait(timeout):
+        if self._held:
+            datagram, ancillary = self._held.popleft(), []
+        elif not self._wait(timeout):
             return None, False
-        datagram, ancillary = self._read(MAX_DATAGRAM, _ANCILLARY_SIZE)
+        else:
+            datagram, ancillary = self._read(MAX_DATAGRAM, _ANCILLARY_SIZE)
         fields = self._fields(datagram)
         if fields is None:
             return None, False
-        return self._message(fields, _timestamp(ancillary)), False
+        msg = self._message(fields, _timestamp(ancillary))
+        if self._matches_filters(msg) and self._admitted_only(fields, msg) is None:
+            return None, False
+        return msg, False
 
     def _wait(self, timeout: float | None) -> bool:
         """Wait until a datagram can be read (False: ``timeout`` seconds passed first)."""

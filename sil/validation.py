@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import stat
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -50,10 +51,20 @@ def number(
     if positive and value <= 0:
         raise InputError.at(source, field, f"expected a positive number, got {value!r}")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        low = "" if lo is None else f"{lo:g}"
-        high = "" if hi is None else f"{hi:g}"
-        raise InputError.at(source, field, f"expected a number in {low}..{high}, got {value!r}")
+        raise InputError.at(source, field, f"expected {within(lo, hi)}, got {value!r}")
     return float(value)
+
+
+def within(lo: float | None, hi: float | None, what: str = "a number") -> str:
+    """``what`` with its bounds in words: "a number in 0..5", "a number >= 0" (no upper
+    limit), "a number <= 5" (no lower one); a missing bound is left out, never written."""
+    if lo is not None and hi is not None:
+        return f"{what} in {lo:g}..{hi:g}"
+    if lo is not None:
+        return f"{what} >= {lo:g}"
+    if hi is not None:
+        return f"{what} <= {hi:g}"
+    return what
 
 
 def option(
@@ -153,3 +164,46 @@ def folder_option(text: str) -> Path:
         return output_folder("", "", path_option(text))
     except InputError as exc:
         raise argparse.ArgumentTypeError(str(exc).lstrip(": ")) from None
+
+
+def bus_option(text: str) -> str:
+    """An argparse ``type`` for ``--bus``: an empty spec is refused (it would otherwise stand for
+    the default bus, which a user who left a variable empty did not mean)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty bus spec")
+    return text
+
+
+# the kernel's trees: their files are interfaces (a process's environment, memory maps), not input
+KERNEL_TREES = (Path("/proc"), Path("/sys"))
+
+
+def input_file(path: Path, where: str | None = None) -> Path:
+    """A file to read: refused when it lies in the kernel's trees (/proc, /sys) or exists and is
+    not a regular file (a device such as /dev/zero, a pipe, a folder), before anything reads it,
+    so that no message ever quotes such a file's content. A missing file passes (its reader
+    says so). The refusal reads ``WHERE: why``, WHERE the path unless given."""
+    where = str(path) if where is None else where
+    try:
+        real = path.resolve()
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return path
+    except (OSError, RuntimeError) as exc:
+        raise InputError(one_line(f"{where}: cannot read it: {exc}")) from None
+    if stat.S_ISDIR(mode):
+        raise InputError(one_line(f"{where}: a folder, not a file"))
+    if not stat.S_ISREG(mode):
+        raise InputError(one_line(f"{where}: not a regular file (a device or a pipe)"))
+    tree = next((t for t in KERNEL_TREES if real == t or t in real.parents), None)
+    if tree is not None:
+        raise InputError(one_line(f"{where}: a kernel file under {tree}, not an input"))
+    return path
+
+
+def input_option(text: str) -> Path:
+    """An argparse ``type`` for a file to read (:func:`input_file`); an empty path is refused."""
+    try:
+        return input_file(path_option(text))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

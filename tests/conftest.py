@@ -4,8 +4,10 @@ difference of two logs."""
 
 from __future__ import annotations
 
+import json
 import os
 import random
+import select
 import subprocess
 import sys
 import time
@@ -76,6 +78,52 @@ def udp_spec() -> Callable[[], str]:
 def udp_group() -> tuple[str, int]:
     """A loopback multicast group and port no other test uses."""
     return _udp_group()
+
+
+class BenchConsole:
+    """``sil console PORT ... --json`` in a process of its own, as an operator at a bench types
+    it: ``console(port, *args)`` its answer as JSON, ``console.live(port, count)`` that many
+    live samples, ``console.until(port, done, limit_s)`` live samples until ``done(sample)``
+    or ``limit_s`` (the last sample)."""
+
+    def __call__(self, port: str, *args: str) -> dict | list:
+        done = _sil("console", port, *args, "--json", timeout=30)
+        assert done.returncode == 0, done.stderr
+        return json.loads(done.stdout)
+
+    def live(self, port: str, count: int) -> list[dict]:
+        return self(port, "live", "--samples", str(count))  # type: ignore[return-value]
+
+    def until(self, port: str, done: Callable[[dict], bool], limit_s: float) -> dict:
+        deadline = time.monotonic() + limit_s
+        while True:
+            sample = self.live(port, 1)[0]
+            if done(sample) or time.monotonic() > deadline:
+                return sample
+            time.sleep(0.3)
+
+
+@pytest.fixture(scope="session")
+def console() -> BenchConsole:
+    return BenchConsole()
+
+
+def _stderr_line(proc: subprocess.Popen, prefix: str, limit_s: float = 60) -> str:
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        if select.select([proc.stderr], [], [], 1.0)[0]:
+            line = proc.stderr.readline()
+            assert line, f"the process exited with {proc.poll()} before printing {prefix!r}"
+            if line.startswith(prefix):
+                return line[len(prefix) :].strip()
+    raise AssertionError(f"no {prefix!r} line within {limit_s} s")
+
+
+@pytest.fixture(scope="session")
+def stderr_line() -> Callable[..., str]:
+    """``stderr_line(proc, prefix, limit_s=60)``: the rest of the first line of a process's
+    stderr that starts with ``prefix`` (a node's service port, its XCP IDs ...)."""
+    return _stderr_line
 
 
 def _first_difference(a: bytes, b: bytes) -> str | None:

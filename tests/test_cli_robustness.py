@@ -383,7 +383,9 @@ def test_any_bus_spec_opens_or_is_refused_in_one_line(
     captured = capsys.readouterr()
     assert "Traceback" not in captured.out + captured.err
     assert code in (0, 2), captured.err
-    if code == 2:
+    if not spec:  # argparse's usage and its line
+        assert _split(captured.err)[-1].endswith("argument --bus: an empty bus spec")
+    elif code == 2:
         assert len(_split(captured.err)) == 1 and captured.err.startswith("sil selfcheck: ")
 
 
@@ -576,3 +578,292 @@ def test_identify_exports_only_what_the_ecu_loads(
         assert commissioning_refusal(json.loads(export.read_text())) is None
     else:
         assert not export.exists()  # nothing half-written, nothing the ECU would refuse
+
+
+# -- clear messages: bus specs, files to read, python-can's logging, fault kinds, bounds ---------
+
+
+def _bus_options() -> list[tuple[list[str], str]]:
+    """(the command's words, the option) for every option of every command that takes a bus
+    spec, read from the parser (a new one is checked the day it is added)."""
+    import argparse
+
+    def walk(words: list[str], parser: argparse.ArgumentParser) -> list[tuple[list[str], str]]:
+        found = []
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    found += walk([*words, name], sub)
+            elif action.option_strings and action.dest in ("bus", "ecu_bus"):
+                found.append((words, action.option_strings[-1]))
+        return found
+
+    top = cli.build_parser()
+    sub = next(a for a in top._actions if a.__class__.__name__ == "_SubParsersAction")
+    return [found for name, p in sorted(sub.choices.items()) for found in walk([name], p)]
+
+
+BUS_OPTIONS = _bus_options()
+
+
+def test_every_command_with_a_bus_is_checked():
+    commands = {words[0] for words, _ in BUS_OPTIONS}
+    assert {"ecu", "plant", "run", "replay", "selfcheck", "gsu", "bridge", "xcp"} <= commands
+
+
+@pytest.mark.parametrize(("words", "option"), BUS_OPTIONS, ids=lambda x: " ".join(x) or x)
+def test_an_empty_bus_spec_is_refused_not_taken_as_the_default(sil, words, option):
+    done = sil(*words, option, "", timeout=120)
+    assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr
+    prog = " ".join(["sil", *words])
+    assert done.stderr.splitlines()[-1] == f"{prog}: error: argument {option}: an empty bus spec"
+
+
+@pytest.mark.parametrize("spec", [" ", "\t", "  \n"])
+def test_a_blank_bus_spec_is_refused_too(capsys, spec):
+    code, output = _main(["selfcheck", "--bus", spec], capsys)
+    assert code == 2 and output.splitlines()[-1].endswith("--bus: an empty bus spec")
+
+
+SECRET = "sil-robustness-secret-7d41"  # put in the environment of a command given its own
+
+
+# every way a `sil` command is given a file to read: IN that file, TRACE a good trace, TMP a
+# scratch folder
+READERS = [
+    ["identify", "IN"],
+    ["identify", "TRACE", "--validate", "IN"],
+    ["replay", "IN", "--dry-run"],
+    ["log", "convert", "IN", "TMP/o.log"],
+    ["scenarios", "--check", "IN"],
+    ["run", "IN", "--mode", "inproc", "--out", "TMP/out"],
+    ["run", "thesis-6.1-pid", "--mode", "inproc", "--commission", "IN", "--out", "TMP/out"],
+    ["campaign", "IN", "--out", "TMP/out"],
+    ["bridge", "IN", "--bus", "virtual:r1", "--ecu-bus", "virtual:r2"],
+    ["ecu", "--bus", "virtual:r3", "--ticks", "1", "--commission", "IN"],
+    ["gsu", "--bus", "virtual:r4", "--port", "0", "--a2l", "IN"],
+    ["xcp", "record", "--bus", "virtual:r5", "--a2l", "IN", "--measure", "n", "--seconds", "1",
+     "--out", "TMP/o.mf4"],
+]  # fmt: skip
+
+
+def _reading(argv: list[str], path: str, tmp: Path) -> list[str]:
+    trace = _trace(tmp / "trace.csv", [90.0 + i % 7 for i in range(50)], [10.0] * 50)
+    fill = {"IN": path, "TRACE": str(trace)}
+    return [fill.get(a, a.replace("TMP", str(tmp))) for a in argv]
+
+
+@pytest.mark.parametrize("argv", READERS, ids=lambda argv: " ".join(argv[:2]))
+def test_the_environment_as_an_input_file_is_refused_unread(sil, tmp_path, argv):
+    done = sil(
+        *_reading(argv, "/proc/self/environ", tmp_path),
+        env={**os.environ, "SIL_ROBUSTNESS_SECRET": SECRET},
+        timeout=120,
+    )
+    assert SECRET not in done.stdout + done.stderr and "Traceback" not in done.stderr
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.splitlines()[-1].endswith(
+        "/proc/self/environ: a kernel file under /proc, not an input"
+    )
+    assert not (tmp_path / "out").exists() and not (tmp_path / "o.log").exists()
+
+
+def _not_regular(kind: str, tmp: Path) -> tuple[str, str]:
+    """A path that is no regular file (or lies in /sys), and what the refusal says of it."""
+    if kind == "fifo":  # a reader would wait on it for ever
+        os.mkfifo(tmp / "fifo")
+        return str(tmp / "fifo"), "not a regular file (a device or a pipe)"
+    if kind == "folder":
+        (tmp / "folder").mkdir()
+        return str(tmp / "folder"), "a folder, not a file"
+    if kind == "sys":
+        return (
+            "/sys/kernel/mm/transparent_hugepage/enabled",
+            "a kernel file under /sys, not an input",
+        )
+    return kind, "not a regular file (a device or a pipe)"
+
+
+@pytest.mark.parametrize("kind", ["/dev/zero", "/dev/null", "fifo", "folder", "sys"])
+@pytest.mark.parametrize("argv", READERS, ids=lambda argv: " ".join(argv[:2]))
+def test_devices_pipes_and_folders_are_refused_as_input_files(tmp_path, capsys, kind, argv):
+    path, why = _not_regular(kind, tmp_path)
+    if not Path(path).exists():
+        pytest.skip(f"{path} is not on this machine")
+    code, output = _main(_reading(argv, path, tmp_path), capsys)
+    assert code == 2 and "Traceback" not in output
+    assert output.strip().splitlines()[-1].endswith(f"{path}: {why}")
+
+
+ASC_DLC_MISMATCH = """date Mon Dec 7 10:00:00.000 am 2026
+base hex  timestamps absolute
+no internal events logged
+Begin TriggerBlock Mon Dec 7 10:00:00.000 am 2026
+   0.010000 CANFD   1 Rx        100  0 0 9  2 01 02   0    0   0        0        0        0        0        0
+End TriggerBlock
+"""  # noqa: E501 (a line as CANoe writes it)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["identify", "LOG"], ["replay", "LOG", "--dry-run"], ["log", "convert", "LOG", "OUT"]],
+    ids=lambda argv: argv[0],
+)
+def test_python_can_logs_nothing_before_our_line(sil, tmp_path, argv):
+    log = tmp_path / "odd.asc"
+    log.write_text(ASC_DLC_MISMATCH)
+    args = [str(log) if a == "LOG" else str(tmp_path / "o.log") if a == "OUT" else a for a in argv]
+    done = sil(*args, timeout=120)
+    assert "DLC" not in done.stderr and "Traceback" not in done.stderr
+    if done.returncode == 2:  # identify: nothing to identify from, in our one line
+        assert done.stderr.splitlines() == [
+            f"sil identify: {log}: only 0 usable samples of time, speed and voltage"
+        ]
+    else:
+        assert done.returncode in (0, 1) and done.stderr.strip().count("\n") == 0
+
+
+# -- sil plant --fault: the scenario files' fault names ------------------------------------------
+
+
+def _plant_kinds() -> list[str]:
+    return [t for t in fault_targets() if t != "CLEAR_ALL"]
+
+
+def _fault_text(name: str) -> str:
+    """A fault of kind ``name`` (a scenario file's) at 1.5 s, with a value in its range when it
+    takes one."""
+    from plant.faults import FAULT_TARGETS, value_range
+
+    kind = FAULT_TARGETS[fault_targets().index(name)]
+    values = value_range(kind)
+    return f"1.5:{name}" if values is None else f"1.5:{name}:{sum(values) / 2!r}"
+
+
+@pytest.mark.parametrize("name", _plant_kinds())
+@pytest.mark.parametrize("case", [str.upper, str.lower, str.title])
+def test_plant_faults_take_the_scenario_files_names(name, case):
+    from plant.faults import FAULT_TARGETS
+
+    args = cli.build_parser(["plant"]).parse_args(["plant", "--fault", case(_fault_text(name))])
+    (fault,) = args.fault
+    assert fault.kind == FAULT_TARGETS[fault_targets().index(name)] and fault.at_s == 1.5
+
+
+def test_an_unknown_fault_kind_lists_the_scenario_files_names(sil):
+    done = sil("plant", "--fault", "3:PUMP_WEAR", timeout=120)
+    assert done.returncode == 2
+    last = done.stderr.splitlines()[-1]
+    assert last.startswith("sil plant: error: argument --fault: fault '3:PUMP_WEAR': unknown kind")
+    listed = last.split("(kinds: ")[1].rstrip(")").split(", ")
+    assert set(_plant_kinds()) <= set(listed) and set(listed) - set(_plant_kinds()) == {
+        "PUMP_DRY",
+        "PUMP_STALL",
+    }
+    shown = " ".join(sil("plant", "--help", timeout=120).stdout.split())
+    assert all(name in shown for name in listed)
+
+
+def test_a_plant_applies_faults_named_as_in_a_scenario(sil_process, udp_spec):
+    from protocol.bus import open_bus
+    from protocol.dbc import load_database
+
+    db, spec = load_database(), udp_spec()
+    seen: dict[str, list[tuple[int, float]]] = {"ShaftSpeed": [], "SupplyVoltage": []}
+    with open_bus(spec) as bus:
+        plant = sil_process(
+            "plant", "--bus", spec, "--realtime", "--ticks", "40",
+            "--fault", "0.1:supply_voltage:18", "--fault", "0.2:SPEED_DROPOUT",
+        )  # fmt: skip
+        while (msg := bus.recv(0.1)) is not None or plant.poll() is None:
+            if msg is None or msg.arbitration_id not in (0x100, 0x101):  # sensors, analog
+                continue
+            values = db.decode_message(msg.arbitration_id, msg.data)
+            tick = values.get("SensorTick", values.get("AnalogTick"))
+            for name in seen.keys() & values.keys():
+                seen[name].append((tick, values[name]))
+    assert plant.returncode == 0, plant.stderr.read()
+    speed, supply = seen["ShaftSpeed"], seen["SupplyVoltage"]
+    assert all(v > 10_000 for t, v in speed if t < 20) and all(v == 0 for t, v in speed if t > 20)
+    assert all(v > 21 for t, v in supply if t < 10) and all(v < 18.5 for t, v in supply if t > 10)
+    assert len(speed) > 30 and len(supply) > 6
+
+
+# -- no "None" for a missing bound ---------------------------------------------------------------
+
+
+@given(
+    lo=st.one_of(st.none(), st.floats(-1e6, 1e6)),
+    hi=st.one_of(st.none(), st.floats(-1e6, 1e6)),
+    value=st.floats(allow_nan=True, allow_infinity=True),
+)
+def test_a_range_message_names_only_the_bounds_there_are(lo, hi, value):
+    from sil.validation import InputError, number
+
+    try:
+        number("s.toml", "field 'x'", value, lo=lo, hi=hi)
+    except InputError as exc:
+        text = str(exc)
+        assert "None" not in text and text.startswith("s.toml: field 'x': expected ")
+        for bound in (lo, hi):
+            if bound is not None and math.isfinite(value):
+                assert f"{bound:g}" in text
+
+
+@pytest.mark.parametrize(
+    ("line", "expected"),
+    [("time_s = -2", "a number >= 0, got -2"), ("value = nan", "a finite number, got nan")],
+)
+def test_a_scenario_field_out_of_range_says_its_bound_without_none(sil, tmp_path, line, expected):
+    path = tmp_path / "s.toml"
+    path.write_text(VALID.replace("time_s = 0.5" if "time" in line else "value = 1.0", line))
+    done = sil("scenarios", "--check", str(path), timeout=120)
+    assert done.returncode == 2 and "None" not in done.stderr
+    assert done.stderr.splitlines() == [
+        f"sil scenarios: {path}: field 'command.component[0].{line.split()[0]}': "
+        f"expected {expected}"
+    ]
+
+
+# -- sil console: options and values ------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "option"),
+    [
+        (["--timeout", "nan", "identify"], "--timeout"),
+        (["--timeout", "inf", "identify"], "--timeout"),
+        (["--timeout", "0", "identify"], "--timeout"),
+        (["--rate", "-1", "live"], "--rate"),
+        (["live", "--samples", "0"], "--samples"),
+        (["throttle", "nan"], "PCT"),
+    ],
+)
+def test_console_options_are_refused_naming_the_option(sil, argv, option):
+    done = sil("console", "/nonexistent-port", *argv, timeout=120)
+    assert done.returncode == 2 and done.stdout == ""
+    assert f"error: argument {option}: expected " in done.stderr.splitlines()[-1]
+
+
+@settings(max_examples=max(20, EXAMPLES // 4), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+@given(
+    option=st.sampled_from(["--timeout", "--rate"]),
+    value=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, -0.0])),
+)
+def test_console_timing_options_are_finite_positive_and_bounded(capsys, option, value):
+    from sil.commands.console import MAX_RATE_HZ, MAX_TIMEOUT_S
+
+    code, output = _main(
+        ["console", "/nonexistent-port", f"{option}={value!r}", "identify"], capsys
+    )
+    lo, hi = (0.0, MAX_TIMEOUT_S) if option == "--timeout" else (0.1, MAX_RATE_HZ)
+    taken = math.isfinite(value) and (lo < value if option == "--timeout" else lo <= value)
+    taken = taken and value <= hi
+    if taken:  # then the port is looked for
+        assert code == 2 and output.strip() == (
+            "sil console: port '/nonexistent-port': cannot open it: [Errno 2] could not open "
+            "port /nonexistent-port: [Errno 2] No such file or directory: '/nonexistent-port'"
+        )
+    else:
+        assert code == 2 and f"argument {option}: expected" in output.splitlines()[-1]

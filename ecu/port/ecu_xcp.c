@@ -648,6 +648,9 @@ static NOINLINE int write_bench(ecu_xcp_t *x, int first, int n, const uint8_t *d
             x->test_request = ECU_TEST_NONE; /* an arm ends a test */
             if (!can_present(x)) {
                 (void)take_demand(x);
+                if (!running_mode(mode)) { /* a start from rest begins at idle */
+                    x->throttle_cpct = x->idle_cpct;
+                }
                 x->arm = 1;
                 x->stop = 0;
             }
@@ -693,6 +696,9 @@ const ecu_inputs_t *ecu_xcp_inputs(ecu_xcp_t *x, ecu_inputs_t *in, ecu_inputs_t 
         x->engaged = 0; /* the CAN Demand wins while present */
     }
     x->last_mode = (uint8_t)mode;
+    if (left_run) {
+        x->throttle_cpct = x->idle_cpct; /* the run's demand ends with the run */
+    }
     if (x->engaged) {
         if (left_run) {
             x->arm = 0; /* the start request is done: no retry by itself */

@@ -1,10 +1,11 @@
 """The C CAN node (``ecu_node.c``) through ctypes, with the node interface of
 :class:`ecu.node.EcuNode`, so a driver or the in-process bus runs either: ``start``,
 ``on_frame``, ``on_timeout``, ``on_period``, ``finished``, ``timeout_s``, ``frame_ids``,
-``attach_xcp`` and the counters. It runs a :class:`ecu.port.core.CEcu` (the C core) and sends the
-same frames, byte for byte and in the same order, as ``EcuNode(ecu=CEcu(...))`` without a service
-port and with ``max_ticks=None`` (tests/port/test_node.py); with the C XCP slave
-(:class:`ecu.port.xcp.CXcpSlave`, ``attach_xcp``) as EcuNode with its Python slave.
+``attach_xcp``, ``watch_bus`` and the counters. It runs a :class:`ecu.port.core.CEcu` (the C
+core) and sends the same frames, byte for byte and in the same order, as
+``EcuNode(ecu=CEcu(...))`` without a service port and with ``max_ticks=None``
+(tests/port/test_node.py); with the C XCP slave (:class:`ecu.port.xcp.CXcpSlave`,
+``attach_xcp``) as EcuNode with its Python slave.
 
 The two records the wrapper shares with C (``ecu_can_frame_t``, ``ecu_node_config_t``) are read
 from the library's field strings, as :mod:`ecu.port.core` reads the core's; the node itself is an
@@ -18,9 +19,10 @@ from __future__ import annotations
 
 import ctypes
 import re
+from collections.abc import Callable
 from functools import cache
 
-from ecu.node import RECEIVED, SERVICE_IDLE_POLL_S
+from ecu.node import RECEIVED, SERVICE_IDLE_POLL_S, OtherEcuWatch
 from ecu.port.core import CEcu, PortError, library
 from ecu.port.xcp import CXcpSlave
 from ecu.service.logbook_save import LogbookSaver
@@ -161,6 +163,8 @@ class CEcuNode:
         self.xcp: CXcpSlave | None = None  # the C XCP slave (attach_xcp), or None
         self._xcp_send_for: SendFn | None = None
         self._receive = nl.lib.ecu_node_receive
+        self._codec = codec
+        self.watch: OtherEcuWatch | None = None  # another ECU on the bus (watch_bus), or None
         # the logbook's save at rest (ecu.service.logbook_save), stepped once per tick run
         self.logbook_saver: LogbookSaver | None = None
         self._saver_ticks = 0
@@ -174,6 +178,17 @@ class CEcuNode:
         self._lib.ecu_node_attach_xcp(self._ref, slave.address)
         self.xcp = slave
         self.frame_ids = (*self.frame_ids, slave.cmd_id)
+
+    def watch_bus(self, report: Callable[[str], None]) -> None:
+        """EcuNode.watch_bus: another ECU's frames (those of this ECU's IDs) are heard from now
+        on, before the C node sees any frame; a refusal ends the node."""
+
+        def other_ecu(text: str) -> None:
+            report(text)
+            self.finished = self.finished or watch.refused is not None
+
+        self.watch = watch = OtherEcuWatch(self._codec, self.rate_hz, self.lockstep, other_ecu)
+        self.frame_ids = (*self.frame_ids, *watch.names)
 
     def _xcp_to(self, send: SendFn) -> None:
         """The slave's packets to ``send`` on its response ID (set once per driver)."""
@@ -199,6 +214,11 @@ class CEcuNode:
         pass
 
     def on_frame(self, frame_id: int, data: bytes | bytearray, send: SendFn) -> None:
+        watch = self.watch
+        if watch is not None and (frame_id in watch.names or watch.refused is not None):
+            if frame_id in watch.names:
+                watch.heard(frame_id, self.ticks)
+            return  # (a node that refused takes nothing more)
         if self.xcp is not None:
             self._xcp_to(send)
             if frame_id == self.xcp.cmd_id:
@@ -212,10 +232,14 @@ class CEcuNode:
         self._send(self._frame(self._ref, frame_id, bytes(data), self._out), send)
 
     def on_timeout(self, send: SendFn) -> None:
+        if self.watch is not None and self.watch.refused is not None:
+            return
         self._xcp_to(send)
         self._send(self._timeout(self._ref, self._out), send)
 
     def on_period(self, send: SendFn) -> None:
+        if self.watch is not None and self.watch.period():
+            return
         self._xcp_to(send)
         self._send(self._period(self._ref, self._out), send)
 

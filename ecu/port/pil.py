@@ -345,6 +345,10 @@ class PilImage:
                 raise PilError(f"the image was not ready within {timeout:g} s")
             time.sleep(0.005)
 
+    def exit_code(self) -> int | None:
+        """QEMU's exit code once it has ended (None while it runs, or before it started)."""
+        return None if self.proc is None else self.proc.poll()
+
     def stop(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
             self.proc.terminate()

@@ -141,11 +141,11 @@ class FlashStore:
 
     def __init__(
         self,
-        path: Path,
+        flash: FlashImage,
         raws: Callable[[], list[int]],
         logbook: Callable[[], dict[str, int]] = dict,
     ) -> None:
-        self.flash = FlashImage(path)
+        self.flash = flash
         self.raws = raws
         self.logbook = logbook
         self.writer: SlotWriter | None = None
@@ -176,7 +176,7 @@ class FlashStore:
 class CXcpSlave:
     """The C slave on ``ecu``'s core and parameters (``table``: the set they were compiled
     from), sans-IO as XcpSlave. ``clock_us``: the clock of DAQ timestamps in real time (None:
-    the ECU's ticks, simulated time); ``flash``: where a store goes (None: refused)."""
+    the ECU's ticks, simulated time); ``flash``: the image a store goes to (None: refused)."""
 
     def __init__(
         self,
@@ -186,7 +186,7 @@ class CXcpSlave:
         ids: tuple[int, int] = DEFAULT_IDS,
         seed: int = 1,
         clock_us: Callable[[], int] | None = None,
-        flash: Path | None = None,
+        flash: FlashImage | None = None,
     ) -> None:
         if not isinstance(ecu, CEcu):
             raise TypeError(f"the C XCP slave runs on a C core (ecu.port.core.CEcu), not {ecu}")

@@ -10,6 +10,9 @@ then asks this module, which refuses what the ECU's state does not allow, with t
   (they win while present);
 - a stop is always accepted, and held until the next arm.
 
+A start always goes to idle: the bench's throttle is that of the run in progress, back to idle
+when the engine leaves ARMED or RUN and when an arm starts it from rest.
+
 Before each tick :meth:`BenchControl.step` hands the firmware the inputs to take: the bench's
 demand while the bench is the demand source, and the held stop.
 """
@@ -110,8 +113,7 @@ class BenchControl:
         self.test_request = T.NONE  # an arm ends a test
         if not self.demand.can_present:
             self._take_demand("arm")
-            self.demand.arm = 1
-            self.demand.stop = 0
+            self.demand.request_arm(o.mode)
 
     def stop(self) -> None:
         """A stop request: always accepted, held until the next arm; it ends a test."""

@@ -12,6 +12,9 @@ reference model smooths its step).
 
 The bench arm is one start request: it is dropped when the engine leaves ARMED or RUN (a stop,
 an abort or a trip), so a start is never retried by itself. A stop holds until the next arm.
+The bench's throttle belongs to one run: it goes back to idle when the engine leaves ARMED or
+RUN and when an arm starts the engine from rest, so a start always goes to idle and a demand
+set before the run (in an earlier one, or while the engine was at rest) is never taken.
 """
 
 from __future__ import annotations
@@ -29,6 +32,11 @@ SOURCE_NAMES = ("CAN", "BENCH", "NONE")
 def cpct(x_q24: int) -> int:
     """Q7.24 %N -> 0.01 %N per count, rounded."""
     return (x_q24 * 100 + (1 << 23)) >> 24
+
+
+def running(mode: int) -> bool:
+    """The engine is being started or runs (the modes a bench arm holds)."""
+    return mode == M.ARMED or mode == M.RUN
 
 
 class BenchDemand:
@@ -64,11 +72,17 @@ class BenchDemand:
         if self.engaged:
             return False
         self.engaged = True
-        running = mode == M.ARMED or mode == M.RUN
-        self.arm = 1 if running else 0
+        self.arm = 1 if running(mode) else 0
         self.stop = 0
-        self.throttle_cpct = demand_cpct if running else self.idle_cpct
+        self.throttle_cpct = demand_cpct if running(mode) else self.idle_cpct
         return True
+
+    def request_arm(self, mode: int) -> None:
+        """An arm (the bench is the source): a start from rest begins at idle."""
+        if not running(mode):
+            self.throttle_cpct = self.idle_cpct
+        self.arm = 1
+        self.stop = 0
 
     def set_throttle(self, cpct: int) -> None:
         self.throttle_cpct = max(self.idle_cpct, min(cpct, self.max_cpct))
@@ -86,10 +100,10 @@ class BenchDemand:
         if self.engaged and self.can_present:
             self.engaged = False  # the CAN Demand wins while present
             switched = CAN
-        left_run = (self._last_mode == M.ARMED or self._last_mode == M.RUN) and not (
-            mode == M.ARMED or mode == M.RUN
-        )
+        left_run = running(self._last_mode) and not running(mode)
         self._last_mode = mode
+        if left_run:
+            self.throttle_cpct = self.idle_cpct  # the run's demand ends with the run
         if not self.engaged:
             return i, switched
         if left_run:

@@ -25,6 +25,7 @@ PARAMS_DEFAULTS = 64  # no valid parameter slot in flash at start: defaults in u
 PARAMS_REJECTED = 65  # a stored set (or some of its entries) was refused at start
 DEMAND_SOURCE_CAN = 66  # the CAN Demand took over as the demand source
 DEMAND_SOURCE_BENCH = 67  # the service port's bench demand took over
+OTHER_ECU = 68  # another ECU on the bus: frames of this ECU's IDs from another sender
 REPEAT_WINDOW = 4
 START_ABORT = 80  # + the abort reason
 LOGGED_BITS = 0xFFFF & ~(F.LIMITER_ACTIVE | F.PUMP_SATURATED)
@@ -43,6 +44,7 @@ def code_name(code: int) -> str:
         PARAMS_REJECTED: "PARAMS_REJECTED",
         DEMAND_SOURCE_CAN: "DEMAND_SOURCE_CAN",
         DEMAND_SOURCE_BENCH: "DEMAND_SOURCE_BENCH",
+        OTHER_ECU: "OTHER_ECU_ON_BUS",
     }.get(code, f"CODE_{code}")
 
 

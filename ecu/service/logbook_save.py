@@ -5,7 +5,8 @@ sequence and CRC, the other slot untouched until the new one is whole), so a sav
 writes both: a parameter store (the service port's PARAM_SAVE, XCP's SET_REQUEST STORE_CAL) takes
 the logbook as it is, and :class:`LogbookSaver` saves the set by itself when the ECU has come
 to rest (back in OFF after a start or a run, or latched in FAULT), one flash operation per tick
-as the other saves. A stored set without a logbook (saved before it existed) leaves it at zero.
+as the other saves, and at once on an orderly stop (:meth:`LogbookSaver.at_stop`), whatever the
+engine is doing. A stored set without a logbook (saved before it existed) leaves it at zero.
 """
 
 from __future__ import annotations
@@ -76,6 +77,23 @@ class LogbookSaver:
             self.writer = None
             self.failures += 1
             self.on_end(None)
+
+    def at_stop(self) -> Slot | None:
+        """An orderly stop (SIGTERM, Ctrl-C): what the firmware has counted and flash does not
+        hold yet (a run or a cool-down under way, a save at rest not yet begun or not yet
+        whole) is saved now, whole; the slot saved, or None when flash held it all. A save of
+        another under way is taken over: this one carries the same set. Raises OSError when the
+        image cannot be written."""
+        counted = L.stored_dict(self.ecu.s)
+        newest = self.flash.newest()
+        held = None if newest is None else stored_logbook(newest.payload)
+        if self.writer is None and counted == (held or dict.fromkeys(counted, 0)):
+            return None
+        self.writer = None
+        slot = self.flash.save(self.image())
+        self.saves += 1
+        self.on_end(slot)
+        return slot
 
 
 def boot_saver(ecu: Any, boot: Any) -> LogbookSaver:

@@ -250,6 +250,10 @@ class ServicePort:
             c.worst_cpu_s = cpu
         return ticked
 
+    def note_other_ecu(self) -> None:
+        """Another ECU heard on the bus (:meth:`ecu.node.EcuNode.watch_bus`): in the fault log."""
+        self.fault_log.record(self.ecu.s.ticks, FL.OTHER_ECU, self._snapshot())
+
     def _log_source(self, source: int) -> None:
         code = FL.DEMAND_SOURCE_CAN if source == BD.CAN else FL.DEMAND_SOURCE_BENCH
         self.fault_log.record(self.ecu.s.ticks, code, self._snapshot())

@@ -28,8 +28,16 @@ HELP = "put the bus fault injector between two buses (in front of a real ECU, fo
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("faults", type=Path, help="TOML file with [[bus_fault]] tables")
-    parser.add_argument("--bus", required=True, metavar="SPEC", help="the plant's side")
-    parser.add_argument("--ecu-bus", required=True, metavar="SPEC", help="the ECU's side")
+    parser.add_argument(
+        "--bus", type=validation.bus_option, required=True, metavar="SPEC", help="the plant's side"
+    )
+    parser.add_argument(
+        "--ecu-bus",
+        type=validation.bus_option,
+        required=True,
+        metavar="SPEC",
+        help="the ECU's side",
+    )
     parser.add_argument(
         "--lockstep",
         action="store_true",

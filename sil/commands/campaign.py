@@ -28,7 +28,7 @@ def max_workers() -> int:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "file", type=validation.path_option, help="campaign file (TOML, see sil/campaign/library/)"
+        "file", type=validation.input_option, help="campaign file (TOML, see sil/campaign/library/)"
     )
     parser.add_argument(
         "--executor",

@@ -9,9 +9,10 @@ from pathlib import Path
 
 from ecu.params import CONTROLLERS
 from protocol import strict_json
+from sil.run.membership import say_ready, wait_to_start
 from sil.run.node_options import add_launcher_options, add_pil_link, run_sequence, xcp_ids
 from sil.run.parent_death import NodeStop, PeerLost
-from sil.validation import option
+from sil.validation import bus_option, input_option, option
 
 NAME = "ecu"
 HELP = "run the ECU firmware as a CAN node on a bus (lockstep: one tick per sensor frame)"
@@ -20,6 +21,7 @@ HELP = "run the ECU firmware as a CAN node on a bus (lockstep: one tick per sens
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bus",
+        type=bus_option,
         metavar="SPEC",
         required=True,
         help="bus spec (socketcan:vcan0, udp:GROUP@PORT, virtual:NAME, ...)",
@@ -66,7 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--commission",
-        type=Path,
+        type=input_option,
         metavar="FILE",
         help="trim point and initial estimates from `sil identify --export` (read at start)",
     )
@@ -75,6 +77,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=Path,
         metavar="PATH",
         help="create this file once the node listens on the bus (for launchers)",
+    )
+    parser.add_argument(
+        "--start-file",
+        type=Path,
+        metavar="PATH",
+        help="wait until this file exists before the first tick, and hear only the run's "
+        "senders it names (a launcher writes it when every node is ready)",
     )
     parser.add_argument(
         "--impl",
@@ -95,7 +104,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--flash",
         type=Path,
         metavar="FILE",
-        help="emulated flash image holding the stored parameter set (created when missing)",
+        help="emulated flash image holding the stored parameter set and the logbook (made when "
+        "missing or empty; any other file must be such an image; locked while the ECU runs)",
     )
     parser.add_argument(
         "--xcp-ids",
@@ -156,6 +166,10 @@ def run(args: argparse.Namespace) -> int:
         print("sil ecu: --xcp-ids: no XCP slave runs (--no-xcp, or --impl c with --serial)",
               file=sys.stderr)  # fmt: skip
         return 2
+    if args.impl == "pil" and (args.serial or args.flash):
+        print("sil ecu: --impl pil: the image has no service port (--serial, --flash)",
+              file=sys.stderr)  # fmt: skip
+        return 2
     if args.controller:
         overrides["controller"] = args.controller
     if args.rate:
@@ -181,10 +195,6 @@ def run(args: argparse.Namespace) -> int:
         print("sil ecu: --ticks must be at least 1", file=sys.stderr)
         return 2
     if args.impl == "pil":
-        if args.serial or args.flash:
-            print("sil ecu: --impl pil: the image has no service port (--serial, --flash)",
-                  file=sys.stderr)  # fmt: skip
-            return 2
         return _run_pil(args, params, booted if xcp_on else None)
     from ecu.port.build import PortBuildError
     from ecu.port.core import PortError, make_ecu
@@ -220,15 +230,19 @@ def run(args: argparse.Namespace) -> int:
     except (BusSpecError, ValueError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
+    node.watch_bus(_say)  # another ECU on the bus: this one stays silent, or reports it
     listen_for(node, bus)  # its filters set before it says it is ready
     if node.xcp is not None:  # said once the node listens: a master may connect from now on
         x = node.xcp
         print(f"xcp: CAN IDs 0x{x.cmd_id:03X} (master) 0x{x.res_id:03X} (ECU)", file=sys.stderr,
               flush=True)  # fmt: skip
     stop = NodeStop()  # SIGTERM (or the run's end) ends the run cleanly, with the summary
+    _stop_on_ctrl_c(stop)
     lost = PeerLost(on_lost=bus.relax)
     if args.ready_file:
-        args.ready_file.write_text("ready\n")
+        say_ready(args.ready_file, bus)
+    if args.start_file:
+        wait_to_start(args.start_file, bus, stop.is_set)
     try:
         if args.mode == "lockstep":
             guard = lost.guard(args.guard)
@@ -241,6 +255,9 @@ def run(args: argparse.Namespace) -> int:
         bus.shutdown()
         if node.service is not None:
             node.service.transport.close()
+        if booted is not None and booted.flash is not None:
+            _save_logbook_at_stop(node)
+            booted.flash.close()
     o = node.ecu.out
     summary = {
         "ticks": node.ticks,
@@ -250,12 +267,50 @@ def run(args: argparse.Namespace) -> int:
         **stats.summary(),
         **bus.stats(),
         "ticks_without_due_demand": node.demand_waits,
+        **node.watch.summary(),
     }
     if node.service is not None:
         summary["service"] = node.service.summary()
     if node.xcp is not None:
         summary["xcp"] = node.xcp.summary()
-    return _report(summary, args)
+    code = _report(summary, args)
+    return 2 if node.watch.refused is not None else code  # (said when it refused)
+
+
+def _say(text: str) -> None:
+    print(f"sil ecu: {text}", file=sys.stderr, flush=True)
+
+
+def _stop_on_ctrl_c(stop: NodeStop) -> None:
+    """Ctrl-C stops the node as SIGTERM does, after its tick (the logbook saved, the summary
+    printed); a second Ctrl-C interrupts at once."""
+    import signal
+    import threading
+
+    def interrupt(*_: object) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, interrupt)
+
+
+def _save_logbook_at_stop(node) -> None:  # noqa: ANN001
+    """An orderly stop: what the firmware has counted and its flash image does not hold yet
+    (a run or a cool-down under way) saved now, said on stderr."""
+    saver = node.logbook_saver
+    if saver is None:
+        return
+    try:
+        slot = saver.at_stop()
+    except (OSError, ValueError) as exc:
+        print(f"sil ecu: {saver.flash.path}: the logbook could not be saved at stop: {exc}",
+              file=sys.stderr)  # fmt: skip
+        return
+    if slot is not None:
+        print(f"logbook: saved at stop into {saver.flash.path} (slot {slot.index}, sequence "
+              f"{slot.sequence})", file=sys.stderr, flush=True)  # fmt: skip
 
 
 def _attach_xcp(node, booted, args: argparse.Namespace) -> None:  # noqa: ANN001
@@ -317,7 +372,7 @@ def _c_node(ecu, booted, args: argparse.Namespace, codec):  # noqa: ANN001, ANN2
         slave = CXcpSlave(
             ecu, booted.table, ids=args.xcp_ids or xcp_frame_ids(),
             seed=int.from_bytes(os.urandom(4), "little") or 1,
-            clock_us=_wall_clock_us() if args.mode == "realtime" else None, flash=args.flash,
+            clock_us=_wall_clock_us() if args.mode == "realtime" else None, flash=booted.flash,
         )  # fmt: skip
         node.attach_xcp(slave)
     return node
@@ -328,7 +383,7 @@ def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
     ``booted`` (the set it runs) the image's XCP slave on the DBC's IDs or --xcp-ids."""
     import os
 
-    from ecu.node import RECEIVED
+    from ecu.node import RECEIVED, OtherEcuWatch
     from ecu.port.build import PortBuildError
     from ecu.port.pil import PilError, PilImage, XcpBlock, calibration_block, image_sizes
     from ecu.port.pil_bridge import PilBridge
@@ -336,6 +391,7 @@ def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
     from protocol.bus import BusSpecError, open_bus
     from protocol.codec import Codec
     from protocol.dbc import xcp_frame_ids
+    from protocol.node import realtime_scheduling
     from protocol.run_bus import RunBus
 
     lockstep = args.mode == "lockstep"  # profiled by instruction counting (ecu/port/pil.py)
@@ -363,24 +419,34 @@ def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
     bridge = None
+    # in real time the bridge and QEMU (which inherits it) at the nodes' real-time scheduling:
+    # the image's periods come on time on a machine busy with other work
+    policy = None if lockstep else realtime_scheduling()
     try:
         image.start()
         image_bus = image.open_bus()
         try:
             image.wait_ready()
             print(f"pil: image {image.elf.name} on {image.url}", file=sys.stderr, flush=True)
-            bridge = PilBridge(bus, image_bus, frame_ids)
+            watch = OtherEcuWatch(codec, params.rate_hz, lockstep, _say)
+            actuator_id = codec["EcuActuator"].frame_id
+            bridge = PilBridge(bus, image_bus, frame_ids, watch, actuator_id)
             if xcp is not None:  # said once the bridge listens: a master may connect
                 print(f"xcp: CAN IDs 0x{xcp.ids[0]:03X} (master) 0x{xcp.ids[1]:03X} (ECU)",
                       file=sys.stderr, flush=True)  # fmt: skip
             if args.ready_file:
-                args.ready_file.write_text("ready\n")
+                say_ready(args.ready_file, bus)
+            if args.start_file:
+                wait_to_start(args.start_file, bus, stop.is_set)
             limit = args.ticks
 
             def should_stop() -> bool:
-                return stop.is_set() or (limit is not None and image.profile.ticks >= limit)
+                done = limit is not None and image.profile.ticks >= limit
+                return stop.is_set() or done or image.exit_code() is not None
 
             bridge.run(should_stop)
+            if (code := image.exit_code()) is not None and not stop.is_set():
+                raise PilError(f"the emulator exited with code {code} while the image ran")
         finally:
             image_bus.shutdown()
     except PilError as exc:
@@ -391,13 +457,14 @@ def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
         bus.shutdown()
     summary = {
         "impl": "pil",
-        **({"ticks": image.profile.ticks} if lockstep else {}),
+        **({"ticks": image.profile.ticks} if lockstep else {"scheduling": policy}),
         **(bridge.stats() if bridge is not None else {}),
         **bus.stats(),
         "pil": {**image.profile.summary(), "image": image_sizes(image.elf)},
         **({"xcp": {"impl": "pil", "ids": list(xcp.ids)}} if xcp is not None else {}),
     }
-    return _report(summary, args)
+    code = _report(summary, args)
+    return 2 if bridge is not None and bridge.silenced else code  # (said when it refused)
 
 
 def _report(summary: dict, args: argparse.Namespace) -> int:

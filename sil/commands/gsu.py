@@ -15,8 +15,9 @@ from pathlib import Path
 
 from sil import validation
 from sil.commands import a2l as a2l_command
+from sil.run import run_folder
 from sil.run.node_options import xcp_ids
-from sil.validation import option
+from sil.validation import bus_option, option
 
 NAME = "gsu"
 HELP = "the ground-support page in the browser: dashboard, start/stop, tests, parameters, logbook"
@@ -25,7 +26,8 @@ DEFAULT_PORT = 8470
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--bus", required=True, metavar="SPEC", help="the engine's bus: socketcan:vcan0, "
+        "--bus", type=bus_option, required=True, metavar="SPEC",
+        help="the engine's bus: socketcan:vcan0, "
         "udp:GROUP[@PORT] as the ECU's, or any python-can interface:channel"
     )  # fmt: skip
     parser.add_argument(
@@ -88,6 +90,11 @@ def run(args: argparse.Namespace) -> int:
     from sil.record.a2l import A2lError
 
     prefix = "sil gsu"
+    try:
+        run_folder.check("--out", args.out)
+    except run_folder.FolderError as exc:
+        print(f"{prefix}: {exc}", file=sys.stderr)
+        return 2
     if not args.out.is_dir():
         print(f"{prefix}: --out {args.out}: not a folder", file=sys.stderr)
         return 2

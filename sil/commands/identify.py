@@ -23,7 +23,7 @@ HELP = "identify the fast engine model (eq. 3.5 or appendix B) from a trace, CAN
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "file", type=validation.path_option, help="trace.csv of a run, a CAN log, or a plain CSV"
+        "file", type=validation.input_option, help="trace.csv of a run, a CAN log, or a plain CSV"
     )
     parser.add_argument(
         "--order",
@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--validate",
-        type=validation.path_option,
+        type=validation.input_option,
         metavar="FILE",
         help="a second recording to judge the fit on (default: held-out part)",
     )

@@ -21,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     convert = actions.add_parser("convert", help=CONVERT, description=CONVERT)
     convert.add_argument(
-        "source", type=validation.path_option, metavar="IN", help="the log to convert"
+        "source", type=validation.input_option, metavar="IN", help="the log to convert"
     )
     convert.add_argument(
         "target", type=validation.path_option, metavar="OUT", help="the log to write"

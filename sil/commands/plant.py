@@ -6,19 +6,18 @@ import argparse
 import gc
 import math
 import sys
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from protocol import strict_json
+from sil.run.membership import say_ready, wait_to_start
 from sil.run.node_options import add_launcher_options, run_sequence
 from sil.run.parent_death import NodeStop, PeerLost
-from sil.validation import option
+from sil.validation import bus_option, option
 
 NAME = "plant"
 HELP = "run the simulated engine (aero-thermal or fast model) as a CAN node"
-START_POLL_S = 0.002  # --start-file: how often to look for it
 # the engine as built and its sensors (sil.scenario's [plant] variation): option, range, default
 VARIATION = (
     ("compressor_efficiency", 0.1, 1.5, 1.0),
@@ -33,18 +32,32 @@ VARIATION = (
 )
 
 
+def fault_kinds() -> tuple[str, ...]:
+    """The fault kinds ``--fault`` takes: the scenario files' fault names (the DBC's FaultTarget,
+    CLEAR_ALL aside) and the plant's own (PUMP_DRY, PUMP_STALL)."""
+    from plant.faults import FaultKind
+
+    return tuple(kind.value.upper() for kind in FaultKind)
+
+
 def _fault(text: str):  # noqa: ANN202 - argparse type
-    """AT_S:KIND[:VALUE[:DURATION_S]], e.g. 30:pump_effectiveness:0.5 (the document's failure)."""
-    from plant.faults import Fault
+    """AT_S:KIND[:VALUE[:DURATION_S]], e.g. 30:PUMP_EFFECTIVENESS:0.5 (the document's failure);
+    KIND in any case."""
+    from plant.faults import Fault, FaultKind
 
     parts = text.split(":")
     if not 2 <= len(parts) <= 4:
         raise argparse.ArgumentTypeError(f"fault {text!r}: expected AT_S:KIND[:VALUE[:DURATION_S]]")
+    name = parts[1].strip().upper()
+    if name not in fault_kinds():
+        raise argparse.ArgumentTypeError(
+            f"fault {text!r}: unknown kind {parts[1]!r} (kinds: {', '.join(fault_kinds())})"
+        )
     try:
-        at, kind = float(parts[0]), parts[1]
+        at = float(parts[0])
         value = float(parts[2]) if len(parts) > 2 and parts[2] != "" else None
         duration = float(parts[3]) if len(parts) > 3 else None
-        return Fault(at, kind, value, duration)
+        return Fault(at, FaultKind(name.lower()), value, duration)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"fault {text!r}: {exc}") from None
 
@@ -52,6 +65,7 @@ def _fault(text: str):  # noqa: ANN202 - argparse type
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bus",
+        type=bus_option,
         metavar="SPEC",
         help="bus spec (default: vcan0 if up, else a "
         "loopback multicast bus of this run's own; see protocol.bus)",
@@ -144,7 +158,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="AT_S:KIND[:VALUE[:DURATION_S]]",
-        help="scheduled fault, repeatable (kinds: plant.faults.FaultKind)",
+        help="scheduled fault, repeatable; KIND (in any case) one of the scenario files' fault "
+        f"names or the plant's own: {', '.join(fault_kinds())}",
     )
 
 
@@ -203,12 +218,6 @@ def build_node(args: argparse.Namespace):  # noqa: ANN201
     )
 
 
-def _wait_for(path: Path, stopped: Callable[[], bool]) -> None:
-    """Wait until ``path`` exists (the launcher's go) or a stop is asked for."""
-    while not path.exists() and not stopped():
-        time.sleep(START_POLL_S)
-
-
 def run(args: argparse.Namespace) -> int:
     from protocol.bus import BusSpecError, default_spec, open_bus, parse_spec
     from protocol.node import listen_for, realtime_scheduling, run_lockstep, run_realtime
@@ -242,9 +251,9 @@ def run(args: argparse.Namespace) -> int:
     listen_for(node, bus)
     lost = PeerLost(on_lost=bus.relax)
     if args.ready_file is not None:
-        args.ready_file.write_text("ready\n")
-    if args.start_file is not None:
-        _wait_for(args.start_file, stop.is_set)
+        say_ready(args.ready_file, bus)
+    if args.start_file is not None:  # (the run's senders, named there, the only ones heard)
+        wait_to_start(args.start_file, bus, stop.is_set)
     try:
         if args.realtime:
             policy = realtime_scheduling()

@@ -23,11 +23,16 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("log", type=Path, help="the log file (format detected from its content)")
+    parser.add_argument(
+        "log", type=validation.input_option, help="the log file (format detected from its content)"
+    )
     parser.add_argument(
         "--dry-run", action="store_true", help="print the decoded frames instead of sending them"
     )
-    parser.add_argument("--bus", metavar="SPEC", help="bus to play onto (default as in protocol)")
+    parser.add_argument(
+        "--bus", type=validation.bus_option, metavar="SPEC",
+        help="bus to play onto (default as in protocol)",
+    )  # fmt: skip
     parser.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
     parser.add_argument("--loop", action="store_true", help="play the log again and again")
     parser.add_argument(

@@ -18,6 +18,7 @@ from sil.run import run_folder
 from sil.run.node_options import add_pil_link
 from sil.run.run_record import Overrides
 from sil.run.watchdog import Terminated, interrupt_reason
+from sil.validation import bus_option, input_option
 
 NAME = "run"
 HELP = "run a scenario: plant and ECU nodes over a bus (or in one process), with results"
@@ -65,11 +66,13 @@ def overrides(args: argparse.Namespace) -> Overrides:
 def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCENARIO") -> None:
     parser.add_argument(
         "--bus",
+        type=bus_option,
         metavar="SPEC",
         help="bus spec (default: vcan0 if up, else a loopback bus of this run's own)",
     )
     parser.add_argument(
         "--ecu-bus",
+        type=bus_option,
         metavar="SPEC",
         help="with [[bus_fault]] on a bus: the ECU's bus behind the fault bridge "
         "(default: a second loopback bus)",
@@ -94,7 +97,7 @@ def add_run_options(parser: argparse.ArgumentParser, out_default: str = "out/SCE
     )
     parser.add_argument(
         "--commission",
-        type=Path,
+        type=input_option,
         metavar="FILE",
         help="ECU trim point and initial estimates (sil identify --export)",
     )
@@ -227,8 +230,8 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
         print(strict_json.dumps(summary, indent=2, default=float))
     else:
         print_summary(summary, out)
-    if summary["status"] != "completed":
-        print(f"sil run: aborted: {summary['abort_reason']}", file=sys.stderr)
+    if summary["status"] != "completed":  # aborted, or touched by another sender
+        print(f"sil run: {summary['status']}: {summary['abort_reason']}", file=sys.stderr)
         return 1
     return 0
 

@@ -9,6 +9,7 @@ from protocol import strict_json
 from protocol.bus import BusSpecError, default_spec, parse_spec
 from protocol.dbc import ContractError
 from protocol.selfcheck import run_selfcheck
+from sil.validation import bus_option
 
 NAME = "selfcheck"
 HELP = "send every message of the CAN contract over a bus, decode it twice, check E2E"
@@ -17,6 +18,7 @@ HELP = "send every message of the CAN contract over a bus, decode it twice, chec
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bus",
+        type=bus_option,
         metavar="SPEC",
         help="bus spec (socketcan:vcan0, udp, udp:GROUP@PORT, virtual:NAME, "
         "INTERFACE:CHANNEL); default: vcan0 if up, else loopback multicast",

@@ -23,7 +23,8 @@ RECORD = (
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     p = actions.add_parser("record", help=RECORD, description=RECORD)
-    p.add_argument("--bus", metavar="SPEC", help="the ECU's bus (default as in protocol)")
+    p.add_argument("--bus", type=validation.bus_option, metavar="SPEC",
+                   help="the ECU's bus (default as in protocol)")  # fmt: skip
     p.add_argument("--a2l", type=validation.path_option, required=True, metavar="FILE",
                    help="the ECU's A2L (sil a2l): addresses, types, units, XCP IDs")  # fmt: skip
     p.add_argument("--measure", nargs="+", action="extend", required=True, metavar="NAME",

@@ -9,12 +9,14 @@ that runs the ECU's ticks instead.
 
 from __future__ import annotations
 
+import math
 import random
 import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+from ecu import logbook as L
 from ecu.modes import NAMES as MODE_NAMES
 from ecu.service import fault_log, live
 from ecu.service.framing import FrameDecoder, encode_frame
@@ -45,8 +47,35 @@ class ServiceTimeout(TimeoutError):
     pass
 
 
+RAW_MAX = (1 << 31) - 1  # a parameter's raw value is a signed 32-bit Q number
+# the logbook's words (ecu.logbook.word_names) that are not plain counts: the name shown (the
+# A2L's, without the unit's suffix), the unit, and what the word counts per unit
+LOGBOOK_UNITS = {
+    "log_run_time_s": ("log_run_time_s", "s", 1),
+    "log_run_frac_ticks": ("log_run_frac_ticks", "ticks", 1),
+    "log_last_max_egt_dk": ("log_last_max_egt", "K", 10),
+    "log_last_max_speed_cpct": ("log_last_max_speed", "%N", 100),
+}
+
+
 def _sleep() -> None:
     time.sleep(0.001)
+
+
+def finite_value(name: str, value: object) -> float:
+    """``value`` (a number, or its text) as a finite float; else ValueError naming the
+    parameter ``name``."""
+    if isinstance(value, bool) or not isinstance(value, str | int | float):
+        raise ValueError(f"set {name}: {value!r} is not a number")
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond any float
+        number = math.inf
+    except ValueError:
+        raise ValueError(f"set {name}: {value!r} is not a number") from None
+    if not math.isfinite(number):
+        raise ValueError(f"set {name}: {value} is not a finite number")
+    return number
 
 
 class ServiceClient:
@@ -155,11 +184,26 @@ class ServiceClient:
         r = self.request(Service.PARAM_READ, {"name": name})
         return {**r, "value": r["raw"] / (1 << r["frac"])}
 
-    def set(self, name: str, value: float) -> dict:
-        """Write a parameter in engineering units (rounded to its Q format); unlocks first."""
+    def raw_value(self, name: str, value: float) -> int:
+        """The raw Q number that writes ``value`` (engineering units) to parameter ``name``,
+        rounded to its Q format. A value that is not a finite number, or that the format cannot
+        hold, is refused (ValueError naming the parameter); the ECU checks its own limits."""
+        value = finite_value(name, value)
         frac = self.get(name)["frac"]
+        scaled = value * (1 << frac)
+        if not -RAW_MAX - 1 <= scaled <= RAW_MAX:
+            top = (RAW_MAX + 1) / (1 << frac)
+            raise ValueError(
+                f"set {name}: {value:g} is more than its Q{31 - frac}.{frac} format holds "
+                f"(-{top:g}..{top:g})"
+            )
+        return round(scaled)
+
+    def set(self, name: str, value: float) -> dict:
+        """Write a parameter in engineering units (:meth:`raw_value`); unlocks first."""
+        raw = self.raw_value(name, value)
         self.unlock()
-        r = self.request(Service.PARAM_WRITE, {"name": name, "raw": round(value * (1 << frac))})
+        r = self.request(Service.PARAM_WRITE, {"name": name, "raw": raw})
         return {**r, "value": r["raw"] / (1 << r["frac"])}
 
     def save(self) -> dict:
@@ -186,6 +230,18 @@ class ServiceClient:
             }
             for tick, code, snap, count, last in entries
         ]
+
+    def logbook(self) -> list[dict]:
+        """The engine's logbook: each word's name, value in its unit (the last shutdown by
+        name) and unit, in the order of ecu.logbook.word_names."""
+        rows = []
+        for word, raw in zip(L.word_names(), self.request(Service.LOGBOOK_READ), strict=True):
+            name, unit, per_unit = LOGBOOK_UNITS.get(word, (word, "", 1))
+            value = raw / per_unit if per_unit != 1 else raw
+            if word == "log_last_shutdown" and 0 <= raw < len(L.SHUTDOWN_NAMES):
+                value = L.SHUTDOWN_NAMES[raw]
+            rows.append({"name": name, "value": value, "unit": unit})
+        return rows
 
     def clear_faults(self) -> int:
         self.unlock()

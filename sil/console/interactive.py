@@ -14,11 +14,11 @@ from ecu import faults as F
 from ecu import start_sequencer as Q
 from ecu.modes import NAMES as MODE_NAMES
 from ecu.service.bench_demand import SOURCE_NAMES
-from sil.console.client import ServiceClient, ServiceRequestError, ServiceTimeout
+from sil.console.client import ServiceClient, ServiceRequestError, ServiceTimeout, finite_value
 
 HELP = (
     "arm | throttle PCT | stop | get NAME | set NAME VALUE | params | save | faults | clear | "
-    "rate HZ | counters | help | quit"
+    "logbook | rate HZ | counters | help | quit"
 )
 
 
@@ -78,7 +78,7 @@ def execute(client: ServiceClient, line: str) -> list[str]:
     cmd, args = words[0], words[1:]
     try:
         return _command(client, cmd, args)
-    except (ServiceRequestError, ServiceTimeout) as exc:
+    except (ServiceRequestError, ServiceTimeout, ValueError) as exc:
         return [f"error: {exc}"]
 
 
@@ -87,11 +87,7 @@ def _command(client: ServiceClient, cmd: str, args: list[str]) -> list[str]:
         r = client.get(args[0])
         return [f"{r['name']} = {r['value']:g} (raw {r['raw']}, Q frac {r['frac']})"]
     if cmd == "set" and len(args) == 2:
-        try:
-            value = float(args[1])
-        except ValueError:
-            return [f"error: value {args[1]!r} is not a number"]
-        r = client.set(args[0], value)
+        r = client.set(args[0], finite_value(args[0], args[1]))
         return [
             f"{r['name']} = {r['value']:g} (param CRC 0x{r['param_crc']:04X}; 'save' stores it)"
         ]
@@ -113,6 +109,8 @@ def _command(client: ServiceClient, cmd: str, args: list[str]) -> list[str]:
             + (f"  (x{e['count']}, last {e['last_s']:.2f} s)" if e["count"] > 1 else "")
             for e in entries
         ] or ["fault log empty"]
+    if cmd == "logbook" and not args:
+        return [f"{r['name']:<24} {r['value']:>12} {r['unit']}".rstrip() for r in client.logbook()]
     if cmd == "clear" and not args:
         return [f"cleared {client.clear_faults()} entries"]
     if cmd == "arm" and not args:

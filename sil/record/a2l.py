@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from sil.record import mdf
+from sil.validation import InputError, input_file
 
 XCP_INSTALL = "pip install 'turbojet-sil[xcp]' (pyxcp, pya2ldb, asammdf)"
 
@@ -132,6 +133,10 @@ def _quiet_pya2l(said: list[str]) -> Iterator[None]:
 def read_a2l(path: Path) -> A2l:
     """The measurements, characteristics, XCP identifiers, events and EPK of an A2L
     (A2lError: not readable, or pya2ldb missing)."""
+    try:
+        input_file(path, f"--a2l {path}")
+    except InputError as exc:
+        raise A2lError(str(exc)) from None
     if not path.is_file():
         raise A2lError(f"--a2l {path}: no such file")
     said: list[str] = []

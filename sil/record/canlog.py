@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import gzip
 import itertools
+import logging
 import re
 import zlib
 from collections.abc import Iterable, Iterator
@@ -20,6 +21,11 @@ import can
 import numpy as np
 
 from sil.record.results import WriteError, atomic
+
+# python-can's readers log what they make of odd lines (a DLC that does not match the data, a
+# line they skip); the readers here say what is wrong with a log themselves, in one line, so
+# those records go to the application's handlers, if any, never to stderr by default
+logging.getLogger("can.io").addHandler(logging.NullHandler())
 
 EXTRA_FORMATS = ("asc", "blf", "mf4")
 # what `sil log convert` writes, by the output's suffix

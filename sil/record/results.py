@@ -3,9 +3,10 @@ how results are written.
 
 A run owns only the names in :data:`RUN_FILES`: before it starts, those left by an earlier run
 in the folder are removed (a user's own files stay), and ``summary.json`` says at once that the
-run is ``running``. It is replaced, atomically, by the final summary (``completed`` or
-``aborted``), or by a ``failed`` one naming the reason when the run fails before it began or
-while it ended. A run killed outright leaves ``running``. ``status`` is always the first key.
+run is ``running``. It is replaced, atomically, by the final summary (``completed``,
+``aborted`` or ``touched``), or by a ``failed`` one naming the reason when the run fails before
+it began or while it ended. A run killed outright leaves ``running``. ``status`` is always the
+first key.
 
 Results written at once (the summary, the run's record, plots, the log's other formats, `sil
 compare`'s and `sil replay --into-ecu`'s files) are written under a temporary name in the folder

@@ -5,6 +5,7 @@ command lines."""
 from __future__ import annotations
 
 import math
+import shutil
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -53,6 +54,26 @@ class RunOptions:
     )
     overrides: Overrides = field(default_factory=Overrides)  # --controller, --param, ...
     command_line: tuple[str, ...] = ()  # the command that asked for the run, for run.json
+
+
+def check_ecu_impl(opts: RunOptions) -> None:
+    """What the run's ECU implementation needs, found or built before the run folder is
+    touched: the C port's library for ``c``, the emulator and the firmware image for ``pil``;
+    else a ValueError naming what is missing."""
+    from ecu.port.build import PortBuildError, arm_pil_image
+    from ecu.port.core import PortError, library
+    from ecu.port.qemu import QEMU, QEMU_NOT_FOUND
+
+    where = f"--ecu-impl {opts.ecu_impl}"
+    try:
+        if opts.ecu_impl == "c":
+            library()
+        elif opts.ecu_impl == "pil":
+            if not shutil.which(QEMU):
+                raise ValueError(f"{where}: the emulator {QEMU_NOT_FOUND}")
+            arm_pil_image(opts.pil_link)
+    except (PortBuildError, PortError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def plant_config(s: Scenario, seed: int, *, nominal: bool = False) -> PlantConfig:
@@ -233,6 +254,8 @@ def ecu_args(
         s.controller.preset or "default",
         "--ready-file",
         str(ready_file(opts.out_dir, "ecu")),
+        "--start-file",
+        str(start_file(opts.out_dir)),
         "--guard",
         str(guard_s(opts, s)),
         "--foreign-frames",
@@ -298,7 +321,8 @@ def ready_file(out_dir: Path, node: str) -> Path:
 
 
 def start_file(out_dir: Path) -> Path:
-    """The plant's go (``sil plant --start-file``): tick 0 goes out once it exists."""
+    """The nodes' go (``--start-file``), naming the run's senders: the plant sends tick 0
+    once it exists."""
     return out_dir / ".plant-start"
 
 

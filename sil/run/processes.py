@@ -24,6 +24,7 @@ from sil.busfault.injector import Injector
 from sil.record.ticks import ACTUATOR, ECU_IDS, PLANT_IDS, SENSORS
 from sil.run.command_node import CommandNode
 from sil.run.config import NODE_GUARD_S, RunOptions, ready_file, start_file, stats_file, strict
+from sil.run.membership import give_start, sender_in
 from sil.run.parent_death import PEER_LOST_SIGNAL, child_env, die_with_parent
 from sil.run.state import RunState
 from sil.run.watchdog import Starting, StartWatch, TurnWatch, Watchdog
@@ -42,6 +43,11 @@ LOCKSTEP_READ_S = 100e-6
 
 
 READY_POLL_S = 0.02  # how often the start-up looks at the node processes
+
+
+STOPPED_ANSWERS_S = 0.5  # real time: the ECU's answers stopped this long before the run's end
+CLEAN_END_TICKS = 10  # real time: a node may end cleanly this many ticks before the run's last
+QUEUED_S = 0.1  # real time: the frames queued at the run's end are read for at most this long
 
 
 def spawn(name: str, args: list[str], out_dir: Path) -> subprocess.Popen:
@@ -105,10 +111,15 @@ def run_on_bus(
         if failed is not None:
             state.status, state.abort_reason = "aborted", failed
             return
+        # who belongs to the run, agreed before tick 0: from now on its nodes and this one (and
+        # so the recorder) hear only each other, where the bus names senders
+        senders = {} if s.bus_faults else _run_senders(opts.out_dir, state.children, bus)
+        if senders and bus.admit(senders.values()):
+            state.senders = senders
         _drain(bus)
         send = bus_sender(bus, DriverStats())
         command.start(send)
-        start_file(opts.out_dir).touch()
+        give_start(start_file(opts.out_dir), state.senders or {})
         state.nodes_up = time.perf_counter()
         _listen(
             bus,
@@ -118,6 +129,7 @@ def run_on_bus(
             realtime=opts.mode == "realtime",
             period=1.0 / s.ecu_rate_hz,
             turns=strict(opts, s),
+            logs=opts.out_dir,
         )
 
 
@@ -139,6 +151,17 @@ def _wait_until_ready(out_dir: Path, children: dict[str, subprocess.Popen]) -> s
                 f"(see {name}.log)"
             )
         time.sleep(READY_POLL_S)
+
+
+def _run_senders(
+    out_dir: Path, children: dict[str, subprocess.Popen], bus: RunBus
+) -> dict[str, str]:
+    """The run's senders by their tokens (this command node's and each node's, from its ready
+    file); none unless every one has a token (frames on this bus name their sender)."""
+    senders = {"command": bus.sender} | {n: sender_in(ready_file(out_dir, n)) for n in children}
+    if any(token is None for token in senders.values()):
+        return {}
+    return {name: token for name, token in senders.items() if token is not None}
 
 
 def _last_line(log: Path) -> str:
@@ -181,13 +204,16 @@ def _listen(
     realtime: bool,
     period: float,
     turns: bool = False,
+    logs: Path,
 ) -> None:
     """The command node's loop: frames in (all those queued at each read), and a watch on the
     node processes. One that exits aborts the run; so does one that falls silent: with
     ``turns`` (lockstep without bus faults) the node whose turn it is, once /proc shows it dead
     (:class:`sil.run.watchdog.TurnWatch`; a slow one is waited for), its peer then told and
     recorded on its own clock for PEER_GRACE_S; else one that sends nothing for
-    ``watchdog.SILENCE_S``, its peer having run on its own clock since its guard time."""
+    ``watchdog.SILENCE_S``, its peer having run on its own clock since its guard time. The
+    abort names the node, when and why (:class:`_Ending`); ``logs``: the nodes' logs' folder."""
+    ending = _Ending(state, command, period, logs)
     died_at = None
     receive = bus_batch_receiver(bus)
     paced = not realtime and getattr(bus, "recv_frames", None) is not None
@@ -208,19 +234,20 @@ def _listen(
         if now >= next_check:
             next_check = now + 0.2
             if died_at is None:
-                died_at = _node_exited(state, now)
+                left = command.last_tick - command.own_tick if realtime else None
+                died_at = _node_exited(state, ending, now, left)
                 if died_at is None and watch is None:
                     if (silent := _silent(dog, seen, state, now)) is not None:
-                        state.status, state.abort_reason = "aborted", silent
+                        ending.end(dog.silent_node or "a node", silent)
                         return  # its peer has run on its own clock since its guard time
                 elif died_at is None and drained and (dead := watch.dead(now)) is not None:
-                    state.status, state.abort_reason = "aborted", dead
+                    ending.end(watch.node, dead)
                     died_at = now
                 if died_at is not None and watch is not None and state.status == "aborted":
                     _peer_lost(state, bus)
             elif now - died_at > (grace if state.status == "aborted" else GRACE_S):
                 if state.status != "aborted":  # it ended cleanly, and the run's end never came
-                    state.status, state.abort_reason = "aborted", _ended_early(state, command)
+                    _ended_early(state, ending)
                 return
         frames = receive(min(0.05, next_period - now) if realtime else 0.05)
         drained = not frames
@@ -238,6 +265,30 @@ def _listen(
                 return
         if frames and paced:
             time.sleep(LOCKSTEP_READ_S)
+    if realtime and command.recorder.tick <= command.last_tick and state.status != "aborted":
+        last = _queued_answers(receive, command, send, start) or seen.get(ACTUATOR)
+        if command.recorder.tick <= command.last_tick:
+            _short_of_ticks(ending, last, start, period)
+
+
+def _queued_answers(receive, command: CommandNode, send, start: float) -> float | None:
+    """Real time, the run's clock run out: the frames queued meanwhile (a command node that got
+    its core late runs its clock's last periods before it reads them), heard before the run is
+    judged; when the last EcuActuator among them was read, if one was."""
+    last, deadline = None, time.monotonic() + QUEUED_S
+    while (frames := receive(0.0)) and time.monotonic() < deadline:
+        for got in frames:
+            if type(got) is not tuple:
+                if unusable(got) is not None:
+                    continue
+                got = (got.arbitration_id, got.data)
+            now = time.monotonic()
+            command.on_frame(got[0], got[1], send, wall_s=now - start)
+            if got[0] == ACTUATOR:
+                last = now
+                if command.recorder.tick > command.last_tick:  # the last tick answered
+                    return last
+    return last
 
 
 class _TurnState:
@@ -276,28 +327,92 @@ def _peer_lost(state: RunState, bus: RunBus) -> None:
     bus.relax()
 
 
-def _node_exited(state: RunState, now: float) -> float | None:
+class _Ending:
+    """How a run that ends short of its last tick says so: which node ended it, when (the ticks
+    the ECU had answered, as simulated time, and the wall time since tick 0) and why (its exit
+    code and the last line it wrote, or the watch's verdict), in the abort reason and in the
+    summary's ``ended_early``."""
+
+    def __init__(self, state: RunState, command: CommandNode, period: float, logs: Path) -> None:
+        self.state, self.command, self.period, self.logs = state, command, period, logs
+
+    def end(self, node: str, why: str, *, code: int | None = None) -> None:
+        state, tick = self.state, self.command.recorder.tick
+        wall = time.perf_counter() - state.nodes_up if state.nodes_up is not None else 0.0
+        said = _last_line(self.logs / f"{node}.log") if code is not None and code > 0 else ""
+        state.status = "aborted"
+        state.abort_reason = (
+            f"{why}, at tick {tick} of {self.command.last_tick + 1} ({tick * self.period:.2f} s "
+            f"simulated, {wall:.1f} s after tick 0)" + (f"; its last line: {said}" if said else "")
+        )
+        state.ended_early = {
+            "node": node,
+            "tick": tick,
+            "time_s": tick * self.period,
+            "wall_s": wall,
+            "why": why,
+            **({"exit_code": code} if code is not None else {}),
+            **({"last_line": said} if said else {}),
+        }
+
+
+def _short_of_ticks(ending: _Ending, last: float | None, start: float, period: float) -> None:
+    """Real time: the run's clock ran out before the ECU answered every tick. Said with when its
+    answers stopped, or how far behind the run's clock they fell."""
+    command = ending.command
+    answered, total = command.recorder.tick, command.last_tick + 1
+    now = time.monotonic()
+    said = f"the ECU answered {answered} of {total} ticks by the end of the run's clock"
+    if last is None:
+        why = f"{said}: none came"
+    elif now - last > STOPPED_ANSWERS_S:
+        why = f"{said}: its answers stopped {now - last:.1f} s before it ended"
+    else:
+        rate = answered / max(last - start, period)
+        why = (
+            f"{said}: it fell {total - answered} ticks behind (its answers came at {rate:.1f} Hz, "
+            f"the run's rate is {1.0 / period:g} Hz)"
+        )
+    ending.end("ecu", why)
+
+
+def _exit(name: str, code: int) -> str:
+    """How a node process ended: its exit code, and the signal that killed it."""
+    try:
+        by = f" (killed by {signal.Signals(-code).name})" if code < 0 else ""
+    except ValueError:
+        by = ""
+    return f"{name} process exited with code {code}{by}"
+
+
+def _node_exited(
+    state: RunState, ending: _Ending, now: float, left: int | None = None
+) -> float | None:
     """``now`` if a node process has exited, else None. One that failed marks the run aborted;
     one that ended cleanly (code 0: its last tick done) does not yet: the command node, behind
-    it on a loaded machine, may still have its last frames to read (``_ended_early``)."""
+    it on a loaded machine, may still have its last frames to read (``_ended_early``). In real
+    time (``left``: the ticks left on the run's clock) one that ended cleanly more than
+    CLEAN_END_TICKS before the run's last tick aborts it too."""
     for name, proc in state.children.items():
         code = proc.poll()
         if code is not None:
             if code != 0:
-                state.status = "aborted"
-                state.abort_reason = f"{name} process exited with code {code} mid-run"
+                ending.end(name, f"{_exit(name, code)} mid-run", code=code)
+            elif left is not None and left > CLEAN_END_TICKS:
+                why = f"{name} process ended (code 0) {left} ticks before the run's last tick"
+                ending.end(name, why, code=0)
             return now
     return None
 
 
-def _ended_early(state: RunState, command: CommandNode) -> str:
-    """Why the run aborts when a node that ended cleanly left it short of its last tick."""
+def _ended_early(state: RunState, ending: _Ending) -> None:
+    """The run aborts: a node that ended cleanly left it short of its last tick."""
     ended = [n for n, p in state.children.items() if p.poll() == 0] or ["a node"]
-    return (
+    why = (
         f"{ended[0]} process ended (code 0) before the ECU answered the run's last tick "
-        f"(answered {command.recorder.tick} of {command.last_tick + 1} ticks within "
-        f"{GRACE_S:g} s)"
+        f"(none came within {GRACE_S:g} s)"
     )
+    ending.end(ended[0], why, code=0 if ended[0] in state.children else None)
 
 
 def _silent(dog: Watchdog, seen: dict[int, float], state: RunState, now: float) -> str | None:

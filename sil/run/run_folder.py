@@ -28,7 +28,7 @@ LOCK = ".lock"
 # kernel file systems: paths there are interfaces to the kernel, not places for files
 KERNEL_FS = frozenset(
     "proc sysfs cgroup cgroup2 debugfs tracefs securityfs configfs pstore bpf efivarfs fusectl "
-    "devpts mqueue binfmt_misc selinuxfs autofs".split()
+    "devtmpfs devpts mqueue binfmt_misc selinuxfs autofs".split()
 )
 
 

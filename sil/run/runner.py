@@ -42,6 +42,7 @@ from sil.run.config import (
     RunOptions,
     build_plant,
     bus_spec,
+    check_ecu_impl,
     demand_warnings,
     ecu_args,
     ecu_overrides,
@@ -89,11 +90,12 @@ class _Progress:
 def run(opts: RunOptions) -> dict:
     """Run the scenario, write can.log, trace.csv, summary.json and plots; return the summary.
 
-    Every input (the scenario and commissioning files, the ECU parameters, the bus, ``--out``)
-    is checked before the run folder is touched; a refusal raises ValueError (BusSpecError,
-    :class:`~sil.run.run_folder.FolderError`) and leaves the folder as it was. The folder is then
-    made and locked for the run's time (:class:`~sil.run.run_folder.FolderLock`), cleared of an
-    earlier run's files and marked running. A result that cannot be written raises
+    Every input (the scenario and commissioning files, the ECU parameters and what its
+    implementation needs, the bus, ``--out``) is checked before the run folder is touched; a
+    refusal raises ValueError (BusSpecError, :class:`~sil.run.run_folder.FolderError`) and leaves
+    the folder as it was. The folder is then made and locked for the run's time
+    (:class:`~sil.run.run_folder.FolderLock`), cleared of an earlier run's files and marked
+    running. A result that cannot be written raises
     :class:`~sil.record.results.WriteError` before the run began; once it flew, the run is aborted
     with the file named."""
     s = opts.overrides.apply(opts.scenario)
@@ -114,12 +116,14 @@ def run(opts: RunOptions) -> dict:
 
 def _check_inputs(opts: RunOptions, s: Scenario, state: RunState) -> None:
     """Refuse, before the run folder is touched, what the run could not fly: ``--ecu-impl pil``
-    in process, a bus that cannot be opened (it is opened here, for the run), a commissioning
-    file the ECU would refuse, ECU parameters it would refuse (checked at the preset's trim;
-    the run's own trim is checked again once the plant is built)."""
+    in process, an ECU implementation whose pieces are missing (the emulator, a compiler: they
+    are built here), a bus that cannot be opened (it is opened here, for the run), a
+    commissioning file the ECU would refuse, ECU parameters it would refuse (checked at the
+    preset's trim; the run's own trim is checked again once the plant is built)."""
     if opts.mode == "inproc" and opts.ecu_impl == "pil":
         raise ValueError("--ecu-impl pil runs the image on a bus: use --mode lockstep or "
                          "realtime")  # fmt: skip
+    check_ecu_impl(opts)
     nominal = {
         k: v for k, v in ecu_overrides(s, 0.0, 0.0).items() if k not in ("trim_v", "entry_v")
     }

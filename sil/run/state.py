@@ -33,12 +33,14 @@ class RunState:
     run_id: int | None = None  # on a bus: this run's RunId (its SimRun beacons carry it)
     claims: list[TagClaim] = field(default_factory=list)  # the run's tags: run bus, ECU bus
     run_bus: RunBus | None = None  # the command node's bus: its foreign-frame counts
+    senders: dict[str, str] | None = None  # the run's senders (node -> token), where named
     warnings: list[str] = field(default_factory=list)  # said on stderr and in the summary
     record: dict = field(default_factory=dict)  # what shaped the run (run.json)
     specs: tuple[BusSpec, BusSpec] | None = None  # on a bus: the run's bus and the ECU's
     bus_handle: can.BusABC | None = None  # the command node's bus, opened before the run
     write_errors: list[str] = field(default_factory=list)  # results that could not be written
     turn_watch: TurnWatch | None = None  # lockstep without bus faults: the mid-run watch
+    ended_early: dict | None = None  # a run short of its last tick: which node, when and why
 
     def close_bus(self) -> None:
         """Shut the command node's bus if the run did not take it over."""

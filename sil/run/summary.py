@@ -26,6 +26,7 @@ from sil.run.recorder_process import RecorderProcess
 from sil.run.state import RunState
 from sil.scenario import Scenario
 
+TOUCHED = "touched"  # the run flew to its end, but another sender's frames may be in its record
 # fault bits listed in the summary: all but the two that only describe the present tick
 REPORTED_FAULTS = {
     bit: name
@@ -38,7 +39,8 @@ def _isolation(state: RunState) -> dict:
     """On a bus: the run's RunId and tag, and the other runs' frames it heard and dropped."""
     if state.run_bus is None:
         return {}
-    return {"run_id": state.run_id, **state.run_bus.stats()}
+    senders = {"run_senders": state.senders} if state.senders else {}
+    return {"run_id": state.run_id, **senders, **state.run_bus.stats()}
 
 
 def _egt_limit_k(s: Scenario) -> float:
@@ -107,7 +109,12 @@ def finish(
     }
     if state.status == "completed" and totals["tick"] < len(command.commands):
         summary["status"] = "aborted"
-        summary["abort_reason"] = summary["abort_reason"] or "the run ended early"
+        summary["abort_reason"] = summary["abort_reason"] or (
+            f"the run ended early: the ECU answered {totals['tick']} of "
+            f"{len(command.commands)} ticks"
+        )
+    if state.ended_early is not None:
+        summary["ended_early"] = _ended_early(state.ended_early, summary)
     if state.turn_watch is not None and state.turn_watch.looked:
         summary["slow_turns"] = state.turn_watch.looked
     _other_senders(summary)
@@ -129,10 +136,28 @@ def finish(
     return results.status_first(summary)
 
 
+def _ended_early(ended: dict, summary: dict) -> dict:
+    """Which node ended the run early, when and why, with what its own figures say of its pace
+    in real time (the periods it overran, its worst lateness), also in the abort reason."""
+    node = summary.get("nodes", {}).get(ended["node"], {})
+    if not node.get("overruns"):
+        return ended
+    late = node.get("jitter_ms", {}).get("max", 0.0)
+    pace = (
+        f"its process overran {node['overruns']} of {node['periods']} periods, "
+        f"{late:.0f} ms late at worst"
+    )
+    summary["abort_reason"] += f"; {pace}"
+    return {**ended, "overruns": node["overruns"], "worst_lateness_ms": late}
+
+
 def _other_senders(summary: dict) -> None:
-    """Another sender's frames on the run's bus (heard by the recorder or a node): a run they
-    disturbed (aborted, or with missed ticks) is aborted saying so first; an undisturbed one
-    warns of them."""
+    """Another sender's frames on the run's bus (heard by the recorder or a node). Where the
+    run's senders were named before tick 0 (``run_senders``), every frame of another sender was
+    dropped by who sent it, and the record is the run's alone: an undisturbed run warns of them,
+    a disturbed one (aborted, or with missed ticks) is aborted saying so first. Where frames
+    carry no sender, the run cannot tell that its record holds none of them: it is ``touched``,
+    saying so first, with the first frame dropped."""
     counts = [summary.get("other_sender_frames", 0)]
     ids = set(summary.get("other_sender_ids", {}))
     firsts = [f"run: {summary['other_sender_first'][0]}"] if "other_sender_first" in summary else []
@@ -155,8 +180,13 @@ def _other_senders(summary: dict) -> None:
         why = summary["abort_reason"] or f"{summary['missed_ticks']} missed ticks"
         summary["status"] = "aborted"
         summary["abort_reason"] = f"{said} ({why})"
+    elif "run_senders" not in summary:
+        summary["status"] = TOUCHED
+        summary["abort_reason"] = (
+            f"{said}; its frames name no sender, so the run's record may hold some of them"
+        )
     else:
-        warning = f"{said}; they were left out of the run"
+        warning = f"{said}; they were left out of the run (not one of the run's senders)"
         summary.setdefault("warnings", []).append(warning)
         print(f"sil run: warning: {warning}", file=sys.stderr)
 

@@ -46,6 +46,7 @@ class Watchdog:
         self.silence_s = silence_s
         self.node_of = {m.frame_id: NODES[s] for m in messages for s in m.senders if s in NODES}
         self.heard_at = dict.fromkeys(NODES.values(), now)
+        self.silent_node: str | None = None  # the node process found silent (plant, ecu)
 
     def silent(self, seen: dict[int, float], now: float) -> str | None:
         """The reason to abort if a node has been silent too long, else None. ``seen``: when
@@ -56,6 +57,7 @@ class Watchdog:
                 self.heard_at[node] = at
         for node, at in self.heard_at.items():
             if now - at > self.silence_s:
+                self.silent_node = node.lower()
                 return f"the {node} sent no frame for {now - at:.1f} s (stopped or stuck)"
         return None
 

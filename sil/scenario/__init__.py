@@ -275,7 +275,7 @@ class _Reader:
         if positive and value <= 0:
             raise self.fail(key, "a positive number", value)
         if (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise self.fail(key, f"a number in {lo}..{hi}", value)
+            raise self.fail(key, validation.within(lo, hi), value)
         return float(value)
 
     def numbers(self, key: str, length: int) -> tuple[float, ...]:
@@ -361,6 +361,10 @@ def _component(r: _Reader, base_dir: Path) -> profiles.Component:
         path = base_dir / r.text("path")
         if not path.is_file():
             raise r.fail("path", "an existing CSV file", str(path))
+        try:
+            validation.input_file(path, f"{r.source}: field '{r.prefix}path': {path}")
+        except validation.InputError as exc:
+            raise ScenarioError(str(exc)) from None
         try:
             c = profiles.Table.from_csv(
                 path, r.text("time_column", "time_s"), r.text("value_column", "value")
@@ -571,6 +575,7 @@ class BridgeFaults:
 def load_bridge_faults(path: Path) -> BridgeFaults:
     """``[[bus_fault]]`` tables with an optional ``ecu_rate_hz`` (100) and ``seed`` (0), as in a
     scenario (a scenario file is read for these alone); windows may start at any time."""
+    _readable(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
@@ -593,17 +598,27 @@ def load(name_or_path: str | Path) -> Scenario:
     path = Path(name_or_path)
     if not path.is_file():
         shipped = SCENARIO_DIR / f"{name_or_path}.toml"
-        if not shipped.is_file():
+        if shipped.is_file():
+            path = shipped
+        elif not path.exists():
             known = ", ".join(shipped_names())
             raise ScenarioError(
                 f"{name_or_path}: no such file or shipped scenario (shipped: {known})"
             )
-        path = shipped
+    _readable(path)  # (a device, a pipe or a folder is refused here)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{path}: cannot read: {exc}") from None
     return parse(text, str(path), path.parent, path)
+
+
+def _readable(path: Path) -> None:
+    """Refuse a kernel file or a device as the file to read (validation.input_file)."""
+    try:
+        validation.input_file(path)
+    except validation.InputError as exc:
+        raise ScenarioError(str(exc)) from None
 
 
 def shipped_names() -> list[str]:

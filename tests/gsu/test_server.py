@@ -1,12 +1,13 @@
 """The page's server on its own (no ECU on the bus): local only, every /api request needs the
 session's token and a known host name, a command is a JSON POST, a start needs its
-confirmation, and what the ECU cannot be asked (no answer) comes back as a refusal, not a
-crash."""
+confirmation, and what the ECU cannot be asked (it is silent) comes back at once as a refusal
+saying so, not a crash or a wait."""
 
 from __future__ import annotations
 
 import json
 import threading
+import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -74,24 +75,29 @@ def test_every_api_request_needs_the_token_and_a_local_host_name(page: str) -> N
 
 def test_commands_are_json_posts_and_a_start_needs_its_confirmation(page: str) -> None:
     status, answer = _call(page + "/api/start", {"confirm": True}, _auth())
-    assert status == 409 and answer["error"] == "a command is a JSON POST"
+    assert status == 415 and answer["error"] == "a command is a JSON POST"
     json_post = _auth(**{"Content-Type": "application/json"})
     status, answer = _call(page + "/api/start", {}, json_post)
     assert status == 409 and answer["error"] == "start: not confirmed"
     status, answer = _call(page + "/api/throttle", {"pct": "fast"}, json_post)
-    assert status == 409 and "a number" in answer["error"]
+    assert status == 400 and "a number" in answer["error"]
     status, answer = _call(page + "/api/nothing", {}, json_post)
     assert status == 404
     status, answer = _call(page + "/api/record/stop", {}, json_post)
     assert status == 409 and answer["error"] == "no recording under way"
 
 
-def test_an_ecu_that_does_not_answer_is_a_refusal(page: str) -> None:
+def test_a_silent_ecu_is_a_refusal_at_once(page: str) -> None:
     json_post = _auth(**{"Content-Type": "application/json"})
     status, answer = _call(page + "/api/stop", {}, json_post)
     assert status == 409 and "not in the A2L" in answer["error"]
+    started = time.monotonic()
     status, answer = _call(page + "/api/unlock", {}, json_post)
-    assert status == 409 and "did not answer" in answer["error"]
+    assert (
+        status == 503
+        and answer["error"] == "unlock: the ECU is silent (no status frame on the bus)"
+    )
+    assert time.monotonic() - started < 1.0
     status, answer = _call(page + "/api/logbook", headers=_auth())
     assert status == 409 and "no logbook" in answer["error"]
 
@@ -111,6 +117,8 @@ def test_sil_gsu_refuses_bad_input_with_exit_2(sil, tmp_path, udp_spec) -> None:
     cases = [
         (["--a2l", str(tmp_path / "none.a2l")], "none.a2l: no such file"),
         (["--out", str(tmp_path / "nowhere")], "nowhere: not a folder"),
+        (["--out", "/proc/self"], "--out /proc/self: on the kernel's proc file system"),
+        (["--out", "/dev"], "--out /dev: on the kernel's devtmpfs file system"),
         (["--port", "70000"], "--port"),
     ]
     for args, said in cases:

@@ -6,9 +6,6 @@ bus show every sequencer state in order."""
 
 from __future__ import annotations
 
-import json
-import select
-import subprocess
 import time
 
 import pytest
@@ -19,24 +16,6 @@ from protocol.bus import open_bus, unique_udp_spec
 from protocol.codec import Codec
 
 pytestmark = pytest.mark.slow
-
-
-def _console(sil, port: str, *args: str) -> dict | list:
-    done = sil("console", port, *args, "--json", timeout=30)
-    assert done.returncode == 0, done.stderr
-    return json.loads(done.stdout)
-
-
-def _service_port(ecu: subprocess.Popen) -> str:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([ecu.stderr], [], [], 1.0)
-        if ready:
-            line = ecu.stderr.readline()
-            assert line, f"sil ecu exited with {ecu.poll()} before serving its port"
-            if line.startswith("service port: "):
-                return line.split(": ", 1)[1].strip()
-    raise AssertionError("sil ecu did not print its service port")
 
 
 class Frames:
@@ -63,18 +42,20 @@ class Frames:
                     self.modes.append(self._raw[0])
 
 
-def _until(sil, frames: Frames, port: str, done, limit_s: float) -> dict:
+def _until(console, frames: Frames, port: str, done, limit_s: float) -> dict:
     """Console live samples until ``done(sample)``; the last sample."""
     deadline = time.monotonic() + limit_s
     while True:
         frames.drain()
-        sample = _console(sil, port, "live", "--samples", "1")[0]
+        sample = console.live(port, 1)[0]
         if done(sample) or time.monotonic() > deadline:
             return sample
         time.sleep(0.5)
 
 
-def test_console_starts_throttles_and_stops_an_engine_on_a_bench(tmp_path, sil, sil_process):
+def test_console_starts_throttles_and_stops_an_engine_on_a_bench(
+    tmp_path, sil_process, console, stderr_line
+):
     spec = unique_udp_spec()
     frames = Frames(spec)
     plant = sil_process("plant", "--bus", str(spec), "--realtime", "--standstill", cwd=tmp_path)
@@ -82,36 +63,36 @@ def test_console_starts_throttles_and_stops_an_engine_on_a_bench(tmp_path, sil, 
         "ecu", "--bus", str(spec), "--mode", "realtime", "--serial", "pty", cwd=tmp_path
     )
     try:
-        port = _service_port(ecu)
-        at_rest = _until(sil, frames, port, lambda v: v["inputs_valid"] == 1, 30)
+        port = stderr_line(ecu, "service port: ")
+        at_rest = _until(console, frames, port, lambda v: v["inputs_valid"] == 1, 30)
         assert at_rest["mode"] == M.OFF and at_rest["speed"] < 1.0
         assert at_rest["demand_source"] == 2  # NONE: no Demand frames, bench not engaged
 
         t0 = time.monotonic()
-        assert _console(sil, port, "arm") == {"mode_before": "OFF"}
+        assert console(port, "arm") == {"mode_before": "OFF"}
         idle = _until(
-            sil, frames, port, lambda v: v["mode"] == M.RUN and v["seq_state"] == Q.RUN, 60
+            console, frames, port, lambda v: v["mode"] == M.RUN and v["seq_state"] == Q.RUN, 60
         )
         start_s = time.monotonic() - t0
         assert idle["mode"] == M.RUN, idle
         assert idle["demand_source"] == 1 and idle["seq_reason"] == Q.NO_ABORT  # BENCH
-        idle = _until(sil, frames, port, lambda v: abs(v["speed"] - v["demand"]) < 3.0, 20)
+        idle = _until(console, frames, port, lambda v: abs(v["speed"] - v["demand"]) < 3.0, 20)
         assert 30.0 < idle["speed"] < 45.0, idle
 
         t1 = time.monotonic()
-        assert _console(sil, port, "throttle", "70") == {"demand_pct": 70.0, "source": "BENCH"}
-        at_70 = _until(sil, frames, port, lambda v: abs(v["speed"] - 70.0) < 1.0, 30)
+        assert console(port, "throttle", "70") == {"demand_pct": 70.0, "source": "BENCH"}
+        at_70 = _until(console, frames, port, lambda v: abs(v["speed"] - 70.0) < 1.0, 30)
         throttle_s = time.monotonic() - t1
         assert abs(at_70["speed"] - 70.0) < 1.0 and at_70["egt"] < at_70["egt_start_limit"]
 
         t2 = time.monotonic()
-        assert _console(sil, port, "stop") == {"mode_before": "RUN"}
-        cooled = _until(sil, frames, port, lambda v: v["mode"] == M.OFF, 150)
+        assert console(port, "stop") == {"mode_before": "RUN"}
+        cooled = _until(console, frames, port, lambda v: v["mode"] == M.OFF, 150)
         stop_s = time.monotonic() - t2
         assert cooled["mode"] == M.OFF and cooled["speed"] < 1.0
         assert cooled["egt"] < 373.15 + 15  # cooled under 100 degC (and its re-arm margin)
         frames.drain()
-        faults = _console(sil, port, "faults")
+        faults = console(port, "faults")
     finally:
         for proc in (ecu, plant):
             proc.terminate()

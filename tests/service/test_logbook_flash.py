@@ -57,6 +57,7 @@ def test_a_start_is_saved_at_rest_and_loaded_at_power_up(tmp_path):
         assert stored["log_starts"] == n and stored["log_aborts_stopped"] == n
         assert stored["log_last_shutdown"] == L.SD_OPERATOR_STOP
         assert stored == L.stored_dict(ecu.s)
+        booted.flash.close()  # power off
 
 
 def test_a_power_cut_in_a_save_keeps_the_previous_logbook(tmp_path):
@@ -71,10 +72,12 @@ def test_a_power_cut_in_a_save_keeps_the_previous_logbook(tmp_path):
     assert operations > 3
     for cut in range(operations):  # the process killed after `cut` flash operations
         before = path.read_bytes()
-        writer = FlashImage(path).writer(image)
-        for _ in range(cut):
-            writer.step()
+        with FlashImage(path) as flash:
+            writer = flash.writer(image)
+            for _ in range(cut):
+                writer.step()
         booted = boot(EcuParams(), path)
+        booted.flash.close()
         fresh = Ecu(booted.table.firmware)
         logbook_save.load(fresh, booted.payload)
         assert (fresh.s.log_runs, fresh.s.log_run_time_s) == (3, 120), f"cut after {cut}"

@@ -70,9 +70,10 @@ def test_a_save_cut_after_any_operation_keeps_the_last_good_set(tmp_path):
     assert operations == 1 + 32 + 1  # erase, 32 pages, header
     for cut in range(operations + 1):
         path.write_bytes(start)
-        writer = FlashImage(path).writer(new, page_size=16)
-        for _ in range(cut):
-            writer.step()
+        with FlashImage(path) as flash:  # the process killed after `cut` operations
+            writer = flash.writer(new, page_size=16)
+            for _ in range(cut):
+                writer.step()
         got = load(path)
         if cut < operations:
             assert (got.sequence, got.payload) == (2, b"better " * 40), f"cut after {cut}"
@@ -162,7 +163,13 @@ def test_power_cut_at_random_points_never_loses_the_last_good_set(tmp_path):
 
 def test_start_up_without_a_valid_slot_runs_on_defaults_and_flags_it(tmp_path, rig_factory):
     path = tmp_path / "flash.bin"
-    path.write_bytes(b"\x00" * IMAGE_SIZE)  # neither slot valid
+    with FlashImage(path) as flash:
+        flash.save(b"older")
+        flash.save(b"newer")
+    damaged = bytearray(path.read_bytes())
+    for base in (0, SLOT_SIZE):
+        damaged[base + HEADER.size] ^= 0x01  # a bit of each set: neither slot valid
+    path.write_bytes(bytes(damaged))
     rig = rig_factory(EcuParams(), path)
     ident = rig.client.identify()
     assert (ident["storage"], ident["sequence"]) == ("defaults", None)
@@ -184,6 +191,7 @@ def test_save_over_the_port_and_power_up_with_it(tmp_path, rig_factory):
     assert rig.client.identify()["storage"] == "loaded"
     rig.client.set("pid_kp", 3.0)
     assert rig.client.save()["slot"] == 1
+    rig.boot.flash.close()
     again = rig_factory(EcuParams(), path)  # power cycle
     ident = again.client.identify()
     assert (ident["storage"], ident["slot"], ident["sequence"]) == ("loaded", 1, 2)
@@ -271,7 +279,9 @@ def test_power_cut_of_the_ecu_process_during_saves_over_the_port(tmp_path):
 
 def test_a_flash_write_error_is_answered_and_the_port_goes_on(tmp_path, rig_factory):
     rig = rig_factory(EcuParams(), tmp_path / "flash.bin")
-    os.close(rig.boot.flash.fd)  # the flash fails under the ECU
+    read_only = os.open(tmp_path / "flash.bin", os.O_RDONLY)
+    os.dup2(read_only, rig.boot.flash.fd)  # the flash fails under the ECU: it reads, writes fail
+    os.close(read_only)
     with pytest.raises(ServiceRequestError, match="STORAGE: flash write failed: .*Bad file"):
         rig.client.save()
     assert rig.client.identify()["storage"] == "defaults"

@@ -114,7 +114,8 @@ def test_an_ecu_stopped_on_a_loaded_machine_is_found_and_named_within_5_s(tmp_pa
     print(f"found and written in {took:.1f} s: {summary['abort_reason']}")
     assert proc.returncode == 1 and summary["status"] == "aborted"
     assert re.fullmatch(
-        r"the ECU sent no frame for \d+\.\d s: its process is stopped \(process state T\)",
+        r"the ECU sent no frame for \d+\.\d s: its process is stopped \(process state T\), "
+        r"at tick \d+ of \d+ \(\d+\.\d\d s simulated, \d+\.\d s after tick 0\)",
         summary["abort_reason"],
     ), summary["abort_reason"]
     assert took < 5.0

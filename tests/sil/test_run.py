@@ -387,17 +387,22 @@ def test_an_open_thermocouple_reading_its_burnout_value_is_flagged(tmp_path):
 
 
 def test_a_node_that_cannot_come_up_says_why_in_the_abort(tmp_path, sil, udp_spec):
-    # no QEMU on the PATH: the ECU node of --ecu-impl pil stops before it is ready
+    # an emulator that is there but fails at once: the run's checks find it, the ECU node of
+    # --ecu-impl pil stops before it is ready
     spec = udp_spec()
     out = tmp_path / "out"
-    env = {**os.environ, "PATH": str(tmp_path)}
+    shim = tmp_path / "bin" / "qemu-system-arm"
+    shim.parent.mkdir()
+    shim.write_text("#!/bin/sh\necho 'qemu-system-arm: no such board here' >&2\nexit 1\n")
+    shim.chmod(0o755)
+    env = {**os.environ, "PATH": f"{shim.parent}{os.pathsep}{os.environ['PATH']}"}
     result = sil(
         "run", str(_scenario(tmp_path)), "--out", str(out), "--bus", spec, "--ecu-impl", "pil",
         timeout=120, env=env,
     )  # fmt: skip
-    assert result.returncode == 1
+    assert result.returncode == 1, result.stderr
     summary = json.loads((out / "summary.json").read_text())
     reason = summary["abort_reason"]
     assert reason.startswith("ecu process did not come up: ") and reason.endswith("(see ecu.log)")
-    assert "qemu-system-arm not found" in reason, reason
+    assert "no such board here" in reason, reason
     assert _no_nodes_left(spec)

@@ -62,7 +62,8 @@ def _contents(folder: Path) -> dict[str, bytes]:
         ("/proc/foo", "--out /proc/foo: on the kernel's proc file system, not a place for files"),
         ("/proc", "--out /proc: on the kernel's proc file system, not a place for files"),
         ("/sys/foo", "--out /sys/foo: on the kernel's sysfs file system, not a place for files"),
-        ("/dev/null", "--out /dev/null: exists and is not a folder"),
+        ("/dev", "--out /dev: on the kernel's devtmpfs file system, not a place for files"),
+        ("summary.json", "--out summary.json: exists and is not a folder"),
     ],
 )
 def test_an_unusable_out_is_refused_before_anything_is_touched(

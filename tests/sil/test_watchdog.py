@@ -106,7 +106,8 @@ def test_a_stopped_node_aborts_the_run_naming_it(tmp_path, victim, name, sil_pro
     took = time.monotonic() - stopped
     summary = _ended(proc, out, spec, children)
     match = re.fullmatch(
-        rf"the {name} sent no frame for (\d+\.\d) s: its process is stopped \(process state T\)",
+        rf"the {name} sent no frame for (\d+\.\d) s: its process is stopped \(process state T\)"
+        r", at tick \d+ of \d+ \(\d+\.\d\d s simulated, \d+\.\d s after tick 0\)",
         summary["abort_reason"],
     )
     assert match is not None, summary["abort_reason"]

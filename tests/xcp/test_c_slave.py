@@ -28,6 +28,7 @@ from ecu.port.xcp import CXcpSlave, XorShiftSeeds, c_limits
 from ecu.port.xcp_run import COMMISSIONING, INDEX, bounds, writable
 from ecu.service.param_table import TABLE
 from ecu.service.port import boot
+from ecu.service.storage import FlashImage
 from ecu.xcp import codes as C
 from ecu.xcp import memory as MEM
 from ecu.xcp.seed_key import key_for
@@ -60,7 +61,8 @@ class Rigs:
         self.py = XcpSlave(self.py_ecu, self.py_boot, seed=0, limits=c_limits())
         self.py._rng = XorShiftSeeds(SEED)
         self.c_ecu = CEcu(c_boot.table.firmware)
-        self.c = CXcpSlave(self.c_ecu, c_boot.table, seed=SEED, flash=c_flash)
+        c_image = FlashImage(c_flash) if c_flash is not None else None
+        self.c = CXcpSlave(self.c_ecu, c_boot.table, seed=SEED, flash=c_image)
         self.i = EcuInputs()
         self.i.sensor_status = self.i.analog_status = self.i.demand_status = E2E_NONEWDATA
         self.ci = EcuInputs()

@@ -11,7 +11,7 @@ import pytest
 from ecu import modes as M
 from ecu.service import bench_demand as BD
 from ecu.service.param_table import BY_NAME, TABLE
-from ecu.service.storage import FlashImage
+from ecu.service.storage import load
 from ecu.xcp import codes as C
 from ecu.xcp import memory as MEM
 
@@ -146,8 +146,9 @@ def test_store_cal_saves_the_set_to_flash_and_says_when_done(rig_factory, tmp_pa
         events += [f for f in rig.tick() if f[0] == C.PID_EV]
     assert events == [bytes((C.PID_EV, C.Ev.STORE_CAL))]
     assert not rig.request(C.Cmd.GET_STATUS)[1] & C.SESSION_STORE_CAL_REQ
+    rig.boot.flash.close()  # power off
     assert rig_factory(flash=flash).boot.table.raw("egt_limit_k") == 1210 << 16
-    assert FlashImage(flash).newest().sequence == rig.boot.sequence
+    assert load(flash).sequence == rig.boot.sequence
 
 
 def test_store_cal_without_a_flash_image_is_refused(rig):

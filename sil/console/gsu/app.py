@@ -43,8 +43,9 @@ class App:
         except Exception:
             live_bus.shutdown()
             raise
-        link = XcpLink(xcp_bus, a2l, ids)
-        gsu = Gsu(Live(), link, out_dir, token or secrets.token_urlsafe(16))
+        live = Live()
+        link = XcpLink(xcp_bus, a2l, ids, live.running_for)
+        gsu = Gsu(live, link, out_dir, token or secrets.token_urlsafe(16))
         return cls(live_bus, xcp_bus, gsu)
 
     def start(self) -> None:

@@ -74,6 +74,7 @@ class Live:
     frames: int = 0
     undecodable: int = 0
     status_s: float = 0.0  # wall clock of the newest EcuStatus
+    running_since_s: float = 0.0  # ... of the first EcuStatus after a silence
     history: deque = field(default_factory=lambda: deque(maxlen=int(HISTORY_S * HISTORY_HZ)))
     fault_log: deque = field(default_factory=lambda: deque(maxlen=FAULT_LOG_MAX))
     recorder: list[can.Message] | None = None
@@ -125,6 +126,8 @@ class Live:
         new = word & ~self._fault_word & ~INFORMATION
         self._fault_word = word
         self.values["faults"] = faults.names(word)
+        if now_s - self.status_s > SILENT_S:
+            self.running_since_s = now_s
         self.status_s = now_s
         if new:
             self._log(now_s, faults.names(new))
@@ -162,6 +165,14 @@ class Live:
             out["recording"] = self.recorder is not None
             out["recorded_frames"] = len(self.recorder) if self.recorder is not None else 0
             return out
+
+    def running_for(self, now_s: float | None = None) -> float:
+        """How long the ECU's status frames have come without a silence (0: silent now)."""
+        now_s = time.time() if now_s is None else now_s
+        with self._lock:
+            if now_s - self.status_s > SILENT_S:
+                return 0.0
+            return now_s - self.running_since_s
 
     def chart(self) -> list[list]:
         with self._lock:

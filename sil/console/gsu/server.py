@@ -7,6 +7,12 @@ another site cannot reach the server through DNS tricks), and a command is a JSO
 (which another site's page cannot send without the token). Commands go to the ECU over XCP
 (:mod:`sil.console.gsu.xcp_link`); the live values come from the bus
 (:mod:`sil.console.gsu.live`) and are pushed at :data:`STREAM_HZ` as server-sent events.
+
+Every answer is JSON; a refusal is ``{"error": reason}`` with its status: 400 for a malformed
+request (a body that is not a JSON object, a number that is not finite or too large, a field of
+the wrong type or unknown), 411/413/415 for a body without its length, too long, or not JSON,
+404 for no such page or command, 409 for what the ECU refuses, 503 when the ECU cannot be asked
+now (silent, only just back, another XCP master on the bus) and 504 when it did not answer.
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from __future__ import annotations
 import hmac
 import json
 import math
+import sys
 import threading
 import time
 from datetime import UTC, datetime
@@ -25,7 +32,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from protocol import strict_json
 from sil.console.gsu.live import Live
-from sil.console.gsu.xcp_link import Refused, XcpLink
+from sil.console.gsu.xcp_link import Refused, Unavailable, XcpLink
 from sil.record import mdf
 
 STREAM_HZ = 20.0
@@ -37,7 +44,32 @@ LOGBOOK_PREFIX = "log_"
 BENCH_PREFIX = "bench_"  # the A2L's bench commands: not parameters of the engine
 PARAM_FILE = "turbojet-gsu parameters"
 MAX_BODY = 1 << 20
+MAX_NUMBER = 1e15  # a number in a request, at most this large
+SOCKET_TIMEOUT_S = 10.0  # a request (its headers, its body) comes within this
+# a command's fields (None: any, the parameter file's own)
+FIELDS: dict[str, frozenset[str] | None] = {
+    "/api/params": frozenset({"name", "value"}),
+    "/api/import": None,
+    "/api/start": frozenset({"confirm"}),
+    "/api/throttle": frozenset({"pct"}),
+    "/api/test": frozenset({"test", "level", "seconds"}),
+    **{f"/api/{name}": frozenset() for name in
+       ("stop", "end-test", "unlock", "store", "record/start", "record/stop")},
+}  # fmt: skip
 STATIC = ("index.html", "gsu.js", "gsu.css")
+
+
+class BadRequest(Exception):
+    """A request the page cannot take as it is: its HTTP status and the reason."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+def is_number(value: object) -> bool:
+    """A JSON number (a boolean is not one)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 class Gsu:
@@ -58,6 +90,8 @@ class Gsu:
             self.poll()
 
     def poll(self) -> None:
+        """The dashboard's XCP values, or what kept them from being read (whatever it was: the
+        poller goes on, and shows them again once the ECU answers)."""
         try:
             polled = self.link.read_measurements(list(POLLED))
             c = self.link.a2l.characteristics
@@ -67,6 +101,8 @@ class Gsu:
             self.polled = polled
         except Refused as exc:
             self.polled = {"error": str(exc)}
+        except Exception as exc:  # noqa: BLE001 (the poller must not end)
+            self.polled = {"error": f"read: {type(exc).__name__}: {exc}"}
 
     def stop(self) -> None:
         self._stop.set()
@@ -87,6 +123,8 @@ class Gsu:
             try:
                 value = self.link.read_characteristic(c)
                 problem = None
+            except Unavailable:
+                raise
             except Refused as exc:
                 value, problem = None, str(exc)
             rows.append(
@@ -108,12 +146,18 @@ class Gsu:
         if c is None or name.startswith(BENCH_PREFIX):
             raise Refused(f"{name}: no such parameter in the A2L")
         values = value if isinstance(value, list) else [value]
-        if len(values) != c.count or not all(
-            isinstance(v, int | float) and math.isfinite(v) for v in values
-        ):
+        if len(values) != c.count or not all(is_number(v) for v in values):
             raise Refused(f"{name}: takes {c.count} number(s)")
-        self.link.write_characteristic(c, [float(v) for v in values], "parameter")
-        return {"name": name, "value": self.link.read_characteristic(c)}
+        asked = [float(v) for v in values]
+        self.link.write_characteristic(c, asked, "parameter")
+        held = self.link.read_characteristic(c)
+        meant = [c.to_value(c.to_raw(v)) for v in asked]
+        if not all(
+            math.isclose(h, m, rel_tol=1e-9, abs_tol=1e-12)
+            for h, m in zip(held if isinstance(held, list) else [held], meant, strict=True)
+        ):
+            raise Refused(f"{name}: written, but the ECU holds {held} (another master wrote it?)")
+        return {"name": name, "value": held}
 
     def export(self) -> dict:
         params = {
@@ -151,6 +195,9 @@ class Gsu:
             try:
                 self.write_parameter(name, value)
                 written.append(name)
+            except Unavailable as exc:
+                before = ", ".join(written) or "none"
+                raise Unavailable(f"{exc} (written before: {before})", exc.timed_out) from None
             except Refused as exc:
                 refused.append({"name": name, "reason": str(exc)})
         return {"written": written, "refused": refused, "unknown": unknown}
@@ -191,6 +238,7 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
         server_version = "turbojet-gsu"
         protocol_version = "HTTP/1.1"
+        timeout = SOCKET_TIMEOUT_S
 
         def log_message(self, format: str, *args: object) -> None:  # noqa: A002
             pass  # (no line per request on the terminal)
@@ -202,10 +250,13 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
             self.send_header("Content-Length", str(len(body)))
             self.send_header("Cache-Control", "no-store")
             self.send_header("X-Content-Type-Options", "nosniff")
+            if self.close_connection:
+                self.send_header("Connection", "close")
             for k, v in (extra or {}).items():
                 self.send_header(k, v)
             self.end_headers()
-            self.wfile.write(body)
+            if self.command != "HEAD":
+                self.wfile.write(body)
 
         def _json(self, status: int, value: object, extra: dict | None = None) -> None:
             body = strict_json.dumps(value).encode()
@@ -213,6 +264,12 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
 
         def _refuse(self, status: int, message: str) -> None:
             self._json(status, {"error": message})
+
+        def send_error(self, code: int, message: str | None = None, explain: str | None = None):
+            """http.server's own refusals (a malformed request line or header), as JSON."""
+            self.close_connection = True
+            self.request_version = "HTTP/1.1"  # (an answer with its status line, whatever came)
+            self._refuse(code, message or HTTPStatus(code).phrase)
 
         def _allowed(self, query: dict) -> bool:
             if self.headers.get("Host", "") not in hosts:
@@ -224,16 +281,47 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
                 return False
             return True
 
-        def _body(self) -> object:
-            if self.headers.get("Content-Type", "").split(";")[0] != "application/json":
-                raise Refused("a command is a JSON POST")
-            length = int(self.headers.get("Content-Length") or 0)
+        def _body(self) -> dict:
+            """The request's JSON object (an empty body: no fields)."""
+            if self.headers.get("Content-Type", "").split(";")[0].strip() != "application/json":
+                raise BadRequest(HTTPStatus.UNSUPPORTED_MEDIA_TYPE, "a command is a JSON POST")
+            length = _length(self.headers.get("Content-Length"))
             if length > MAX_BODY:
-                raise Refused(f"a body over {MAX_BODY} bytes")
+                self.close_connection = True  # (the body is not read)
+                raise BadRequest(
+                    HTTPStatus.REQUEST_ENTITY_TOO_LARGE, f"a body over {MAX_BODY} bytes"
+                )
             try:
-                return json.loads(self.rfile.read(length) or b"{}")
-            except (ValueError, UnicodeDecodeError) as exc:
-                raise Refused(f"the body is not JSON: {exc}") from None
+                raw = self.rfile.read(length)
+            except OSError:
+                raw = b""
+            if len(raw) < length:
+                self.close_connection = True
+                raise BadRequest(
+                    HTTPStatus.BAD_REQUEST, f"the body ended before its {length} bytes"
+                )
+            return _json_object(raw)
+
+        def _run(self, route, extra: dict | None = None) -> None:  # noqa: ANN001
+            """``route()``'s answer as JSON, or its refusal with its status."""
+            try:
+                answer = route()
+            except BadRequest as exc:
+                return self._refuse(exc.status, str(exc))
+            except Unavailable as exc:
+                status = (
+                    HTTPStatus.GATEWAY_TIMEOUT if exc.timed_out else HTTPStatus.SERVICE_UNAVAILABLE
+                )
+                return self._refuse(status, str(exc))
+            except Refused as exc:
+                return self._refuse(HTTPStatus.CONFLICT, str(exc))
+            except Exception as exc:  # noqa: BLE001 (an answer, never a dropped connection)
+                print(f"sil gsu: {self.command} {self.path}: {type(exc).__name__}: {exc}",
+                      file=sys.stderr)  # fmt: skip
+                return self._refuse(
+                    HTTPStatus.INTERNAL_SERVER_ERROR, f"{type(exc).__name__}: {exc}"
+                )
+            return self._json(HTTPStatus.OK, answer, extra)
 
         # -- GET -----------------------------------------------------------------------------
         def do_GET(self) -> None:  # noqa: N802
@@ -256,17 +344,11 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
             if url.path == "/api/export":
                 name = f"parameters-{datetime.now(UTC).strftime('%Y%m%d-%H%M%S')}.json"
                 disposition = {"Content-Disposition": f'attachment; filename="{name}"'}
-                return self._answer(gsu.export, disposition)
+                return self._run(gsu.export, disposition)
             route = routes.get(url.path)
             if route is None:
                 return self._refuse(HTTPStatus.NOT_FOUND, f"no such page: {url.path}")
-            return self._answer(route)
-
-        def _answer(self, route, extra: dict | None = None) -> None:  # noqa: ANN001
-            try:
-                self._json(HTTPStatus.OK, route(), extra)
-            except Refused as exc:
-                self._refuse(HTTPStatus.CONFLICT, str(exc))
+            return self._run(route)
 
         def _static(self, path: str) -> None:
             name = "index.html" if path in ("/", "/index.html") else path.lstrip("/")
@@ -294,28 +376,38 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
                     self.wfile.flush()
                     next_s += period
                     time.sleep(max(0.0, next_s - time.monotonic()))
-            except (BrokenPipeError, ConnectionResetError):
+            except OSError:  # the page went away
                 pass
             self.close_connection = True
 
         # -- POST ----------------------------------------------------------------------------
         def do_POST(self) -> None:  # noqa: N802
+            self.close_connection = True  # (a refused command's body may be left unread)
             url = urlsplit(self.path)
             if not self._allowed(parse_qs(url.query)):
-                return
-            try:
-                body = self._body()
-                answer = self._command(url.path, body if isinstance(body, dict) else {})
-            except Refused as exc:
-                return self._refuse(HTTPStatus.CONFLICT, str(exc))
-            except KeyError as exc:
-                return self._refuse(HTTPStatus.NOT_FOUND, str(exc.args[0]))
-            self._json(HTTPStatus.OK, answer)
+                return None
+            if url.path not in FIELDS:
+                return self._refuse(HTTPStatus.NOT_FOUND, f"no such command: {url.path}")
+            return self._run(lambda: self._command(url.path, self._fields(url.path)))
+
+        def _fields(self, path: str) -> dict:
+            body = self._body()
+            allowed = FIELDS[path]
+            unknown = sorted(set(body) - allowed) if allowed is not None else []
+            if unknown:
+                takes = ", ".join(sorted(allowed or ())) or "none"
+                said = f"{path}: unknown field(s): {', '.join(unknown)} (it takes: {takes})"
+                raise BadRequest(HTTPStatus.BAD_REQUEST, said)
+            return body
 
         def _command(self, path: str, body: dict) -> object:
             link = gsu.link
             if path == "/api/params":
-                return gsu.write_parameter(str(body.get("name")), body.get("value"))
+                name, value = _text(body, "name"), body.get("value")
+                values = value if isinstance(value, list) else [value]
+                if not values or not all(is_number(v) for v in values):
+                    raise BadRequest(HTTPStatus.BAD_REQUEST, "value: a number, or a list of them")
+                return gsu.write_parameter(name, value)
             if path == "/api/import":
                 return gsu.import_file(body)
             if path == "/api/start":
@@ -324,15 +416,14 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
                 link.bench("bench_arm", 1)
                 return {"started": True}
             if path == "/api/throttle":
-                pct = body.get("pct")
-                if not isinstance(pct, int | float) or not math.isfinite(pct):
-                    raise Refused("throttle: a number, %N")
-                link.bench("bench_throttle", float(pct))
+                pct = _number(body, "pct", None)
+                link.bench("bench_throttle", pct)
                 return {"throttle": pct}
             if path == "/api/test":
-                level, seconds = _number(body, "level"), _number(body, "seconds")
-                link.run_test(str(body.get("test")), level, seconds)
-                return {"test": body.get("test")}
+                level, seconds = _number(body, "level", 0.0), _number(body, "seconds", 0.0)
+                test = _text(body, "test")
+                link.run_test(test, level, seconds)
+                return {"test": test}
             simple = {
                 "/api/stop": lambda: link.bench("bench_stop", 1),
                 "/api/end-test": lambda: link.bench_raw("bench_test", 0),
@@ -341,26 +432,82 @@ def _handler(gsu: Gsu, hosts: set[str]) -> type[BaseHTTPRequestHandler]:
                 "/api/record/start": gsu.record_start,
                 "/api/record/stop": gsu.record_stop,
             }
-            if path not in simple:
-                raise KeyError(f"no such command: {path}")
             return simple[path]() or {"done": path.rsplit("/", 1)[1]}
+
+        def _not_allowed(self) -> None:
+            self.close_connection = True
+            self._refuse(
+                HTTPStatus.METHOD_NOT_ALLOWED, f"{self.command}: the page takes GET and POST"
+            )
+
+        do_PUT = do_DELETE = do_PATCH = do_HEAD = do_OPTIONS = _not_allowed  # noqa: N815
 
     return Handler
 
 
-def _number(body: dict, key: str) -> float:
-    value = body.get(key, 0)
-    if not isinstance(value, int | float) or not math.isfinite(value):
-        raise Refused(f"{key}: a number")
-    return float(value)
+def _length(text: str | None) -> int:
+    """A body's Content-Length."""
+    if text is None:
+        raise BadRequest(HTTPStatus.LENGTH_REQUIRED, "a command's body needs its Content-Length")
+    if not text.strip().isdigit():
+        raise BadRequest(HTTPStatus.BAD_REQUEST, f"Content-Length {text[:40]!r}: not a byte count")
+    return int(text)
+
+
+def _json_number(text: str) -> float | int:
+    value = float(text)
+    if not abs(value) <= MAX_NUMBER:
+        raise ValueError(f"{text[:40]}: a number over {MAX_NUMBER:g}")
+    return int(text) if text.lstrip("-").isdigit() else value
+
+
+def _no_constant(name: str) -> None:
+    raise ValueError(f"{name}: not a number JSON has")
+
+
+def _json_object(raw: bytes) -> dict:
+    """A body as a JSON object; numbers finite and at most :data:`MAX_NUMBER` large."""
+    try:
+        body = json.loads(raw or b"{}", parse_float=_json_number, parse_int=_json_number,
+                          parse_constant=_no_constant)  # fmt: skip
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+        raise BadRequest(
+            HTTPStatus.BAD_REQUEST, f"the body is not JSON the page takes: {exc}"
+        ) from None
+    if not isinstance(body, dict):
+        raise BadRequest(HTTPStatus.BAD_REQUEST, "the body is a JSON object")
+    return body
+
+
+def _number(body: dict, key: str, default: float | None) -> float:
+    value = body.get(key, default)
+    if not is_number(value):
+        raise BadRequest(HTTPStatus.BAD_REQUEST, f"{key}: a number")
+    return float(value)  # type: ignore[arg-type]
+
+
+def _text(body: dict, key: str) -> str:
+    value = body.get(key)
+    if not isinstance(value, str):
+        raise BadRequest(HTTPStatus.BAD_REQUEST, f"{key}: a name (text)")
+    return value
+
+
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True
+
+    def handle_error(self, request: object, client_address: object) -> None:
+        """A connection that failed under a request: one line, no traceback."""
+        exc = sys.exc_info()[1]
+        if not isinstance(exc, OSError):
+            print(f"sil gsu: a request failed: {type(exc).__name__}: {exc}", file=sys.stderr)
 
 
 def serve(gsu: Gsu, host: str, port: int) -> ThreadingHTTPServer:
     """The server, bound (``port`` 0: any free port); ``serve_forever`` runs it."""
-    server = ThreadingHTTPServer((host, port), None)  # type: ignore[arg-type]
+    server = _Server((host, port), None)  # type: ignore[arg-type]
     bound = server.server_address[1]
     names = {host, "127.0.0.1", "localhost", "[::1]"}
     hosts = {f"{n}:{bound}" for n in names}
     server.RequestHandlerClass = _handler(gsu, hosts)
-    server.daemon_threads = True
     return server
