@@ -27,6 +27,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from cantools.database.can import Database
+
 from protocol.dbc import DBC_PATH, ContractError, is_xcp, load_database, message_attribute
 from protocol.e2e import COUNTER_MODULO, E2EChecker, crc8, data_id_crc_start
 from protocol.packers import PackFn, UnpackFn, mux_packer, mux_unpacker, packer, unpacker
@@ -212,8 +214,10 @@ class MessageCodec:
 class Codec:
     """All messages of the contract, by name and by frame ID (one instance per node)."""
 
-    def __init__(self, dbc_path: str | Path = DBC_PATH) -> None:
-        self.database = load_database(dbc_path)
+    def __init__(self, dbc_path: str | Path = DBC_PATH, database: Database | None = None) -> None:
+        """The codec of the DBC at ``dbc_path``, or of an already loaded ``database`` (read
+        only: codecs built on one database share it, each with its own buffers and counters)."""
+        self.database = database if database is not None else load_database(dbc_path)
         self.messages = tuple(MessageCodec(m) for m in self.database.messages if not is_xcp(m))
         self.by_name = {m.name: m for m in self.messages}
         self.by_id = {m.frame_id: m for m in self.messages}

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Mapping, Sequence
+from functools import cache
+from types import CodeType
 from typing import Protocol
 
 from protocol.e2e import COUNTER_MODULO, crc8
@@ -131,5 +133,12 @@ def _unpack_lines(fields: Sequence[Field], first: int) -> list[str]:
 
 
 def _compile(lines: list[str], name: str, namespace: dict) -> Callable:
-    exec(compile("\n".join(lines) + "\n", f"<protocol.packers {name}>", "exec"), namespace)
+    exec(_code("\n".join(lines) + "\n", f"<protocol.packers {name}>"), namespace)
     return namespace[name]
+
+
+@cache
+def _code(source: str, filename: str) -> CodeType:
+    """The source compiled once per process: codecs built again (a campaign builds one per
+    run) bind the same code to their own buffers and counters."""
+    return compile(source, filename, "exec")

@@ -17,5 +17,6 @@ TARGETS = {
     "starts": "sil.bench.starts",
     "control": "sil.bench.control",
     "fleet": "sil.bench.fleet",
+    "campaign": "sil.bench.campaign",
     "gsu": "sil.bench.gsu",
 }

@@ -53,6 +53,17 @@ class Injector:
             for i, f in enumerate(faults)
         ]
         self.events: list[dict] = []
+        # before the first window and after the last, a frame passes unchanged (unless a
+        # reorder window still holds one)
+        self._first = min((w.start for w in self.windows), default=0)
+        self._last = max((w.end for w in self.windows), default=0)
+        self._reorders = [w for w in self.windows if w.fault.kind == "reorder"]
+
+    def quiet(self, tick: int) -> bool:
+        """No fault acts at ``tick``: ``transmit`` passes every frame sent then unchanged."""
+        return (tick < self._first or tick >= self._last) and not any(
+            w.held for w in self._reorders
+        )
 
     def _log(self, w: _Window, tick: int, frame_id: int, action: str) -> dict:
         event = {

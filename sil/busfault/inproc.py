@@ -76,6 +76,9 @@ class FaultyInProcessBus:
         if origin != 0:
             self.command.on_frame(frame_id, data, self._senders[0])
         now = self.plant.tick
+        if self.injector.quiet(now):
+            self._to_nodes(origin, frame_id, data, None)
+            return
         for c in self.injector.transmit(now, frame_id, data):
             if c.release_tick <= now:
                 self._to_nodes(origin, frame_id, c.data, c.event)

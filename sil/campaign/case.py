@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cache
 
 import numpy as np
+from cantools.database.can import Database
 
 from ecu.firmware_params import compile_params
 from ecu.node import EcuNode
@@ -19,6 +21,7 @@ from ecu.port.core import make_ecu
 from ecu.port.node import CEcuNode
 from plant.node import PlantNode
 from protocol.codec import Codec
+from protocol.dbc import load_database
 from protocol.node import InProcessBus
 from sil.busfault.injector import Injector
 from sil.busfault.inproc import FaultyInProcessBus
@@ -46,6 +49,13 @@ class CaseRun:
         return np.asarray(getattr(self.probe, name))
 
 
+@cache
+def _database() -> Database:
+    """The DBC, parsed once per process (three quarters of a codec's build): each case builds
+    its codec on it, with counters of its own."""
+    return load_database()
+
+
 def run_case(
     s: Scenario, seed: int | None = None, ecu_impl: str = "python", compiled_loop: bool = True
 ) -> CaseRun:
@@ -58,7 +68,7 @@ def run_case(
     open_loop = s.controller.kind == "open_loop"
     trim_value = plant.trim_pump_voltage if open_loop else params.trim_n_pct
     commands = profiles.sample(s.profile(trim_value), s.duration_s, s.ecu_rate_hz)
-    codec = Codec()
+    codec = Codec(database=_database())
     out = plant.outputs
     probe = Probe(codec, lambda: (out.n_pct, out.egt_true_k, out.p3_pa, out.thrust_n, out.flags))
     command = CommandNode(

@@ -143,3 +143,30 @@ def test_same_seed_same_faults_other_seed_other_faults():
     c, _ = run(fault, 2000, seed=6)
     assert a.events == b.events
     assert a.events != c.events
+
+
+@pytest.mark.parametrize(
+    ("fault", "quiet_again"),
+    [
+        (BusFault("bus_off", (), 1.0, 0.5), 150),
+        (BusFault("drop", (SENSORS.frame_id,), 1.0, 0.5, rate=0.5), 150),
+        (BusFault("delay", (SENSORS.frame_id,), 1.0, 0.5, delay_ticks=2), 150),
+        (BusFault("babble", (0x080,), 1.0, 0.5, starve=True), 150),
+        # ticks 100..150, every other frame held: the one of tick 150 comes with tick 151's
+        (BusFault("reorder", (SENSORS.frame_id,), 1.0, 0.51, rate=1.0), 152),
+    ],
+    ids=lambda f: getattr(f, "kind", ""),
+)
+def test_a_quiet_tick_passes_every_frame_unchanged_and_only_outside_the_window(fault, quiet_again):
+    injector = Injector((fault,), RATE, 1, CODEC)
+    quiet = []
+    for tick, data in frames(300):
+        if injector.quiet(tick):
+            quiet.append(tick)
+            events = len(injector.events)
+            copies = injector.transmit(tick, SENSORS.frame_id, data)
+            assert [(c.release_tick, c.data, c.event) for c in copies] == [(tick, data, None)]
+            assert len(injector.events) == events
+        else:
+            injector.transmit(tick, SENSORS.frame_id, data)
+    assert quiet == [*range(100), *range(quiet_again, 300)]
