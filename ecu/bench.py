@@ -4,14 +4,30 @@ The ECU runs the default preset (MRAC, robustness and limiters on: the longest p
 a scripted, realistic input sequence (speed swinging around trim with sensor noise, square-wave
 demand, EGT near its limit so the limit loop switches in and out, an occasional lost frame),
 generated before timing so only the tick is measured.
+
+With ``against`` (``sil bench ecu --against REV``) the tick of the firmware at git revision REV
+runs in the same process beside this one: both first replay the same inputs and must give the
+same outputs every tick and the same state, then they are timed in alternating rounds (ABBA),
+so both see the same load; us_per_tick is then this firmware's from those rounds (CPU time of
+the process, which another process's load on the machine disturbs far less than the wall
+clock), us_per_tick_against REV's, and speedup the median of the rounds' ratios (REV's time over
+this one's).
 """
 
 from __future__ import annotations
 
 import gc
+import importlib
+import io
+import statistics
+import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from array import array
+from pathlib import Path
+from types import ModuleType
 
 from ecu.firmware import Ecu, EcuInputs
 
@@ -75,7 +91,8 @@ def new_running_ecu() -> tuple[Ecu, EcuInputs]:
 TARGET_TEXT = {"no_allocation_per_tick": "under 1 allocated block per 1,000 firmware ticks"}
 
 
-def run(quick: bool = False) -> dict:
+def run(quick: bool = False, against: str | None = None) -> dict:
+    other = firmware_at(against) if against is not None else None
     n = 5_000 if quick else 50_000
     inputs = scripted_inputs(20_000)
     ecu, i = new_running_ecu()
@@ -88,11 +105,90 @@ def run(quick: bool = False) -> dict:
     gc.collect()
     blocks1 = sys.getallocatedblocks()
     per_1k = (blocks1 - blocks0) * 1000 / n
-    return {
+    figures = {
         "us_per_tick": round(elapsed / n * 1e6, 2),
         "alloc_blocks_per_1k_ticks": round(per_1k, 3),
         "ticks": n,
         "mode_at_end": ecu.out.mode,
         "sat_events": ecu.out.sat_events,
         "targets_met": {"no_allocation_per_tick": per_1k < 1},
+    }
+    if other is not None:
+        figures.update(compare_with(other, inputs, n))
+        figures["against"] = against
+    return figures
+
+
+def firmware_at(rev: str) -> ModuleType:
+    """The module ecu.firmware of git revision ``rev``, imported beside this process's own ecu
+    package (its modules under their own names while it loads, then put aside); ValueError
+    for a revision git does not know."""
+    if rev.startswith("-"):
+        raise ValueError(f"--against {rev}: not a git revision")
+    repo = Path(__file__).resolve().parent.parent
+    done = subprocess.run(
+        ["git", "archive", "--format=tar", rev, "ecu"], cwd=repo, capture_output=True, check=False
+    )
+    if done.returncode != 0:
+        message = done.stderr.decode(errors="replace").strip().splitlines()
+        raise ValueError(f"--against {rev}: {message[-1] if message else 'git archive failed'}")
+    ours = {name: m for name, m in sys.modules.items() if name.split(".")[0] == "ecu"}
+    with tempfile.TemporaryDirectory(prefix="ecu-bench-") as root:
+        with tarfile.open(fileobj=io.BytesIO(done.stdout)) as tar:
+            tar.extractall(root, filter="data")
+        for name in ours:
+            del sys.modules[name]
+        sys.path.insert(0, root)
+        try:
+            return importlib.import_module("ecu.firmware")
+        finally:
+            sys.path.remove(root)
+            for name in [name for name in sys.modules if name.split(".")[0] == "ecu"]:
+                del sys.modules[name]
+            sys.modules.update(ours)
+
+
+def _same(a: object, b: object) -> bool:
+    """Two records (outputs or state) hold the same values, slot by slot."""
+    for name in type(a).__slots__:
+        x, y = getattr(a, name), getattr(b, name)
+        if (list(x) if isinstance(x, array) else x) != (list(y) if isinstance(y, array) else y):
+            return False
+    return True
+
+
+def compare_with(other: ModuleType, inputs: tuple, n: int, rounds: int = 20) -> dict:
+    """This firmware's tick and ``other``'s (an ecu.firmware module) on the same inputs: the
+    same outputs every tick and the same state at the end (replayed untimed first), then
+    microseconds per tick of each (CPU time), timed in alternating rounds of n / rounds ticks."""
+    ours, i = new_running_ecu()
+    theirs = other.Ecu()
+    j = other.EcuInputs()
+    for name in EcuInputs.__slots__:
+        setattr(j, name, getattr(i, name))
+    same = True
+    for k in range(2_000):
+        _drive(ours, i, inputs, k, 1)
+        _drive(theirs, j, inputs, k, 1)
+        same = same and _same(ours.out, theirs.out)
+    same = same and _same(ours.s, theirs.s)
+    chunk = max(1, n // rounds)
+    k0 = 2_000
+    spent = {"ours": 0.0, "theirs": 0.0}
+    ratios = []
+    for r in range(rounds):
+        took = {}
+        order = (("ours", ours, i), ("theirs", theirs, j))
+        for who, e, e_in in order if r % 2 == 0 else order[::-1]:
+            t0 = time.process_time()
+            _drive(e, e_in, inputs, k0, chunk)
+            took[who] = time.process_time() - t0
+            spent[who] += took[who]
+        ratios.append(took["theirs"] / max(took["ours"], 1e-9))
+        k0 += chunk
+    return {
+        "us_per_tick": round(spent["ours"] / (chunk * rounds) * 1e6, 2),
+        "us_per_tick_against": round(spent["theirs"] / (chunk * rounds) * 1e6, 2),
+        "speedup": round(statistics.median(ratios), 3),
+        "same_outputs_and_state": same and _same(ours.s, theirs.s),
     }

@@ -25,6 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quick", action="store_true", help="shorter run, rougher figures")
     parser.add_argument("--full", action="store_true", help="all: the full runs, not quick ones")
     parser.add_argument(
+        "--against",
+        metavar="REV",
+        help="ecu: time the firmware tick of git revision REV in the same run too, alternating "
+        "with this one, and give the speed-up (after checking both give the same outputs)",
+    )
+    parser.add_argument(
         "--only",
         metavar="A,B",
         help="all: these benches only (comma-separated names)",
@@ -50,8 +56,15 @@ def run(args: argparse.Namespace) -> int:
     if args.only or args.markdown or args.full or args.merge:
         print("sil bench: --only, --markdown, --merge and --full go with 'all'", file=sys.stderr)
         return 2
+    if args.against is not None and args.target != "ecu":
+        print("sil bench: --against goes with 'ecu'", file=sys.stderr)
+        return 2
+    options = {"against": args.against} if args.against is not None else {}
     try:
-        figures = importlib.import_module(TARGETS[args.target]).run(quick=args.quick)
+        figures = importlib.import_module(TARGETS[args.target]).run(quick=args.quick, **options)
+    except ValueError as exc:  # input the bench refuses (a revision git does not know)
+        print(f"sil bench {args.target}: {exc}", file=sys.stderr)
+        return 2
     except RuntimeError as exc:  # a bench's own failure (a run without its summary...)
         print(f"sil bench {args.target}: error: {exc}", file=sys.stderr)
         return 1
