@@ -58,10 +58,12 @@ def actuator_test_step(
     none); s.test_active is the one still running after it."""
     fresh = 1 if request != s.test_request_last else 0
     s.test_request_last = request
-    if not allowed or request == NONE:
+    if not allowed or request == NONE:  # none runs
         s.test_active = NONE
         s.test_ticks_left = 0
-    elif fresh and request_ok(p, request, level, ms):
+        s.test_time_left_ms = 0
+        return NONE
+    if fresh and request_ok(p, request, level, ms):
         s.test_active = request
         s.test_level_held = level
         s.test_ticks_left = (ms * p.rate_hz + 999) // 1000

@@ -111,20 +111,21 @@ def estimator_step(
         return
     # eq. 4.31: increments -(Gamma P dt) phi e in Q7.40: phi e in Q15.16 (it exceeds the Q7.24
     # range in transients) times Gamma P dt in Q3.28, >> 4
-    acc_q40(th, s.theta_ext, AP21, _increment_q40(mul_q_round(n_mid, e, 32), p.g_a1_q28))
-    acc_q40(th, s.theta_ext, AP22, _increment_q40(mul_q_round(v_mid, e, 32), p.g_a2_q28))
+    ext = s.theta_ext
+    acc_q40(th, ext, AP21, _increment_q40(mul_q_round(n_mid, e, 32), p.g_a1_q28))
+    acc_q40(th, ext, AP22, _increment_q40(mul_q_round(v_mid, e, 32), p.g_a2_q28))
     if p.pump_scaling_on:
         phi = sat32((g * (u + p.pump_v0_q24)) >> 24)  # Lambda-hat's regressor g(dN) (u + V0 - V_d)
-        acc_q40(th, s.theta_ext, LAM, _increment_q40(mul_q_round(phi, e, 32), p.g_lam_q28))
+        acc_q40(th, ext, LAM, _increment_q40(mul_q_round(phi, e, 32), p.g_lam_q28))
     else:
-        acc_q40(th, s.theta_ext, LAM, _increment_q40(mul_q_round(u, e, 32), p.g_lam_q28))
-        acc_q40(th, s.theta_ext, TH1, _increment_q40(mul_q_round(f1, e, 32), p.g_th1_q28))
-        acc_q40(th, s.theta_ext, TH2, _increment_q40(mul_q24_round(f2_q16, e), p.g_th2_q28))
+        acc_q40(th, ext, LAM, _increment_q40(mul_q_round(u, e, 32), p.g_lam_q28))
+        acc_q40(th, ext, TH1, _increment_q40(mul_q_round(f1, e, 32), p.g_th1_q28))
+        acc_q40(th, ext, TH2, _increment_q40(mul_q24_round(f2_q16, e), p.g_th2_q28))
     if p.lambda_floor_on and th[LAM] < p.lambda_floor_q24:  # projection onto Lambda >= floor
         th[LAM] = p.lambda_floor_q24
-        s.theta_ext[LAM] = 0
+        ext[LAM] = 0
     if p.pump_scaling_on:  # Theta_f-hat = Lambda-hat r
         th[TH1] = mul_q(th[LAM], p.th_per_lam1_q28, 28)
         th[TH2] = mul_q(th[LAM], p.th_per_lam2_q28, 28)
-        s.theta_ext[TH1] = 0
-        s.theta_ext[TH2] = 0
+        ext[TH1] = 0
+        ext[TH2] = 0

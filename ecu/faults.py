@@ -57,7 +57,8 @@ def names(word: int) -> list[str]:
 
 
 def persist(count: int, bad: int, limit: int) -> int:
-    """Persistence counter: up by one while bad, down by one while good, held in [0, limit]."""
+    """Persistence counter: up by one while bad, down by one while good, held in [0, limit]
+    (at 0 with a good reading it stays at 0: callers skip the call then)."""
     if bad:
         return count + 1 if count < limit else limit
     return count - 1 if count > 0 else 0
@@ -66,10 +67,12 @@ def persist(count: int, bad: int, limit: int) -> int:
 def speed_checks(s: EcuState, p: FirmwareParams, rpm: int, prev_rpm: int, v_q24: int) -> int:
     """Range, rate and stuck checks on a fresh speed reading; returns fault bits that tripped."""
     bad = rpm < 0 or rpm > p.speed_valid_max_rpm
-    s.speed_range_cnt = persist(s.speed_range_cnt, bad, p.speed_fault_ticks)
+    if bad or s.speed_range_cnt:
+        s.speed_range_cnt = persist(s.speed_range_cnt, bad, p.speed_fault_ticks)
     step = rpm - prev_rpm
     bad = step > p.speed_step_max_rpm or step < -p.speed_step_max_rpm
-    s.speed_rate_cnt = persist(s.speed_rate_cnt, bad, p.speed_fault_ticks)
+    if bad or s.speed_rate_cnt:
+        s.speed_rate_cnt = persist(s.speed_rate_cnt, bad, p.speed_fault_ticks)
     # stuck: reading frozen for the stuck time while the pump voltage has moved since it froze
     if rpm != prev_rpm:
         s.speed_stuck_cnt = 0
@@ -77,7 +80,8 @@ def speed_checks(s: EcuState, p: FirmwareParams, rpm: int, prev_rpm: int, v_q24:
     else:
         dv = v_q24 - s.speed_stuck_v_q24
         moved = dv > p.speed_stuck_dv_q24 or dv < -p.speed_stuck_dv_q24
-        s.speed_stuck_cnt = persist(s.speed_stuck_cnt, moved, p.speed_stuck_ticks)
+        if moved or s.speed_stuck_cnt:
+            s.speed_stuck_cnt = persist(s.speed_stuck_cnt, moved, p.speed_stuck_ticks)
     tripped = 0
     if s.speed_range_cnt >= p.speed_fault_ticks:
         tripped |= SPEED_RANGE
@@ -91,7 +95,8 @@ def speed_checks(s: EcuState, p: FirmwareParams, rpm: int, prev_rpm: int, v_q24:
 def egt_open_check(s: EcuState, p: FirmwareParams, egt_dk: int) -> int:
     """Open thermocouple: reading railed above or below the plausible range, persistent."""
     bad = egt_dk > p.egt_open_high_dk or egt_dk < p.egt_open_low_dk
-    s.egt_open_cnt = persist(s.egt_open_cnt, bad, p.egt_fault_ticks)
+    if bad or s.egt_open_cnt:
+        s.egt_open_cnt = persist(s.egt_open_cnt, bad, p.egt_fault_ticks)
     return EGT_OPEN if s.egt_open_cnt >= p.egt_fault_ticks else 0
 
 

@@ -84,7 +84,9 @@ AGE_MAX = 1 << 30
 SEEN_SPEED = 1
 SEEN_EGT = 2
 SEEN_ALL = SEEN_SPEED | SEEN_EGT
+LATCHED = ~F.TRANSIENT  # the fault bits a tick starts from
 TRIP_FAULT = F.OVERSPEED | F.EGT_OVERTEMP | F.PUMP_STALL | F.PUMP_DRY
+SPEED_FAILS = F.SPEED_RANGE | F.SPEED_RATE | F.SPEED_STUCK  # a speed sensor failure (latched)
 
 
 class EcuInputs:
@@ -173,6 +175,8 @@ def _q24_to_cpct(x_q24: int) -> int:
 class Ecu:
     """The firmware. ``Ecu(params)`` powers up in OFF; ``tick(inputs)`` runs one control step."""
 
+    __slots__ = ("p", "s", "out", "seq", "t", "sat_pending")
+
     def __init__(self, params: EcuParams | FirmwareParams | None = None) -> None:
         if params is None:
             params = EcuParams()
@@ -212,16 +216,18 @@ class Ecu:
         s = self.s
         p = self.p
         m = p.rate_half_window
+        hist = s.n_hist_rpm
         i_new = (s.hist_idx + RATE_BUF_LEN - age + m) % RATE_BUF_LEN
         i_old = (s.hist_idx + RATE_BUF_LEN - age - m) % RATE_BUF_LEN
-        d_rpm = s.n_hist_rpm[i_new] - s.n_hist_rpm[i_old]
+        d_rpm = hist[i_new] - hist[i_old]
         return div_trunc((d_rpm * p.rpm_to_q24_k * p.rate_hz) >> 16, 2 * m)
 
     def _dn_q24(self, age: int) -> int:
         """Speed deviation from trim of the sample `age` ticks old (Q7.24 %N)."""
         s = self.s
+        p = self.p
         rpm = s.n_hist_rpm[(s.hist_idx + RATE_BUF_LEN - age) % RATE_BUF_LEN]
-        return sat32(((rpm * self.p.rpm_to_q24_k) >> 16) - self.p.trim_n_q24)
+        return sat32(((rpm * p.rpm_to_q24_k) >> 16) - p.trim_n_q24)
 
     def tick(self, i: EcuInputs) -> EcuOutputs:
         """One control step, in the stages the C port's ``ecu_tick`` runs in the same order."""
@@ -230,7 +236,7 @@ class Ecu:
         outer = counting_into(self.sat_pending)  # this instance's saturations, as C's ecu_t
         try:
             s.ticks = s.ticks + 1 if s.ticks < INT32_MAX else INT32_MAX
-            t.faults = s.faults & ~F.TRANSIENT
+            t.faults = s.faults & LATCHED
             t.mode = s.mode
             self._stage_sensors(i)
             self._stage_history()
@@ -256,22 +262,25 @@ class Ecu:
         t = self.t
         faults = t.faults
         if i.sensor_status == E2E_OK:
+            rpm = i.speed_rpm
+            egt_dk = i.egt_dk
             s.sensor_age = 0
             if s.speed_seen:
-                faults |= F.speed_checks(s, p, i.speed_rpm, s.speed_rpm, s.v_applied_q24)
-            s.speed_rpm = i.speed_rpm
-            egt_lead_step(s, p, i.egt_dk)
-            s.egt_dk = i.egt_dk
-            faults |= F.egt_open_check(s, p, i.egt_dk)
-            s.inputs_seen |= F.valid_readings(p, i.speed_rpm, i.egt_dk)
+                faults |= F.speed_checks(s, p, rpm, s.speed_rpm, s.v_applied_q24)
+            s.speed_rpm = rpm
+            egt_lead_step(s, p, egt_dk)
+            s.egt_dk = egt_dk
+            faults |= F.egt_open_check(s, p, egt_dk)
+            if s.inputs_seen != SEEN_ALL:
+                s.inputs_seen |= F.valid_readings(p, rpm, egt_dk)
         else:
             s.sensor_age = s.sensor_age + 1 if s.sensor_age < AGE_MAX else AGE_MAX
             faults |= F.SENSOR_FRAME_LOST
-        if faults & (F.SPEED_RANGE | F.SPEED_RATE | F.SPEED_STUCK):
+        if faults & SPEED_FAILS:
             s.speed_failed = 1
-        t.speed_ok = 1 if (s.speed_failed == 0 and s.sensor_age == 0) else 0
+        speed_ok = t.speed_ok = 1 if (s.speed_failed == 0 and s.sensor_age == 0) else 0
         t.inputs_valid = 1 if s.inputs_seen == SEEN_ALL else 0
-        if t.speed_ok:
+        if speed_ok:
             t.n_rpm = s.speed_rpm
         elif not s.inputs_seen & SEEN_SPEED:
             t.n_rpm = 0  # no reading since power-up: nothing to substitute (not the trim speed)
@@ -279,11 +288,11 @@ class Ecu:
             t.n_rpm = ((s.obs_n_q24 + p.trim_n_q24) * RPM_PER_PCT + (1 << 23)) >> 24
             if s.speed_failed:
                 faults |= F.SPEED_SUBSTITUTED
-        t.egt_ok = 1 if (faults & F.EGT_OPEN) == 0 else 0
+        egt_ok = t.egt_ok = 1 if (faults & F.EGT_OPEN) == 0 else 0
 
         # analog frame: supply voltage and pump current
-        t.analog_fresh = 1 if i.analog_status == E2E_OK else 0
-        if t.analog_fresh:
+        analog_fresh = t.analog_fresh = 1 if i.analog_status == E2E_OK else 0
+        if analog_fresh:
             s.analog_age = 0
             s.supply_mv = i.supply_mv
             s.pump_ma = i.pump_ma
@@ -307,7 +316,7 @@ class Ecu:
         if s.demand_age > p.demand_hold_ticks:
             demand = p.idle_q24
             faults |= F.DEMAND_LOST
-        if not t.egt_ok and demand > p.egt_fail_demand_q24:
+        if not egt_ok and demand > p.egt_fail_demand_q24:
             demand = p.egt_fail_demand_q24
         t.demand = demand
         t.faults = faults
@@ -318,27 +327,31 @@ class Ecu:
         s = self.s
         p = self.p
         t = self.t
-        s.hist_idx = (s.hist_idx + 1) % RATE_BUF_LEN
-        s.n_hist_rpm[s.hist_idx] = t.n_rpm
-        s.u_hist_q24[s.hist_idx] = 0
-        if s.speed_seen < RATE_BUF_LEN:
-            s.speed_seen += 1
+        speed_ok = t.speed_ok
+        idx = s.hist_idx = (s.hist_idx + 1) % RATE_BUF_LEN
+        s.n_hist_rpm[idx] = t.n_rpm
+        u_hist = s.u_hist_q24
+        u_hist[idx] = 0
+        seen = s.speed_seen
+        if seen < RATE_BUF_LEN:
+            seen = s.speed_seen = seen + 1
         m = p.rate_half_window
-        t.n_q24 = mul_q(t.n_rpm, p.rpm_to_q24_k, 16)
-        t.dn = sub_sat(t.n_q24, p.trim_n_q24)
-        if not t.speed_ok:
-            t.rate = s.obs_v_q24
-        elif s.speed_seen > 2 * m:
-            t.rate = self._rate_q24(m)
+        n_q24 = t.n_q24 = mul_q(t.n_rpm, p.rpm_to_q24_k, 16)
+        dn = t.dn = sub_sat(n_q24, p.trim_n_q24)
+        if not speed_ok:
+            rate = s.obs_v_q24
+        elif seen > 2 * m:
+            rate = self._rate_q24(m)
         else:
-            t.rate = 0
-        if s.speed_seen == 1:
-            rate_filter_start(s, t.dn)
+            rate = 0
+        t.rate = rate
+        if seen == 1:
+            rate_filter_start(s, dn)
         else:  # with the voltage applied over the last tick (0 outside RUN)
-            u_last = s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - 1) % RATE_BUF_LEN]
-            rate_filter_step(s, p, t.dn, u_last, t.speed_ok)
+            u_last = u_hist[(idx + RATE_BUF_LEN - 1) % RATE_BUF_LEN]
+            rate_filter_step(s, p, dn, u_last, speed_ok)
         # the control laws' and limit loops' rate: filtered while the sensor is valid
-        t.ctrl_rate = s.rf_v_q24 if (p.rate_filter_on and t.speed_ok) else t.rate
+        t.ctrl_rate = s.rf_v_q24 if (p.rate_filter_on and speed_ok) else rate
 
     def _stage_trips(self) -> None:
         """Protection trips: overspeed, flameout, EGT over its maximum, pump current, sensor
@@ -349,24 +362,32 @@ class Ecu:
         mode = t.mode
         n_rpm = t.n_rpm
         faults = t.faults
-        running = 1 if (mode == M.ARMED or mode == M.RUN) else 0
+        egt_ok = t.egt_ok
+        egt_dk = s.egt_dk
+        in_run = mode == M.RUN
+        running = 1 if (in_run or mode == M.ARMED) else 0
+        # each persistence counter (F.persist); one at 0 with a good reading stays at 0
         bad = running and n_rpm > p.overspeed_rpm
-        s.overspeed_cnt = F.persist(s.overspeed_cnt, bad, p.overspeed_ticks)
+        if bad or s.overspeed_cnt:
+            s.overspeed_cnt = F.persist(s.overspeed_cnt, bad, p.overspeed_ticks)
         if s.overspeed_cnt >= p.overspeed_ticks:
             faults |= F.OVERSPEED
-        bad = mode == M.RUN and n_rpm < p.flameout_rpm
-        s.flameout_cnt = F.persist(s.flameout_cnt, bad, p.flameout_ticks)
-        bad = mode == M.RUN and t.egt_ok and s.egt_dk < p.flameout_egt_dk
-        s.flame_egt_cnt = F.persist(s.flame_egt_cnt, bad, p.flameout_egt_ticks)
+        bad = in_run and n_rpm < p.flameout_rpm
+        if bad or s.flameout_cnt:
+            s.flameout_cnt = F.persist(s.flameout_cnt, bad, p.flameout_ticks)
+        bad = in_run and egt_ok and egt_dk < p.flameout_egt_dk
+        if bad or s.flame_egt_cnt:
+            s.flame_egt_cnt = F.persist(s.flame_egt_cnt, bad, p.flameout_egt_ticks)
         flameout = 0
         if s.flameout_cnt >= p.flameout_ticks or s.flame_egt_cnt >= p.flameout_egt_ticks:
             faults |= F.FLAMEOUT
             flameout = 1
-        bad = running and t.egt_ok and s.egt_dk > p.egt_max_dk
-        s.egt_over_cnt = F.persist(s.egt_over_cnt, bad, p.egt_max_ticks)
+        bad = running and egt_ok and egt_dk > p.egt_max_dk
+        if bad or s.egt_over_cnt:
+            s.egt_over_cnt = F.persist(s.egt_over_cnt, bad, p.egt_max_ticks)
         if s.egt_over_cnt >= p.egt_max_ticks:
             faults |= F.EGT_OVERTEMP
-        if mode == M.RUN and t.analog_fresh:
+        if in_run and t.analog_fresh:
             faults |= pump_current_checks(s, p, s.pump_ma, s.v_applied_q24)
         t.trip_fault = 1 if (faults & TRIP_FAULT) else 0
         if running and s.sensor_age > p.sensor_loss_ticks:
@@ -422,7 +443,7 @@ class Ecu:
             1 if t.n_rpm < p.shutdown_done_rpm else 0,
             1 if (t.start_abort or s.seq_state >= Q.IGNITION) else 0,
             t.relight,
-            1 if (Q.cooled(s, p) or not p.start_on) else 0,
+            1 if (mode != M.SHUTDOWN or not p.start_on or Q.cooled(s, p)) else 0,  # SHUTDOWN's
             1 if (t.inputs_valid and demand_fresh and not s.rearm_wait) else 0,
         )
         if (mode == M.ARMED or mode == M.RUN) and new_mode != M.ARMED and new_mode != M.RUN:
@@ -488,13 +509,15 @@ class Ecu:
         if p.adapt_band_q24 and (dn > p.adapt_band_q24 or dn < -p.adapt_band_q24):
             adapt = 0  # off the trim speed the fast model no longer holds
         if t.speed_ok and s.hist_fill > m + 1 and s.speed_seen > 2 * m + 1:
+            # the interval m + 1 ticks back: dN and dN' at its ends (dN' at its end is the
+            # history stage's rate, the sensor being valid) and the voltage held over it
             estimator_step(
                 s,
                 p,
                 self._dn_q24(m + 1),
                 self._rate_q24(m + 1),
                 self._dn_q24(m),
-                self._rate_q24(m),
+                t.rate,
                 s.u_hist_q24[(s.hist_idx + RATE_BUF_LEN - m - 1) % RATE_BUF_LEN],
                 adapt,
             )
@@ -520,20 +543,21 @@ class Ecu:
         t = self.t
         # the hotter of the probe and the gas (the lead) against the limit; the gas may pass
         # it by what the probe still reads under it, up to the transient allowance
+        trim_v = p.trim_v_q24
         probe_dk = p.egt_limit_dk - s.egt_dk
         room_dk = clamp(probe_dk, 0, p.egt_gas_margin_dk)
         gas_dk = p.egt_limit_dk + room_dk - (s.egt_lead_q12 >> 12)
         e_dk = clamp(min(probe_dk, gas_dk), -EGT_ERROR_MAX_DK, EGT_ERROR_MAX_DK)
-        t.v = select_voltage(
+        v = t.v = select_voltage(
             s,
             p,
-            sat32(p.trim_v_q24 + t.u),
+            sat32(trim_v + t.u),
             div_trunc(e_dk << 24, 10),
             t.egt_ok,
             t.n_q24,
             t.ctrl_rate,
         )
-        u_applied = sub_sat(t.v, p.trim_v_q24)
+        u_applied = sub_sat(v, trim_v)
         if p.controller == CTRL_PID:
             pid_track(s, p, sat32(t.demand - t.n_q24), t.ctrl_rate, u_applied)
         elif p.controller == CTRL_PI:
@@ -615,14 +639,14 @@ class Ecu:
         if health < p.health_alarm_pm:
             faults |= F.PUMP_HEALTH
         s.faults = faults
-        s.sat_events = sat32(s.sat_events + take_sat_events(self.sat_pending))
+        sat_events = s.sat_events = sat32(s.sat_events + take_sat_events(self.sat_pending))
         o.tick = i.tick
         o.duty_cpct = t.duty
         o.pump_mv = t.pump_mv
         o.pump_enable = t.enable
         o.mode = t.new_mode
         o.fault_word = faults & 0xFFFF
-        o.sat_events = s.sat_events
+        o.sat_events = sat_events
         o.ap21_q24 = th[AP21]
         o.ap22_q24 = th[AP22]
         o.lambda_q24 = th[LAM]
@@ -637,8 +661,9 @@ class Ecu:
         o.nref_cpct = _q24_to_cpct(s.xm1_q24 + p.trim_n_q24)
         o.n_cpct = _q24_to_cpct(t.n_q24)
         o.owner = s.owner
-        o.starter_cpct = self.seq.starter_cpct
-        o.igniter = self.seq.igniter
+        seq = self.seq
+        o.starter_cpct = seq.starter_cpct
+        o.igniter = seq.igniter
         o.seq_state = s.seq_state
         o.seq_reason = s.seq_reason
         o.inputs_valid = t.inputs_valid

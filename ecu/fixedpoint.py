@@ -69,13 +69,13 @@ def take_sat_events(counter: array | None = None) -> int:
 
 def sat32(x: int) -> int:
     """Store a 64-bit intermediate into int32: clamp (never wrap) and count a clamp."""
+    if INT32_MIN <= x <= INT32_MAX:
+        return x
     if x > INT32_MAX:
         _SAT_EVENTS[0] += 1
         return INT32_MAX
-    if x < INT32_MIN:
-        _SAT_EVENTS[0] += 1
-        return INT32_MIN
-    return x
+    _SAT_EVENTS[0] += 1
+    return INT32_MIN
 
 
 def clamp(x: int, lo: int, hi: int) -> int:
@@ -89,46 +89,55 @@ def clamp(x: int, lo: int, hi: int) -> int:
 
 def add_sat(a: int, b: int) -> int:
     """a + b, saturated to int32."""
-    return sat32(a + b)
+    x = a + b
+    return x if INT32_MIN <= x <= INT32_MAX else sat32(x)
 
 
 def sub_sat(a: int, b: int) -> int:
     """a - b, saturated to int32."""
-    return sat32(a - b)
+    x = a - b
+    return x if INT32_MIN <= x <= INT32_MAX else sat32(x)
 
 
 def mul_q(a: int, b: int, q: int) -> int:
     """(a * b) >> q: 64-bit product truncated by arithmetic shift, saturated to int32."""
-    return sat32((a * b) >> q)
+    x = (a * b) >> q
+    return x if INT32_MIN <= x <= INT32_MAX else sat32(x)
 
 
 def mul_q_round(a: int, b: int, q: int) -> int:
     """(a * b + 2^(q-1)) >> q: 64-bit product rounded to nearest (ties up), saturated."""
-    return sat32((a * b + (1 << (q - 1))) >> q)
+    x = (a * b + (1 << (q - 1))) >> q
+    return x if INT32_MIN <= x <= INT32_MAX else sat32(x)
 
 
 def mul_q24(a: int, b: int) -> int:
     """Q7.24 x Q7.24 -> Q7.24, truncated."""
-    return sat32((a * b) >> Q24)
+    x = (a * b) >> Q24
+    return x if INT32_MIN <= x <= INT32_MAX else sat32(x)
 
 
 def mul_q24_round(a: int, b: int) -> int:
     """Q7.24 x Q7.24 -> Q7.24, rounded to nearest."""
-    return sat32((a * b + (1 << (Q24 - 1))) >> Q24)
+    x = (a * b + (1 << (Q24 - 1))) >> Q24
+    return x if INT32_MIN <= x <= INT32_MAX else sat32(x)
 
 
 def div_trunc(a: int, b: int) -> int:
     """a / b with C semantics (truncation toward zero), saturated; b == 0 saturates explicitly."""
-    if b == 0:
+    if b > 0:
+        q = a // b if a >= 0 else -(-a // b)
+    elif b < 0:
+        q = -(a // -b) if a >= 0 else -a // -b
+    else:
         _SAT_EVENTS[0] += 1
         if a > 0:
             return INT32_MAX
         if a < 0:
             return INT32_MIN
         return 0
-    q = (a if a >= 0 else -a) // (b if b >= 0 else -b)
-    if (a < 0) != (b < 0):
-        q = -q
+    if INT32_MIN <= q <= INT32_MAX:
+        return q
     return sat32(q)
 
 
@@ -140,9 +149,9 @@ def acc_q40(hi: array, lo: array, i: int, inc_q40: int) -> None:
     """
     total = (hi[i] << ACC_EXT_BITS) + lo[i] + inc_q40
     h = total >> ACC_EXT_BITS
-    if h > INT32_MAX or h < INT32_MIN:
-        hi[i] = sat32(h)
-        lo[i] = 0
+    if INT32_MIN <= h <= INT32_MAX:
+        hi[i] = h
+        lo[i] = total & ACC_EXT_MASK
         return
-    hi[i] = h
-    lo[i] = total & ACC_EXT_MASK
+    hi[i] = sat32(h)
+    lo[i] = 0

@@ -79,7 +79,8 @@ def schedule_v(
     if not p.pump_scaling_on:
         return v
     lam = clamp(s.theta_q24[LAM], lam_lo, lam_hi)
-    return sat32(p.pump_dead_q24 + div_trunc((v - p.pump_dead_q24) * p.lambda_comm_q24, lam))
+    v_d = p.pump_dead_q24
+    return sat32(v_d + div_trunc((v - v_d) * p.lambda_comm_q24, lam))
 
 
 def pump_from_start(s: EcuState, p: FirmwareParams, n_q24: int, v_q24: int) -> None:
@@ -104,13 +105,15 @@ def egt_line_v(s: EcuState, p: FirmwareParams, v_prev: int) -> int | None:
     lead) and V_f the applied voltage through the same lag (the lead's filter c_f), so that the
     two belong together in a transient. None while the gas is under a quarter of the limit's
     rise (an engine far from it, or not lit: no cap, and the ratio stays under 4). Updates V_f."""
-    vf = sat32(s.egt_vf_q24 + ((p.egt_lead_cf_q16 * (v_prev - s.egt_vf_q24)) >> 16))
-    s.egt_vf_q24 = vf
-    rise_dk = (s.egt_lead_q12 >> 12) - p.egt_zero_fuel_dk
-    limit_rise_dk = p.egt_limit_dk - p.egt_zero_fuel_dk
-    if not p.egt_zero_fuel_dk or 4 * rise_dk < limit_rise_dk or vf <= p.pump_dead_q24:
+    vf = s.egt_vf_q24
+    vf = s.egt_vf_q24 = sat32(vf + ((p.egt_lead_cf_q16 * (v_prev - vf)) >> 16))
+    zero_dk = p.egt_zero_fuel_dk
+    rise_dk = (s.egt_lead_q12 >> 12) - zero_dk
+    limit_rise_dk = p.egt_limit_dk - zero_dk
+    v_d = p.pump_dead_q24
+    if not zero_dk or 4 * rise_dk < limit_rise_dk or vf <= v_d:
         return None
-    return sat32(p.pump_dead_q24 + div_trunc((vf - p.pump_dead_q24) * limit_rise_dk, rise_dk))
+    return sat32(v_d + div_trunc((vf - v_d) * limit_rise_dk, rise_dk))
 
 
 def _loop(v_prev: int, e: int, e_prev: int, kp_q24: int, ki_dt_q24: int, owns: bool) -> int:

@@ -43,8 +43,9 @@ def command_lag(s: EcuState, p: FirmwareParams, u: int) -> int:
     c = dt / (tau + dt) in Q24; c = 1 passes u): lag and engine are then the fast model. While
     a limit owns the pump the lag tracks the applied voltage (the firmware sets it), so the
     speed loop takes over from there."""
-    s.u_lag_q24 = sat32(s.u_lag_q24 + ((p.mrac_lag_c_q24 * (u - s.u_lag_q24)) >> 24))
-    return s.u_lag_q24
+    lag = s.u_lag_q24
+    lag = s.u_lag_q24 = sat32(lag + ((p.mrac_lag_c_q24 * (u - lag)) >> 24))
+    return lag
 
 
 def mrac_gain_update(s: EcuState, p: FirmwareParams) -> None:

@@ -31,11 +31,13 @@ def pump_current_checks(s: EcuState, p: FirmwareParams, pump_ma: int, v_q24: int
     friction current), with voltage applied, each persistent."""
     applied = v_q24 > p.pump_dry_min_q24
     stall = pump_ma > p.pump_stall_ma or (applied and pump_ma < p.pump_trip_ma)
-    s.pump_stall_cnt = persist(s.pump_stall_cnt, stall, p.pump_stall_ticks)
+    if stall or s.pump_stall_cnt:
+        s.pump_stall_cnt = persist(s.pump_stall_cnt, stall, p.pump_stall_ticks)
     v_mv = volts_q24_to_mv(v_q24)
     dry_ma = p.pump_dry_base_ma + div_trunc(p.pump_dry_ma_per_v * v_mv, 1000)
     dry = applied and p.pump_trip_ma <= pump_ma < dry_ma
-    s.pump_dry_cnt = persist(s.pump_dry_cnt, dry, p.pump_dry_ticks)
+    if dry or s.pump_dry_cnt:
+        s.pump_dry_cnt = persist(s.pump_dry_cnt, dry, p.pump_dry_ticks)
     tripped = 0
     if s.pump_stall_cnt >= p.pump_stall_ticks:
         tripped |= PUMP_STALL

@@ -140,22 +140,27 @@ def _require_arm_cc() -> None:
         raise PortBuildError(ARM_CC_NOT_FOUND)
 
 
-def arm_replayer(systick: bool = False) -> Path:
+def arm_replayer(systick: bool = False, stages: bool = False) -> Path:
     """The replayer for a Cortex-M4 (mps2-an386 under QEMU), reading vectors by semihosting;
-    ``systick``: the variant that counts SysTick around each tick (see replay.c)."""
+    ``systick``: the variant that counts SysTick around each tick; ``stages``: around each of
+    the tick's stages too (the core built with ECU_STAGE_PROFILE; see replay.c)."""
     _require_arm_cc()
+    if stages:
+        variant, name = ("-DREPLAY_SYSTICK", "-DECU_STAGE_PROFILE"), "replay-cm4-stages.elf"
+    elif systick:
+        variant, name = ("-DREPLAY_SYSTICK",), "replay-cm4-systick.elf"
+    else:
+        variant, name = (), "replay-cm4.elf"
     flags = (
         *WARNINGS,
         *ARM_FLAGS,
-        *(("-DREPLAY_SYSTICK",) if systick else ()),
+        *variant,
         "--specs=rdimon.specs",
         "-Wl,--gc-sections",
         f"-T{PORT_DIR / 'mps2_an386.ld'}",
     )
     sources = (*CORE_SOURCES, "replay.c", "startup_cm4.s")
-    return _compile(
-        ARM_CC, flags, sources, "replay-cm4-systick.elf" if systick else "replay-cm4.elf"
-    )
+    return _compile(ARM_CC, flags, sources, name)
 
 
 PIL_SOURCES = ("ecu_main.c", "board_mps2.c", "startup_pil.s")
@@ -204,10 +209,14 @@ NODE_XCP_HEADERS = (*FLASH_HEADERS, "ecu_node.h", "ecu_xcp.h")
 
 def public_functions(header: str) -> tuple[str, ...]:
     """The functions a header of the port declares, in order (its ``ecu_*`` prototypes), but
-    those of its conditional parts (host builds' names, the integrator's profile hooks)."""
+    those of its conditional parts (host builds' names, the integrator's profile hooks, the
+    stage profile's hook)."""
     text = re.sub(r"/\*.*?\*/", "", (PORT_DIR / header).read_text(), flags=re.S)
     text = re.sub(
-        r"^#ifdef (ECU_WITH_NAMES|ECU_NODE_PROFILE)\b.*?^#endif", "", text, flags=re.M | re.S
+        r"^#ifdef (ECU_WITH_NAMES|ECU_NODE_PROFILE|ECU_STAGE_PROFILE)\b.*?^#endif",
+        "",
+        text,
+        flags=re.M | re.S,
     )
     return tuple(re.findall(r"^[a-z][\w \t*]*?\b(ecu_\w+)\s*\(", text, re.M))
 

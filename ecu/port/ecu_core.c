@@ -77,17 +77,18 @@ ECU_STATIC_ASSERT(((int64_t)ECU_T_STD_CK << 48) / (ECU_INLET_MIN_DK * 10) < ((in
 
 #define ONE_Q24 ((int64_t)1 << 24)
 
-static int32_t sat32(ecu_t *e, int64_t x)
+/* x out of the int32 range: counted, the nearest bound */
+static int32_t sat32_out(ecu_t *e, int64_t x)
 {
-    if (x > INT32_MAX) {
-        e->sat_pending++;
-        return INT32_MAX;
-    }
-    if (x < INT32_MIN) {
-        e->sat_pending++;
-        return INT32_MIN;
-    }
-    return (int32_t)x;
+    e->sat_pending++;
+    return x > 0 ? INT32_MAX : INT32_MIN;
+}
+
+/* x saturated to int32, an x out of range counted: the in-range test inline (the tick
+ * saturates some fifty values), the rare rest a call */
+ECU_INLINE int32_t sat32(ecu_t *e, int64_t x)
+{
+    return x == (int32_t)x ? (int32_t)x : sat32_out(e, x);
 }
 
 /* a control limit, not an overflow: not counted */
@@ -96,14 +97,107 @@ static int64_t clamp(int64_t x, int64_t lo, int64_t hi)
     return x < lo ? lo : (x > hi ? hi : x);
 }
 
-/* a / b truncated toward zero, saturated; b == 0 saturates with the dividend's sign */
-ECU_INLINE int32_t div_trunc(ecu_t *e, int64_t a, int64_t b)
+#define U48 ((uint64_t)1 << 48)
+#define U16 ((uint32_t)1 << 16)
+
+/* The tick's divisions without the library's 64-bit division (a call of some 60 instructions on
+ * a Cortex-M4): a 64-bit magnitude by a divisor of 32 bits, in the core's unsigned 32-bit
+ * divisions (UDIV). */
+
+/* the number of leading zero bits of x != 0 (CLZ on a Cortex-M4) */
+ECU_INLINE unsigned clz32(uint32_t x)
 {
+#if defined(__GNUC__)
+    return (unsigned)__builtin_clz(x);
+#else
+    unsigned n = 0;
+    while (!(x & 0x80000000u)) {
+        x <<= 1;
+        n++;
+    }
+    return n;
+#endif
+}
+
+/* (u1 2^32 + u0) / v for u1 < v (the quotient fits 32 bits), exactly: long division in two
+ * base-2^16 digits on the normalised operands (Knuth's algorithm D, as Hacker's Delight's
+ * divlu), each digit estimated by a 32-bit division and corrected at most twice. The products
+ * and shifts wrap modulo 2^32 where the algorithm lets them (un32 << 16). */
+static uint32_t udiv_2by1(uint32_t u1, uint32_t u0, uint32_t v)
+{
+    unsigned sh = clz32(v);
+    uint32_t vn1, vn0, un32, un10, un1, un0, q1, q0, rhat, un21;
+    v <<= sh;
+    vn1 = v >> 16;
+    vn0 = v & 0xFFFFu;
+    un32 = sh ? u1 << sh | u0 >> (32u - sh) : u1;
+    un10 = u0 << sh;
+    un1 = un10 >> 16;
+    un0 = un10 & 0xFFFFu;
+    q1 = un32 / vn1;
+    rhat = un32 - q1 * vn1;
+    while (q1 >= U16 || q1 * vn0 > (rhat << 16) + un1) {
+        q1--;
+        rhat += vn1;
+        if (rhat >= U16) {
+            break;
+        }
+    }
+    un21 = (un32 << 16) + un1 - q1 * v;
+    q0 = un21 / vn1;
+    rhat = un21 - q0 * vn1;
+    while (q0 >= U16 || q0 * vn0 > (rhat << 16) + un0) {
+        q0--;
+        rhat += vn1;
+        if (rhat >= U16) {
+            break;
+        }
+    }
+    return q1 << 16 | q0;
+}
+
+/* a / v for 0 < v < 2^32, exactly: the high word's quotient, then its remainder and the low
+ * word by udiv_2by1 */
+static uint64_t udiv64_32(uint64_t a, uint32_t v)
+{
+    uint32_t hi = (uint32_t)(a >> 32);
+    uint32_t q_hi = hi / v;
+    return (uint64_t)q_hi << 32 | udiv_2by1(hi - q_hi * v, (uint32_t)a, v);
+}
+
+/* a / b for a < 2^48 and 0 < b < 2^16, exactly, by long division in two base-2^16 digits: the
+ * high part's remainder r < b keeps (r << 16) + the low digit under 2^32 */
+ECU_INLINE uint32_t udiv48_by16(uint64_t a, uint32_t b, uint32_t *q_hi)
+{
+    uint32_t hi = (uint32_t)(a >> 16);
+    uint32_t lo;
+    *q_hi = hi / b;
+    lo = (hi - *q_hi * b) << 16 | (uint32_t)(a & 0xFFFFu);
+    return lo / b;
+}
+
+/* a / b truncated toward zero, saturated; b == 0 saturates with the dividend's sign. Every
+ * call has |a| < 2^63 and |b| < 2^32 (at most a difference of two int32): the magnitudes'
+ * quotient, 2^32 standing for any quotient that saturates; the tick's small divisors (rate
+ * windows, the supply in mV, decimal scales) by udiv48_by16 */
+static int32_t div_trunc(ecu_t *e, int64_t a, int64_t b)
+{
+    uint64_t ua = a < 0 ? 0u - (uint64_t)a : (uint64_t)a;
+    uint32_t ub = (uint32_t)(b < 0 ? 0u - (uint64_t)b : (uint64_t)b);
+    uint32_t hi, lo;
+    int64_t q;
     if (b == 0) {
         e->sat_pending++;
         return a > 0 ? INT32_MAX : (a < 0 ? INT32_MIN : 0);
     }
-    return sat32(e, a / b);
+    if (ub < U16 && ua < U48) {
+        lo = udiv48_by16(ua, ub, &hi);
+        q = (int64_t)hi * U16 + lo;
+    } else {
+        hi = (uint32_t)(ua >> 32);
+        q = hi >= ub ? (int64_t)1 << 32 : (int64_t)udiv_2by1(hi, (uint32_t)ua, ub);
+    }
+    return sat32(e, (a < 0) != (b < 0) ? -q : q);
 }
 
 /* (a * b) >> s exactly where a * b itself may exceed 64 bits (|a| < 2^55 for b of 32 bits):
@@ -839,8 +933,11 @@ ECU_INLINE void take_egt_at_rest(ecu_t *e)
         /* inlet_ck in 22300..33300 (0.01 K): no overflow and no division by zero; the shift
          * and the root's range are checked at compile time (top of this file) */
         int32_t inlet_ck = s->egt_dk * 10;
-        int64_t target = (int64_t)p->seq_egt_target_dk * inlet_ck / ECU_T_STD_CK;
-        s->ncor_k_q24 = (int32_t)isqrt_u64((uint64_t)(((int64_t)ECU_T_STD_CK << 48) / inlet_ck));
+        int64_t target = (int64_t)p->seq_egt_target_dk * inlet_ck;
+        target = target < 0 ? -(int64_t)udiv64_32((uint64_t)-target, ECU_T_STD_CK)
+                            : (int64_t)udiv64_32((uint64_t)target, ECU_T_STD_CK);
+        s->ncor_k_q24 =
+            (int32_t)isqrt_u64(udiv64_32((uint64_t)ECU_T_STD_CK << 48, (uint32_t)inlet_ck));
         s->seq_target_dk = (int32_t)(target < p->seq_egt_cap_dk ? target : p->seq_egt_cap_dk);
     }
 }
@@ -992,9 +1089,9 @@ static void stop_step(ecu_t *e, int32_t n_rpm, int32_t egt_dk)
 
 /* ---- ecu/firmware.py ----------------------------------------------------------------------- */
 
-static int32_t ring(int32_t idx) /* (idx + RATE_BUF_LEN) % RATE_BUF_LEN for idx > -LEN */
+static int32_t ring(int32_t idx) /* (idx + RATE_BUF_LEN) % RATE_BUF_LEN for -LEN < idx < LEN */
 {
-    return (idx + ECU_RATE_BUF_LEN) % ECU_RATE_BUF_LEN;
+    return idx < 0 ? idx + ECU_RATE_BUF_LEN : idx;
 }
 
 /* central difference of speed at the sample `age` ticks old, %N/s (Q7.24) */
@@ -1315,7 +1412,8 @@ static void stage_control_law(ecu_t *e, tick_vars_t *t)
         adapt = 0; /* off the trim speed the fast model no longer holds */
     }
     if (t->speed_ok && s->hist_fill > m + 1 && s->speed_seen > 2 * m + 1) {
-        estimator_step(e, dn_q24(e, m + 1), rate_q24(e, m + 1), dn_q24(e, m), rate_q24(e, m),
+        /* the rate at age m: the history stage's (the same samples, the sensor valid) */
+        estimator_step(e, dn_q24(e, m + 1), rate_q24(e, m + 1), dn_q24(e, m), t->rate,
                        s->u_hist_q24[ring(s->hist_idx - m - 1)], adapt);
     }
     r = sat32(e, (int64_t)t->demand - p->trim_n_q24);
@@ -1586,6 +1684,17 @@ static void stage_logbook(ecu_t *e, const tick_vars_t *t)
     }
 }
 
+/* a stage of the tick, followed by the profiling hook in ECU_STAGE_PROFILE builds */
+#ifdef ECU_STAGE_PROFILE
+#define STAGE(id, call) \
+    do { \
+        call; \
+        ecu_stage_done(id); \
+    } while (0)
+#else
+#define STAGE(id, call) call
+#endif
+
 const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
 {
     ecu_state_t *s = &e->s;
@@ -1593,19 +1702,19 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in)
     s->ticks = s->ticks < INT32_MAX ? s->ticks + 1 : INT32_MAX;
     t.faults = s->faults & ~ECU_FAULT_TRANSIENT;
     t.mode = s->mode;
-    stage_sensors(e, in, &t);
-    stage_history(e, &t);
-    stage_trips(e, &t);
-    stage_start_sequencer(e, &t);
-    stage_mode(e, &t);
+    STAGE(ECU_STAGE_SENSORS, stage_sensors(e, in, &t));
+    STAGE(ECU_STAGE_HISTORY, stage_history(e, &t));
+    STAGE(ECU_STAGE_TRIPS, stage_trips(e, &t));
+    STAGE(ECU_STAGE_START_SEQUENCER, stage_start_sequencer(e, &t));
+    STAGE(ECU_STAGE_MODE, stage_mode(e, &t));
     if (t.new_mode == ECU_RUN) {
-        stage_control_law(e, &t);
-        stage_limit_selection(e, &t);
+        STAGE(ECU_STAGE_CONTROL_LAW, stage_control_law(e, &t));
+        STAGE(ECU_STAGE_LIMIT_SELECTION, stage_limit_selection(e, &t));
     }
-    stage_pump_driver(e, &t);
-    stage_actuator_tests(e, in, &t);
-    stage_health(e, in, &t);
-    stage_logbook(e, &t);
+    STAGE(ECU_STAGE_PUMP_DRIVER, stage_pump_driver(e, &t));
+    STAGE(ECU_STAGE_ACTUATOR_TESTS, stage_actuator_tests(e, in, &t));
+    STAGE(ECU_STAGE_HEALTH, stage_health(e, in, &t));
+    STAGE(ECU_STAGE_LOGBOOK, stage_logbook(e, &t));
     e->rate_q24 = t.rate;
     return &e->o;
 }

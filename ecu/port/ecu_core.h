@@ -23,9 +23,10 @@
  *         outputs, with E2E CRC and alive counter).
  *
  * ecu_tick is reentrant per instance, runs in bounded time, uses no floating point and calls
- * nothing but the compiler's 64-bit division helper (__aeabi_ldivmod on Arm). Its one loop is
- * the integer square root of the inlet correction, at most 32 passes and only in the tick
- * that starts the engine from rest; everything else is straight-line code. Inputs are
+ * no library function: its 64-bit divisions are its own, in 32-bit divisions (UDIV on a
+ * Cortex-M4). Its loops are the integer square root of the inlet correction, at most 32
+ * passes and only in the tick that starts the engine from rest, and a division's digit
+ * correction, at most twice per digit; everything else is straight-line code. Inputs are
  * expected in the ranges their DBC signals can carry (speed 0..262143 rpm, EGT 0..16383 dK,
  * supply and current 0..65535, demand 0..65535); within them no intermediate overflows 64 bits.
  *
@@ -210,6 +211,27 @@ const ecu_outputs_t *ecu_tick(ecu_t *e, const ecu_inputs_t *in);
 
 /* FNV-1a (32-bit) over the ECU_STATE_WORDS state words, as ecu/golden.py computes it. */
 uint32_t ecu_state_digest(const ecu_state_t *s);
+
+#ifdef ECU_STAGE_PROFILE
+/* The tick's stages, in their order (ecu/firmware.py Ecu.tick). Built with ECU_STAGE_PROFILE,
+ * ecu_tick calls ecu_stage_done(stage) at the end of each stage it runs (control law and limit
+ * selection in RUN only); you provide it (the Cortex-M4 replayer counts SysTick with it). */
+enum {
+    ECU_STAGE_SENSORS,
+    ECU_STAGE_HISTORY,
+    ECU_STAGE_TRIPS,
+    ECU_STAGE_START_SEQUENCER,
+    ECU_STAGE_MODE,
+    ECU_STAGE_CONTROL_LAW,
+    ECU_STAGE_LIMIT_SELECTION,
+    ECU_STAGE_PUMP_DRIVER,
+    ECU_STAGE_ACTUATOR_TESTS,
+    ECU_STAGE_HEALTH,
+    ECU_STAGE_LOGBOOK,
+    ECU_STAGES
+};
+void ecu_stage_done(int stage);
+#endif
 
 #ifdef ECU_WITH_NAMES
 /* Field names, space separated, of each record (host builds: the Python wrapper checks them). */

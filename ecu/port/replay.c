@@ -11,7 +11,13 @@
  * With REPLAY_SYSTICK (Cortex-M4 under `qemu -icount shift=0`, where the virtual clock counts
  * instructions) the SysTick timer is read around every ecu_tick and around a calibration loop of
  * a known instruction count; the replayer prints "SYSTICK <tick counts> <calibration counts>
- * <calibration instructions>" (see ecu/port/bench.py).
+ * <calibration instructions>" (see sil/bench/port.py).
+ *
+ * With ECU_STAGE_PROFILE as well, the core calls ecu_stage_done after each stage of the tick
+ * (ecu_core.h): the SysTick counts since the previous stage's end (the first stage's from the
+ * call of ecu_tick) add up per stage, and the replayer prints "STAGES <hook counts> <hook
+ * calls>" and per stage "<counts> <calls>": the hook's own cost, from back-to-back calls, for
+ * the reader to take off each call.
  */
 #include <stdio.h>
 
@@ -37,6 +43,43 @@ static uint32_t calibrate(void)
     uint32_t t0 = SYST_CVR;
     __asm__ volatile("1: subs %0, %0, #1\n bne 1b" : "+r"(n) : : "cc");
     return systick_since(t0);
+}
+#endif
+
+#ifdef ECU_STAGE_PROFILE
+#ifndef REPLAY_SYSTICK
+#error "ECU_STAGE_PROFILE counts SysTick: build with REPLAY_SYSTICK"
+#endif
+#define HOOK_CALIBRATION_LOOPS 2500u /* four back-to-back hooks each */
+
+static uint32_t stage_counts[ECU_STAGES + 1]; /* the last: the calibration's */
+static uint32_t stage_calls[ECU_STAGES + 1];
+static uint32_t stage_t0;
+
+void ecu_stage_done(int stage)
+{
+    stage_counts[stage] += systick_since(stage_t0);
+    stage_calls[stage]++;
+    stage_t0 = SYST_CVR;
+}
+
+static void print_stages(void)
+{
+    int k;
+    uint32_t n;
+    stage_t0 = SYST_CVR;
+    for (n = 0; n < HOOK_CALIBRATION_LOOPS; n++) {
+        ecu_stage_done(ECU_STAGES);
+        ecu_stage_done(ECU_STAGES);
+        ecu_stage_done(ECU_STAGES);
+        ecu_stage_done(ECU_STAGES);
+    }
+    printf("STAGES %lu %lu", (unsigned long)stage_counts[ECU_STAGES],
+           (unsigned long)stage_calls[ECU_STAGES]);
+    for (k = 0; k < ECU_STAGES; k++) {
+        printf(" %lu %lu", (unsigned long)stage_counts[k], (unsigned long)stage_calls[k]);
+    }
+    printf("\n");
 }
 #endif
 
@@ -126,6 +169,9 @@ static int replay(FILE *f, const char *path)
 #ifdef REPLAY_SYSTICK
         {
             uint32_t t0 = SYST_CVR;
+#ifdef ECU_STAGE_PROFILE
+            stage_t0 = t0;
+#endif
             out = ecu_tick(&ecu, &in);
             counts += systick_since(t0);
         }
@@ -150,6 +196,9 @@ static int replay(FILE *f, const char *path)
 #ifdef REPLAY_SYSTICK
     printf("SYSTICK %lu %lu %lu\n", (unsigned long)counts, (unsigned long)calibrate(),
            (unsigned long)(2u * CALIBRATION_LOOPS));
+#endif
+#ifdef ECU_STAGE_PROFILE
+    print_stages();
 #endif
     printf("OK %ld ticks\n", (long)n_ticks);
     return 0;

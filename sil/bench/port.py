@@ -7,10 +7,15 @@
   through the linker's map; the objects' own sizes, unused functions included, are a detail line.
   RAM is the instance and the parameters as the replayer holds them, plus the stack bound: the
   deepest call chain from the core's entry points over GCC's call graph with its frames
-  (``-fcallgraph-info=su``), the library's division helper's frames read from the image;
+  (``-fcallgraph-info=su``), any library helper's frames read from the image;
 - instructions per tick: callgrind on the host build (``--toggle-collect=ecu_tick``) and QEMU on
   the Cortex-M4 build (``-icount shift=0``: SysTick counts the virtual clock, calibrated in the
-  same run by a loop of known length), both replaying the MRAC golden vector;
+  same run by a loop of known length), both replaying the MRAC golden vector; per stage of the
+  tick on the Cortex-M4 (``cm4_stage_instructions_per_tick_<stage>``, the stages of
+  ecu/firmware.py in their order): the same replay with the core built with ECU_STAGE_PROFILE,
+  SysTick counted from each stage's end to the next's (the first from the call of ecu_tick),
+  the profiling hook's own cost taken off each call; control law and limit selection run in
+  RUN only, their figures are per tick of the whole vector;
 - the CAN node with its XCP slave: flash (linked with the core and the frame code, split by
   origin; the whole image stated too) and RAM (its instances and the deepest stack from its entry
   points) against 20 KiB and 3 KiB, the slave's ODT entries (>= 16), and in the loop (the
@@ -116,8 +121,8 @@ def _library_frames(image: Path, name: str, seen: tuple[str, ...] = ()) -> int:
 def _stack_bound(image: Path) -> int:
     """The deepest stack the core's entry points take at -Os: over GCC's call graph of
     ecu_core.c (-fcallgraph-info=su: each function's static frame and its calls), the deepest
-    chain from ROOTS, with the frames of the library helpers it calls (the 64-bit division)
-    read from the linked image. The core has no recursion and no dynamic frames."""
+    chain from ROOTS, with the frames of any library helpers it calls read from the linked
+    image. The core has no recursion and no dynamic frames."""
     with tempfile.TemporaryDirectory() as tmp:
         obj = Path(tmp) / "ecu_core.o"
         subprocess.run(
@@ -250,6 +255,7 @@ def arm_figures(elf: Path) -> dict:
     libgcc = _symbol_sizes(elf, ("__aeabi_ldivmod", "__udivmoddi4", "__aeabi_uldivmod"))
     unlinked = {Path(s).stem + ".o": sum(_size(objects[s])[:2]) for s in build.FLASH_SOURCES}
     unlinked_total = sum(unlinked.values()) + sum(libgcc.values())
+    division = f" + libgcc 64-bit division {parts['libgcc']}" if parts.get("libgcc") else ""
     node = sum(_size(objects["ecu_node.c"])[:2])  # the CAN node (not in the flash target)
     ram = _symbol_sizes(elf, ("ecu", "params"))
     stack = _stack_bound(image)
@@ -258,15 +264,16 @@ def arm_figures(elf: Path) -> dict:
         # linked with --gc-sections from the public functions: what firmware carries
         "cm4_flash_bytes": flash,
         "cm4_core_flash_bytes": flash - frames,
-        "cm4_core_flash_detail": f"ecu_core.o {parts.get('ecu_core.o', 0)} + libgcc 64-bit "
-        f"division {parts.get('libgcc', 0)} + memcpy, memset {parts.get('libc', 0)}"
+        "cm4_core_flash_detail": f"ecu_core.o {parts.get('ecu_core.o', 0)}{division}"
+        f" + memcpy, memset {parts.get('libc', 0)}"
         + (f" + alignment {parts['fill']}" if parts.get("fill") else ""),
         "cm4_frames_flash_bytes": frames,
         "cm4_frames_flash_detail": f"ecu_frames.o {parts.get('ecu_frames.o', 0)} "
         f"+ turbojet.o {parts.get('turbojet.o', 0)}",
         # every function of the objects, before the linker drops the unused ones
         "cm4_flash_objects_detail": " + ".join(f"{k} {v}" for k, v in unlinked.items())
-        + f" + libgcc 64-bit division {sum(libgcc.values())} = {unlinked_total}",
+        + (f" + libgcc 64-bit division {sum(libgcc.values())}" if libgcc else "")
+        + f" = {unlinked_total}",
         "cm4_node_flash_bytes": node,
         "cm4_ram_bytes": ram_total,
         "cm4_ram_detail": f"ecu_t {ram.get('ecu', 0)} + params {ram.get('params', 0)} "
@@ -484,6 +491,35 @@ def qemu_instructions(vectors: Path, ticks: int) -> float | str:
     return round(counts * cal_instructions / cal_counts / ticks, 1)
 
 
+STAGES = (
+    "sensors", "history", "trips", "start_sequencer", "mode", "control_law", "limit_selection",
+    "pump_driver", "actuator_tests", "health", "logbook",
+)  # fmt: skip
+
+
+def qemu_stage_instructions(vectors: Path, ticks: int) -> dict:
+    """Instructions per tick of each of the tick's STAGES on the Cortex-M4 (QEMU -icount, the
+    replayer built with the stage profile): ``cm4_stage_instructions_per_tick_<stage>``."""
+    key = "cm4_stage_instructions_per_tick"
+    try:
+        elf = build.arm_replayer(stages=True)
+        done = qemu.run(elf, vectors, icount=True)
+    except (build.PortBuildError, FileNotFoundError) as exc:
+        return {key: str(exc)}
+    systick = re.search(r"SYSTICK (\d+) (\d+) (\d+)", done.stdout)
+    stages = re.search(r"STAGES ([\d ]+)", done.stdout)
+    words = [int(x) for x in stages.group(1).split()] if stages else []
+    if done.returncode != 0 or not systick or len(words) != 2 + 2 * len(STAGES):
+        return {key: f"QEMU stage replay failed: {done.stdout.strip()} {done.stderr.strip()}"}
+    _, cal_counts, cal_instructions = (int(x) for x in systick.groups())
+    per_count = cal_instructions / cal_counts
+    hook = words[0] / words[1]  # counts of one call of the hook
+    return {
+        f"{key}_{name}": round((counts - calls * hook) * per_count / ticks, 1)
+        for name, counts, calls in zip(STAGES, words[2::2], words[3::2], strict=True)
+    }
+
+
 def tick_us(g: golden.Golden) -> dict:
     """Microseconds per tick called from Python: the C core through ctypes and the Python
     firmware, on the vector's inputs."""
@@ -604,6 +640,7 @@ def run(quick: bool = False) -> dict:
         replayer = build.host_replayer()
         figures["host_instructions_per_tick"] = callgrind_instructions(replayer, vectors, g.ticks)
         figures["cm4_qemu_instructions_per_tick"] = qemu_instructions(vectors, g.ticks)
+        figures.update(qemu_stage_instructions(vectors, g.ticks))
         figures.update(tick_us(g))
     figures["instructions_target_met"] = all(
         isinstance(v, float) and v < INSTRUCTIONS_TARGET

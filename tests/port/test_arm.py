@@ -1,10 +1,13 @@
 """The Cortex-M4 build (arm-none-eabi-gcc -mcpu=cortex-m4 -mthumb -Os) replays the golden
 vectors under qemu-system-arm (mps2-an386, semihosting), and its figures meet the targets."""
 
+import inspect
+import re
 import subprocess
 
 import pytest
 
+from ecu.firmware import Ecu
 from ecu.port import build, qemu
 from sil.bench import port as bench
 from sil.run import golden as sources
@@ -87,3 +90,20 @@ def test_the_xcp_slave_costs_under_a_tenth_of_the_tick_in_the_loop(toolchains):
     assert 0 <= figures["xcp_share_no_master_pct"] <= 10.0
     daq = figures["pil_node_instructions_per_tick_xcp_daq_20"]
     assert daq > figures["pil_node_instructions_per_tick_xcp_no_master"]
+
+
+def test_the_stage_figures_cover_every_stage_and_add_up_to_the_tick(elf, vectors):
+    """`sil bench port` lists instructions per tick for each stage of the tick, in the Python
+    tick's order with its names (the C core's stage numbers the same), and on the Cortex-M4
+    they account for the whole tick's count."""
+    python_stages = tuple(re.findall(r"self\._stage_(\w+)\(", inspect.getsource(Ecu.tick)))
+    header = (build.PORT_DIR / "ecu_core.h").read_text()
+    c_stages = re.findall(r"^\s+ECU_STAGE_(\w+),$", header, re.M)  # the enum's members
+    assert bench.STAGES == python_stages == tuple(name.lower() for name in c_stages)
+    path, g = vectors["mrac-aero"]
+    stages = bench.qemu_stage_instructions(path, g.ticks)
+    assert list(stages) == [f"cm4_stage_instructions_per_tick_{n}" for n in bench.STAGES]
+    assert all(isinstance(v, float) and v >= 0 for v in stages.values()), stages
+    assert stages["cm4_stage_instructions_per_tick_control_law"] > 0  # the vector runs MRAC
+    tick = bench.qemu_instructions(path, g.ticks)
+    assert sum(stages.values()) == pytest.approx(tick, rel=0.03)
