@@ -867,3 +867,26 @@ def test_console_timing_options_are_finite_positive_and_bounded(capsys, option, 
         )
     else:
         assert code == 2 and f"argument {option}: expected" in output.splitlines()[-1]
+
+
+def test_a_bus_whose_run_tags_are_all_taken_is_refused_in_one_line(sil, tmp_path, udp_spec):
+    """As many runs on one bus as its tags keep apart: the next one says so, with no traceback,
+    and its folder says why it failed."""
+    from protocol.run_tag import MAX_TAG, claim_tag
+
+    spec = udp_spec()
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(VALID)
+    claims = [claim_tag(spec) for _ in range(MAX_TAG + 1)]
+    try:
+        done = sil("run", str(scenario), "--bus", spec, "--out", str(tmp_path / "out"),
+                   "--no-plots", timeout=120)  # fmt: skip
+    finally:
+        for claim in claims:
+            claim.release()
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == (
+        f"sil run: bus {spec}: all {MAX_TAG + 1} run tags are in use"
+    )
+    assert "Traceback" not in done.stderr
+    assert (tmp_path / "out" / "summary.json").exists()

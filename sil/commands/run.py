@@ -10,6 +10,7 @@ from pathlib import Path
 
 from protocol import strict_json
 from protocol.bus import BusSpecError
+from protocol.run_tag import TagsExhausted
 from sil import scenario as scenarios
 from sil.record import results
 from sil.record.canlog import EXTRA_FORMATS
@@ -220,8 +221,8 @@ def execute(scenario_ref: str, args: argparse.Namespace, out: Path | None = None
     except (BusSpecError, ValueError) as exc:
         print(f"sil run: {exc}", file=sys.stderr)
         return 2
-    except results.WriteError as exc:  # before the run began: a full disk, say
-        print(f"sil run: {exc}", file=sys.stderr)
+    except (results.WriteError, TagsExhausted) as exc:  # before the run began: a full disk, or
+        print(f"sil run: {exc}", file=sys.stderr)  # as many runs on the bus as it can keep apart
         return 1
     except KeyboardInterrupt as exc:  # before the run began, or while it ended
         print(f"sil run: aborted: {interrupt_reason(exc)}", file=sys.stderr)
