@@ -890,3 +890,11 @@ def test_a_bus_whose_run_tags_are_all_taken_is_refused_in_one_line(sil, tmp_path
     )
     assert "Traceback" not in done.stderr
     assert (tmp_path / "out" / "summary.json").exists()
+
+
+@pytest.mark.parametrize("option", ["--fuel", "--t0", "--p0", "--flight-speed", "--battery-v"])
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e400", "-1e9"])
+def test_the_plants_engine_options_are_finite_and_in_a_scenarios_ranges(capsys, option, value):
+    code, output = _main(["plant", option, value, "--bus", "udp:239.255.1.1@40000"], capsys)
+    assert code == 2
+    assert f"argument {option}: expected" in output.strip().splitlines()[-1], output

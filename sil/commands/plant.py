@@ -101,7 +101,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--fuel",
-        type=float,
+        type=option(positive=True, hi=0.1),
         default=0.008,
         help="start at the steady state of this fuel flow, kg/s",
     )
@@ -123,10 +123,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="start at rest, cold and unlit (aero plant): the ECU's sequencer starts it",
     )
-    parser.add_argument("--t0", type=float, default=288.15, help="ambient temperature, K")
-    parser.add_argument("--p0", type=float, default=101325.0, help="ambient pressure, Pa")
-    parser.add_argument("--flight-speed", type=float, default=0.0, help="flight speed, m/s")
-    parser.add_argument("--battery-v", type=float, default=22.2, help="battery voltage, V")
+    # the ranges a scenario file's [plant] takes (sil/scenario)
+    parser.add_argument(
+        "--t0", type=option(lo=200, hi=350), default=288.15, help="ambient temperature, K"
+    )
+    parser.add_argument(
+        "--p0", type=option(lo=20_000, hi=110_000), default=101325.0, help="ambient pressure, Pa"
+    )
+    parser.add_argument(
+        "--flight-speed", type=option(lo=0, hi=300), default=0.0, help="flight speed, m/s"
+    )
+    parser.add_argument(
+        "--battery-v", type=option(lo=1, hi=60), default=22.2, help="battery voltage, V"
+    )
     parser.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     parser.add_argument(
         "--ready-file",
