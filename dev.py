@@ -25,6 +25,7 @@ VENV = ROOT / ".venv"
 STAMP = VENV / ".setup-stamp"
 BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
 QUICK = "not slow and not vcan and not machine_speed"  # the fast tier's marker expression
+SLOWEST = 15  # the slowest tests listed after a run
 
 
 def _run(*cmd: str | Path) -> int:
@@ -65,7 +66,8 @@ def main(argv: list[str]) -> int:
         rest = [a for a in rest if a != "--quick"]
         rest = ["-m", QUICK, *rest]
     # pytest exits 5 when it collected no test: that is a failure here, as any non-zero exit.
-    return _run(BIN / "python", "-m", "pytest", *rest)
+    # The slowest tests are listed at the end, where a slower suite shows first.
+    return _run(BIN / "python", "-m", "pytest", f"--durations={SLOWEST}", *rest)
 
 
 if __name__ == "__main__":
