@@ -76,6 +76,10 @@ def _alive(pids: list[int]) -> list[int]:
     return [pid for pid in pids if Path(f"/proc/{pid}").exists()]
 
 
+# what differs from one run to the next of the same scenario: its times, its bus and its senders
+PER_RUN = ("wall_time_s", "realtime_factor", "startup_s", "bus", "run_id", "nodes", "run_senders")
+
+
 @pytest.mark.parametrize("mode", ["inproc", "lockstep"])
 def test_the_files_are_those_of_the_recorder_in_process(tmp_path, monkeypatch, mode):
     s = scenario.load(_scenario(tmp_path, 8.0))
@@ -87,7 +91,7 @@ def test_the_files_are_those_of_the_recorder_in_process(tmp_path, monkeypatch, m
         assert a == (tmp_path / "local" / name).read_bytes(), name
     for summary in (offloaded, local):  # (on a bus, the node processes' own counts end when
         # they are stopped: an ECU left 2 s without sensor frames ticks once on its own clock)
-        for key in ("wall_time_s", "realtime_factor", "startup_s", "bus", "run_id", "nodes"):
+        for key in PER_RUN:
             summary.pop(key, None)
     assert offloaded == local
     assert offloaded["status"] == "completed" and offloaded["frames"] > 3000
