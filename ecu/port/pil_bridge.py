@@ -6,10 +6,11 @@ clock: in lockstep it waits for its sensor frame (and a due Demand) as the Pytho
 do, so the bridge only carries frames and adds no timing of its own.
 
 Watched (a :class:`ecu.node.OtherEcuWatch`), the bridge hears the frames of the IDs the ECU sends
-as another ECU's, as the Python and C nodes do: in real time it listens for them before it
-carries anything (the image's frames meanwhile are dropped), and an image that has not flown the
-engine for the watch's time when another ECU is heard is silenced (nothing more of it reaches
-the bus) and the bridge ends; the image's ticks are counted by its EcuActuator frames.
+as another ECU's, as the Python and C nodes do: in real time it listens for them before the
+image's engine frames reach the bus (those it sends meanwhile are dropped; XCP and the frames to
+the image are carried), and an image that has not flown the engine for the watch's time when
+another ECU is heard is silenced (nothing more of it reaches the bus) and the bridge ends; the
+image's ticks are counted by its EcuActuator frames.
 """
 
 from __future__ import annotations
@@ -51,30 +52,29 @@ class PilBridge:
         bus.set_filters([{"can_id": i, "can_mask": 0x7FF, "extended": False} for i in heard])
         self._ids = frozenset(frame_ids)
         self._stop = threading.Event()
+        self._listening = watch is not None and watch.listen_periods > 0
 
     @property
     def silenced(self) -> bool:
         return self.watch is not None and self.watch.refused is not None
 
     def run(self, should_stop: Callable[[], bool]) -> None:
-        if self.watch is not None and self.watch.listen_periods > 0:  # real time: listen first
-            end = time.monotonic() + LISTEN_S
-            self._to_image(lambda: should_stop() or time.monotonic() > end, carry=False)
-        if self.silenced:
-            return
         while self.image.recv(0) is not None:  # sent before the run began (real time): not of it
             self.stale += 1
         back = threading.Thread(target=self._from_image, name="pil-from-image", daemon=True)
         back.start()
         try:
+            if self._listening:  # real time, watched: the bus heard first (XCP carried on)
+                end = time.monotonic() + LISTEN_S
+                self._to_image(lambda: should_stop() or time.monotonic() > end)
+                self._listening = False
             self._to_image(should_stop)
         finally:
             self._stop.set()
             back.join(2.0)
 
-    def _to_image(self, should_stop: Callable[[], bool], carry: bool = True) -> None:
-        """The bus's frames of the ECU's IDs to the image (``carry`` False: only heard, for
-        the watch); another ECU's frames to the watch."""
+    def _to_image(self, should_stop: Callable[[], bool]) -> None:
+        """The bus's frames of the ECU's IDs to the image; another ECU's frames to the watch."""
         receive = bus_batch_receiver(self.bus)
         watch = self.watch
         while not should_stop() and not self._stop.is_set() and not self.silenced:
@@ -88,7 +88,7 @@ class PilBridge:
                 if watch is not None and frame_id in watch.names:
                     watch.heard(frame_id, self.image_ticks)
                     continue
-                if frame_id not in self._ids or not carry:
+                if frame_id not in self._ids:
                     continue
                 msg = can.Message(arbitration_id=frame_id, is_extended_id=False, data=data)
                 try:
@@ -110,6 +110,9 @@ class PilBridge:
                 continue
             if self.silenced:
                 continue  # (another ECU flies the engine: nothing of this one reaches the bus)
+            if self._listening and msg.arbitration_id in self.watch.names:
+                self.stale += 1  # (the image's engine frames while the bridge listens)
+                continue
             if msg.arbitration_id == self._actuator_id:
                 self.image_ticks += 1
             if send is not None:

@@ -230,7 +230,8 @@ def run(args: argparse.Namespace) -> int:
     except (BusSpecError, ValueError) as exc:
         print(f"sil ecu: {exc}", file=sys.stderr)
         return 2
-    node.watch_bus(_say)  # another ECU on the bus: this one stays silent, or reports it
+    if not args.ready_file:  # a bench's ECU (a run's nodes are kept to the run by its bus)
+        node.watch_bus(_say)  # another ECU on the bus: this one stays silent, or reports it
     listen_for(node, bus)  # its filters set before it says it is ready
     if node.xcp is not None:  # said once the node listens: a master may connect from now on
         x = node.xcp
@@ -267,14 +268,15 @@ def run(args: argparse.Namespace) -> int:
         **stats.summary(),
         **bus.stats(),
         "ticks_without_due_demand": node.demand_waits,
-        **node.watch.summary(),
+        **(node.watch.summary() if node.watch is not None else {}),
     }
     if node.service is not None:
         summary["service"] = node.service.summary()
     if node.xcp is not None:
         summary["xcp"] = node.xcp.summary()
     code = _report(summary, args)
-    return 2 if node.watch.refused is not None else code  # (said when it refused)
+    refused = node.watch is not None and node.watch.refused is not None
+    return 2 if refused else code  # (said when it refused)
 
 
 def _say(text: str) -> None:
@@ -428,7 +430,8 @@ def _run_pil(args: argparse.Namespace, params, booted) -> int:  # noqa: ANN001
         try:
             image.wait_ready()
             print(f"pil: image {image.elf.name} on {image.url}", file=sys.stderr, flush=True)
-            watch = OtherEcuWatch(codec, params.rate_hz, lockstep, _say)
+            bench = not args.ready_file  # (a run's nodes are kept to the run by its bus)
+            watch = OtherEcuWatch(codec, params.rate_hz, lockstep, _say) if bench else None
             actuator_id = codec["EcuActuator"].frame_id
             bridge = PilBridge(bus, image_bus, frame_ids, watch, actuator_id)
             if xcp is not None:  # said once the bridge listens: a master may connect
