@@ -15,11 +15,11 @@ tell another sender's frames apart (:mod:`protocol.run_sequence`).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from protocol.run_bus import RunBus
+from sil.record.results import write_atomically
 
 START_POLL_S = 0.002  # how often a node looks for the start file
 
@@ -41,10 +41,8 @@ def sender_in(path: Path) -> str | None:
 
 def give_start(path: Path, senders: Mapping[str, str]) -> None:
     """The start file, naming the run's ``senders`` (name -> token; none: every sender heard),
-    written under a temporary name and renamed, so that it appears whole."""
-    partial = path.with_name(path.name + ".partial")
-    partial.write_text("".join(f"{name} {token}\n" for name, token in senders.items()))
-    os.replace(partial, path)
+    written atomically, so that it appears whole."""
+    write_atomically(path, "".join(f"{name} {token}\n" for name, token in senders.items()))
 
 
 def senders_in(path: Path) -> dict[str, str]:
