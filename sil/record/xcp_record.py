@@ -108,6 +108,18 @@ class Recording:
     notes: list[str]
 
 
+def _daq_info(x, attempts: int = 3) -> dict:  # noqa: ANN001 (pyXCP's Master)
+    """The slave's DAQ processor and resolution info, asked again when an answer was lost (a
+    loaded bus drops a frame now and then; pyXCP marks the info incomplete, it does not ask
+    again). RuntimeError after ``attempts`` incomplete answers."""
+    for _ in range(attempts):
+        info = x.getDaqInfo(include_event_lists=False)
+        valid = info.get("valid", {})
+        if valid.get("processor", True) and valid.get("resolution", True):
+            return info
+    raise RuntimeError(f"no complete DAQ processor and resolution info in {attempts} attempts")
+
+
 def record(
     bus: can.BusABC,
     a2l: A2l,
@@ -148,7 +160,7 @@ def record(
             x.getCommModeInfo()
             identification = x.identifier(0)
             x.cond_unlock("DAQ")
-            policy.setup()
+            policy.setup(daq_info_override=_daq_info(x))
             policy.start()
         except (XcpResponseError, XcpTimeoutError, RuntimeError) as exc:
             return RecordError(f"{where} refused the DAQ list: {mdf.one_line(exc)}", 1), None
