@@ -166,6 +166,7 @@ def _read_a2l(path: Path, said: list[str]) -> A2l:
             from pya2l import model
         except ImportError as exc:
             raise A2lError(f"the A2L needs pya2ldb ({exc}); install: {XCP_INSTALL}") from None
+        session = None
         try:
             session = pya2l.import_a2l(
                 str(path), in_memory=True, progress_bar=False, loglevel="ERROR"
@@ -208,6 +209,12 @@ def _read_a2l(path: Path, said: list[str]) -> A2l:
             raise
         except Exception as exc:  # pya2ldb's parser: a file it cannot read
             raise A2lError(f"--a2l {path}: cannot read it: {mdf.one_line(exc)}") from None
+        finally:
+            # Closed here, in the thread that read it: left to the collector, its SQLite
+            # connection could be closed from another thread (the page's), which SQLite refuses
+            # with a traceback on the terminal.
+            if session is not None:
+                session.close()
     ids = (int(master), int(slave)) if master is not None and slave is not None else None
     return A2l(measurements, ids, events, epk, name, characteristics)
 

@@ -4,6 +4,9 @@ the curves with their points, and the logbook's enumeration by its names."""
 
 from __future__ import annotations
 
+import gc
+import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -50,3 +53,20 @@ def test_the_logbook_enumeration_reads_by_name(a2l) -> None:  # noqa: ANN001
     assert [physical(k, conversion) for k in range(len(SHUTDOWN_NAMES))] == list(SHUTDOWN_NAMES)
     assert physical(1250, {"a": 0.1, "b": 0.0}) == pytest.approx(125.0)
     assert physical(7, None) == 7
+
+
+def test_an_a2l_read_in_one_thread_leaves_nothing_for_another(tmp_path) -> None:
+    """The page reads its A2L in a worker thread: pya2ldb's SQLite database is closed there,
+    not by the collector in whichever thread it runs (SQLite refuses that with a traceback)."""
+    path = tmp_path / "turbojet_ecu.a2l"
+    path.write_text(a2l_text(100, (0x700, 0x701), Limits()), "latin-1")
+    read = threading.Thread(target=read_a2l, args=(path,))
+    raised: list[str] = []
+    hook, sys.unraisablehook = sys.unraisablehook, lambda u: raised.append(repr(u.exc_value))
+    try:
+        read.start()
+        read.join()
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
+    assert raised == []
