@@ -41,6 +41,11 @@ def _q(x: float, frac_bits: int, field: str) -> int:
     return v
 
 
+def _stored_q24(x: float) -> float:
+    """``x`` as a Q24 parameter of the table stores it (the nearest multiple of 2**-24)."""
+    return round(x * (1 << Q24)) / (1 << Q24)
+
+
 def _tustin(a21: float, a22: float, dt: float) -> tuple[tuple[float, ...], tuple[float, float]]:
     """Trapezoidal discretisation of x' = [[0,1],[a21,a22]] x + [0,1] c with c held.
 
@@ -170,7 +175,9 @@ def compile_params(p: EcuParams) -> FirmwareParams:
     sigma_rate = math.sqrt(2.0) * sigma_n / (2.0 * m * dt)
     g_pdt = p.p22 * dt
     # K_b matching the initial Lambda-hat: Lambda K_b + (Lambda - Lambda_c) V0 = 0 (eq. 5.14 form)
-    v0_pump = p.trim_v - p.pump_dead_v  # pump voltage at trim above the dead voltage
+    # pump voltage at trim above the dead voltage, from the values as the parameter table stores
+    # them (Q24): the C slave derives these words from the stored raws after a write
+    v0_pump = _stored_q24(p.trim_v) - _stored_q24(p.pump_dead_v)
     kb0 = v0_pump * (p.lambda_commissioned / p.init_lambda - 1.0) if p.pump_scaling_on else 0.0
     th_scale = p.init_lambda / p.lambda_commissioned if p.pump_scaling_on else 1.0
     pi = pi_schedule(p)
@@ -227,7 +234,7 @@ def compile_params(p: EcuParams) -> FirmwareParams:
         th_per_lam1_q28=_q(p.init_theta_row2[0] / p.lambda_commissioned, Q28, "init_theta_row2"),
         th_per_lam2_q28=_q(p.init_theta_row2[1] / p.lambda_commissioned, Q28, "init_theta_row2"),
         pump_v0_q24=_q(v0_pump, Q24, "pump_dead_v"),
-        lam_comm_v0_q16=_q(p.lambda_commissioned * v0_pump, 16, "lambda_commissioned"),
+        lam_comm_v0_q16=_q(_stored_q24(p.lambda_commissioned) * v0_pump, 16, "lambda_commissioned"),
         g_b_q28=_q(p.gamma_b * dt, Q28, "gamma_b"),
         ref_am21_q24=_q(ref_a21, Q24, "ref_wn"),
         ref_am22_q24=_q(ref_a22, Q24, "ref_zeta"),
