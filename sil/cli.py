@@ -3,7 +3,8 @@
 Each subcommand is one module, named as the command with ``-`` for ``_``. A node process (`sil
 ecu`, `sil plant`) must start fast, so when the command is known only its module is imported
 (scipy, matplotlib and numba stay out of the ECU process); `sil --help` or an unknown command
-imports them all to list them.
+imports them all to list them. python-can comes without its MF4 classes, which no command uses
+(:mod:`protocol.python_can`).
 """
 
 from __future__ import annotations
@@ -16,10 +17,12 @@ import pkgutil
 import sys
 from types import ModuleType
 
-from sil import commands
-from sil.validation import InputError
+from protocol.python_can import import_without_mf4
 
-NODE_COMMANDS = ("ecu", "plant")  # node processes: they start fast
+import_without_mf4()  # before any command's module imports python-can
+
+from sil import commands  # noqa: E402
+from sil.validation import InputError  # noqa: E402
 
 
 def _command_modules(argv: list[str]) -> list[ModuleType]:
@@ -27,11 +30,6 @@ def _command_modules(argv: list[str]) -> list[ModuleType]:
     wanted = next((a.replace("-", "_") for a in argv if not a.startswith("-")), None)
     if wanted in names:
         names = [wanted]
-    if names[0] in NODE_COMMANDS and len(names) == 1:
-        # python-can imports asammdf (and pandas) for its MF4 support when it is installed:
-        # 1.2 s of a node's start, for a format no node reads or writes. An entry of None
-        # makes that import fail, and python-can goes on without MF4.
-        sys.modules.setdefault("asammdf", None)  # type: ignore[arg-type]
     return [importlib.import_module(f"sil.commands.{name}") for name in names]
 
 

@@ -34,10 +34,14 @@ import sys
 import time
 from pathlib import Path
 
-import can
+from protocol.python_can import import_without_mf4
 
-from protocol import strict_json
-from protocol.e2e import E2EChecker
+import_without_mf4()  # (seconds of the emulated guest's start)
+
+import can  # noqa: E402
+
+from protocol import strict_json  # noqa: E402
+from protocol.e2e import E2EChecker  # noqa: E402
 
 CHANNEL = "vcan0"
 RECEIVE_TIMEOUT_S = 10.0
