@@ -10,6 +10,11 @@
 
 Both are idempotent: the install step runs again only when pyproject.toml changes.
 Extra arguments after `test` go to pytest (for example `python3 dev.py test -k replay`).
+
+The tests run in two parts: first those that do not depend on the wall clock, on every core
+(pytest-xdist, each module on one worker), then those paced by the wall clock or asserting the
+machine's pace, one at a time with the machine to themselves (marker expression APART). Each
+part lists its slowest tests.
 """
 
 from __future__ import annotations
@@ -25,7 +30,9 @@ VENV = ROOT / ".venv"
 STAMP = VENV / ".setup-stamp"
 BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
 QUICK = "not slow and not vcan and not machine_speed"  # the fast tier's marker expression
-SLOWEST = 15  # the slowest tests listed after a run
+APART = "realtime or machine_speed"  # tests that run alone, after the others
+SLOWEST = 15  # the slowest tests listed after each part
+NO_TESTS = 5  # pytest's exit status when it collected nothing
 
 
 def _run(*cmd: str | Path) -> int:
@@ -62,12 +69,41 @@ def main(argv: list[str]) -> int:
     if lint != 0:
         print("dev.py: ruff found problems (see above)", file=sys.stderr)
         return lint
-    if "--quick" in rest:
-        rest = [a for a in rest if a != "--quick"]
-        rest = ["-m", QUICK, *rest]
-    # pytest exits 5 when it collected no test: that is a failure here, as any non-zero exit.
-    # The slowest tests are listed at the end, where a slower suite shows first.
-    return _run(BIN / "python", "-m", "pytest", f"--durations={SLOWEST}", *rest)
+    return test(rest)
+
+
+def _marker_expression(args: list[str]) -> tuple[str | None, list[str]]:
+    """The -m expression among pytest's arguments (``-m EXPR``, ``-mEXPR`` or ``-m=EXPR``),
+    and the arguments without it."""
+    expression, others, items = None, [], iter(args)
+    for arg in items:
+        if arg == "-m":
+            expression = next(items, "")
+        elif arg.startswith("-m") and not arg.startswith("--"):
+            expression = arg[2:].removeprefix("=")
+        else:
+            others.append(arg)
+    return expression, others
+
+
+def test(args: list[str]) -> int:
+    """The suite in its two parts (module docstring). A part that selects no test is fine when
+    the other ran some; no test at all is a failure (pytest's exit 5), as any non-zero exit."""
+    quick = "--quick" in args
+    expression, rest = _marker_expression([a for a in args if a != "--quick"])
+    chosen = " and ".join(f"({e})" for e in (QUICK if quick else None, expression) if e)
+    both = f"({chosen}) and " if chosen else ""
+    workers = str(max(1, min(os.cpu_count() or 1, 4)))
+    pytest = [BIN / "python", "-m", "pytest", f"--durations={SLOWEST}"]
+    print(f"dev.py: tests that do not depend on the wall clock, on {workers} workers", flush=True)
+    every_core = ["-n", workers, "--dist", "loadfile", "--no-loadscope-reorder"]
+    shared = _run(*pytest, *every_core, "-m", f"{both}not ({APART})", *rest)
+    print("dev.py: tests paced by the wall clock, one at a time", flush=True)
+    alone = _run(*pytest, "-m", f"{both}({APART})", *rest)
+    if shared == alone == NO_TESTS:
+        return NO_TESTS
+    codes = [code for code in (shared, alone) if code not in (0, NO_TESTS)]
+    return codes[0] if codes else 0
 
 
 if __name__ == "__main__":

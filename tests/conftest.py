@@ -14,7 +14,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import can  # noqa: F401  whole, with its MF4 classes: the tests' second reader of our MF4 logs
 import pytest
+from hypothesis import settings
+
+# Property tests compute microseconds per example; a deadline would only measure the machine's
+# load (the suite runs on every core), so examples have none.
+settings.register_profile("suite", deadline=None)
+settings.load_profile("suite")
 
 SIL = (sys.executable, "-m", "sil.cli")  # the `sil` command of this interpreter
 
@@ -226,14 +233,154 @@ MACHINE_SPEED_TESTS = frozenset(
         "sil/test_bench.py::test_sil_bench_reports_every_run_and_the_loop_without_start_up",
     }
 )
+# Tests paced by the wall clock or asserting it (real-time nodes and runs, a client keeping pace
+# with a lockstep run, a browser on a live page, benches that time): marked realtime, they run
+# after the others, one at a time with the machine to themselves (dev.py's second part).
+REALTIME_MODULES = frozenset(
+    {
+        # `sil bench service --quick`: asserts frames/s, round trips/s and µs per tick
+        "service/test_bench.py",
+        # `sil plant --realtime` + `sil ecu --mode realtime --serial pty`, console
+        # start/throttle/stop, asserts start_s < 40
+        "service/test_bench_start.py",
+        # lockstep run at ~25x real time; a client thread must join and keep pace (ticks[0] < 200,
+        # ticks[-1] >= 360, no gaps)
+        "service/test_sil_stream.py",
+        # `sil bench campaign --quick`: measures runs per minute
+        "sil/test_campaign_bench.py",
+        # `sil replay --loop` plays a log onto the run's bus in real time
+        "sil/test_foreign_frames.py",
+        # Playwright/Chromium against the live page; `bench` fixture = real-time plant + ECU + sil
+        # gsu
+        "gsu/test_browser.py",
+        # `bench` fixture / gsu.station(): real-time plant + ECU; asserts answers within 3 s and
+        # live-again deadlines
+        "gsu/test_masters.py",
+        # in-process XCP slave thread served every 10 ms; asserts refused within 0.1 s,
+        # SETTLE_S/SILENT_S timing
+        "gsu/test_xcp_link.py",
+        # `sil plant --realtime` beside `sil ecu --mode realtime`, the pyXCP session of
+        # docs/calibration.md
+        "xcp/test_calibration_doc.py",
+        # `sil plant --realtime` + `sil ecu --impl X --mode realtime`; glow test waited with 2 s and
+        # 3 s limits
+        "xcp/test_logbook_pyxcp.py",
+        # pyXCP against `sil ecu --mode realtime` beside `sil plant --realtime --standstill`
+        "xcp/test_pyxcp.py",
+        # lockstep run at 40x+ real time; the pyXCP master must start DAQ within ~1000 ticks (>=
+        # 6000 of 7000) and lose no DTO (a race with wall time)
+        "xcp/test_lockstep.py",
+    }
+)
+REALTIME_TESTS = frozenset(
+    {
+        # benches that measure speed
+        # `sil bench plant`: asserts real-time factors > 1 (already MACHINE_SPEED_TESTS)
+        "plant/test_steady_line_and_bench.py::test_sil_bench_plant_reports_both_plants",
+        # `sil bench sil`: real-time factors, python_tick_us 5..500, plant_us 2..200
+        "sil/test_bench.py::test_sil_bench_reports_every_run_and_the_loop_without_start_up",
+        # `sil run --mode realtime` at 100 Hz and 1 kHz: missed_ticks == 0, periods within 0.9..1.2x
+        "sil/test_realtime_bench.py::test_realtime_bench_reports_each_node_at_each_rate",
+        # `sil bench all --only codec,ecu`: runs the codec and ECU timing benches
+        "sil/test_bench_all.py::test_all_writes_the_page_with_every_figure_and_target",
+        # run_all runs the codec timing bench (asserts only codec_encode_us > 0)
+        "sil/test_bench_all.py::test_a_failing_bench_is_reported_and_the_others_still_run",
+        # `sil bench codec --quick`: a timing bench (asserts only > 0)
+        "test_cli.py::test_bench_codec_json",
+        # sil.bench.port.sil_figures: in-process real-time factors (asserts only > 0)
+        "port/test_sil.py::test_sil_bench_port_reports_the_in_process_cases",
+        # bench.compare_with times ticks (CPU time; asserts only > 0)
+        "ecu/test_bench_against.py::test_the_same_firmware_gives_the_same_outputs_and_both_are_timed",
+        # bench.compare_with runs its timed rounds too (asserts only the equality flag)
+        "ecu/test_bench_against.py::test_a_firmware_that_answers_differently_is_found_out",
+        # `sil bench ecu --quick --against HEAD`: times both firmwares
+        "ecu/test_bench_against.py::test_the_command_reports_both_figures_and_the_speed_up",
+        # real-time runs and nodes
+        # `sil run --mode realtime`: realtime_factor < 1.1, 250..320 periods
+        "sil/test_run.py::test_real_time_run_is_paced_by_the_wall_clock_and_reports_jitter",
+        # `sil run --mode realtime`, node SIGKILLed 1 s in: wall_s within killed-0.3..killed+1.0
+        "sil/test_early_end.py::test_a_node_killed_in_a_real_time_run_is_named_with_when_and_why",
+        # `sil run --mode realtime --ecu-impl pil` (QEMU), wall_s window as above
+        "sil/test_early_end.py::test_the_emulator_killed_under_the_image_in_real_time_ends_the_run_naming_it",
+        # in process, but asserts wall_s in [3.0, 4.0) read from perf_counter
+        "sil/test_early_end.py::test_a_node_that_failed_is_named_with_its_code_its_last_line_and_when",
+        # message "stopped 2.0 s" formed from time.monotonic(): a 50 ms margin
+        "sil/test_early_end.py::test_a_real_time_run_short_of_answers_says_when_they_stopped_or_how_far_behind",
+        # five `sil run --mode realtime` at once against lockstep (start time within 1 s)
+        "sil/test_mode_equivalence.py::test_the_starts_in_real_time_are_the_lockstep_starts",
+        # `sil plant --realtime` + `sil ecu --mode realtime --serial pty`, then realtime second ECUs
+        # (python, c, pil)
+        "sil/test_second_ecu.py::test_a_second_ecu_on_a_live_bench_bus_stays_silent",
+        # replay.play: real-time playback at 1 kHz, duration_s >= 0.199
+        "sil/test_replay.py::test_playback_timing_and_filter",
+        # replay.play of an MF4: real-time playback, duration_s >= 0.099
+        "sil/test_mdf.py::test_an_mf4_plays_onto_a_bus",
+        # lockstep, but asserts silence 0.5..3.0 s and detection took < 5 s (wall)
+        "sil/test_watchdog.py::test_a_stopped_node_aborts_the_run_naming_it",
+        # asserts took < 10 s and "stopped ... for 1.x s" (wall)
+        "sil/test_watchdog.py::test_a_node_stopped_before_it_is_ready_ends_the_run_naming_it",
+        # spawns 2x cores busy spinners; asserts took < 5 s
+        "sil/test_lockstep_load.py::test_an_ecu_stopped_on_a_loaded_machine_is_found_and_named_within_5_s",
+        # `sil plant --realtime` + `sil ecu --mode realtime --serial pty`, console, sleep(4) then
+        # speed check
+        "service/test_bench_restart.py::test_a_bench_restart_goes_to_idle_not_to_the_old_throttle",
+        # start_ecu() real-time ECU, `sil console --rate 20 --timeout 0.5 live`
+        "service/test_console_cli.py::test_live_prints_samples_as_they_come_and_keeps_them_when_the_ecu_goes_away",
+        # start_ecu() real-time ECU (default mode)
+        "service/test_console_cli.py::test_the_logbook_prints_the_stored_counts_by_name_in_their_units",
+        # module fixture ecu_port = start_ecu() real-time ECU
+        "service/test_console_cli.py::test_set_refuses_a_value_no_finite_number_naming_the_parameter",
+        # start_ecu() real-time ECU twice; 50 Hz stream of 100 Hz ticks
+        "service/test_pty.py::test_service_over_a_pty_between_processes_and_a_power_cut",
+        # start_ecu() real-time ECU, interactive `sil console`
+        "service/test_pty.py::test_interactive_console_on_a_terminal",
+        # lockstep ECU, but asserts identify answered within 1.0 s
+        "service/test_pty.py::test_a_lockstep_ecu_with_no_plant_serves_its_port",
+        # a lockstep ECU, then start_ecu() real-time reader ECU
+        "service/test_logbook_at_stop.py::test_an_ecu_stopped_in_the_cool_down_keeps_the_run",
+        # start_ecu() real-time ECU, SIGKILL at a random wall time 0.1..1.0 s; >= 1 cut inside a
+        # save
+        "service/test_storage.py::test_power_cut_of_the_ecu_process_during_saves_over_the_port",
+        # asserts port.counters.worst_s < 0.05 (wall time, preemption included)
+        "service/test_services.py::test_work_per_tick_is_bounded",
+        # `sil plant --realtime --ticks 40` watched on the bus
+        "test_cli_robustness.py::test_a_plant_applies_faults_named_as_in_a_scenario",
+        # `sil plant --realtime` + `sil ecu --impl c --mode realtime`, pyXCP, sleep(4) then speed
+        # check
+        "xcp/test_bench_restart.py::test_pyxcp_restart_of_the_c_ecu_goes_to_idle",
+        # `sil ecu --impl c --mode realtime --ticks 1` (trivial, but a real-time node)
+        "xcp/test_ids.py::test_the_c_node_takes_xcp_ids",
+        # real-time plant + ECU; >= 150 samples in 2 s, mean dt 9.5..10.5 ms
+        "xcp/test_daq_mf4.py::test_sil_xcp_record_writes_the_a2ls_names_units_and_conversions",
+        # lockstep at ~40x; the master must join within ~2000 of 4000 ticks and lose no sample (race
+        # with wall time)
+        "xcp/test_daq_mf4.py::test_daq_of_a_lockstep_run_into_mf4_is_its_trace",
+        # asserts every endpoint answers within 1.0 s
+        "gsu/test_requests.py::test_every_endpoint_answers_at_once_when_the_ecu_is_silent",
+        # asserts unlock is refused within 1.0 s
+        "gsu/test_server.py::test_a_silent_ecu_is_a_refusal_at_once",
+        # wall-clock Bridge: asserts 0.18 <= lag < 0.5 s
+        "campaign/test_bridge.py::test_bridge_delays_frames_by_ticks_of_the_wall_clock",
+        # Bridge thread must forward within recv(0.1)/sleep(0.1) windows
+        "campaign/test_bridge.py::test_sensor_ticks_follow_plant_sensors_and_release_delayed_frames_before_the_new_tick",
+        # wall-clock Bridge thread; drained with 0.5 s quiet gaps (weak dependence)
+        "campaign/test_bridge.py::test_bridge_drops_at_its_rate_flips_bits_and_passes_the_rest_both_ways",
+        # `sil bridge --duration 4` paced by the wall clock; 20 frames drained with a 0.5 s gap
+        "campaign/test_bridge.py::test_sil_bridge_command_between_two_udp_buses",
+        # busy spinners on every core beside a lockstep run: slows whatever runs beside it
+        "sil/test_lockstep_load.py::"
+        "test_a_lockstep_run_beside_busy_processes_is_the_quiet_machines_run",
+    }
+)
 TESTS = Path(__file__).resolve().parent
 
 
 def _named_tests_missing() -> list[str]:
-    """Entries of SLOW_TESTS and MACHINE_SPEED_TESTS whose module does not define the test (a
-    renamed test would otherwise leave its tier unnoticed)."""
-    missing = []
-    for entry in sorted(SLOW_TESTS | MACHINE_SPEED_TESTS):
+    """Modules of SLOW_MODULES and REALTIME_MODULES that are not there, and entries of SLOW_TESTS,
+    MACHINE_SPEED_TESTS and REALTIME_TESTS whose module does not define the test (a renamed test
+    would otherwise leave its tier unnoticed)."""
+    missing = sorted(m for m in SLOW_MODULES | REALTIME_MODULES if not (TESTS / m).is_file())
+    for entry in sorted(SLOW_TESTS | MACHINE_SPEED_TESTS | REALTIME_TESTS):
         module, _, test = entry.partition("::")
         path = TESTS / module
         name = test.split("[", 1)[0]
@@ -254,3 +401,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.slow)
         if test in MACHINE_SPEED_TESTS or case in MACHINE_SPEED_TESTS:
             item.add_marker(pytest.mark.machine_speed)
+        if module in REALTIME_MODULES or test in REALTIME_TESTS:
+            item.add_marker(pytest.mark.realtime)
+    # The VM's module first: on its own worker for most of the run, beside all the others.
+    items.sort(key=lambda item: item.get_closest_marker("vcan") is None)

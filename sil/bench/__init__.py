@@ -19,4 +19,5 @@ TARGETS = {
     "fleet": "sil.bench.fleet",
     "campaign": "sil.bench.campaign",
     "gsu": "sil.bench.gsu",
+    "tests": "sil.bench.tests",
 }

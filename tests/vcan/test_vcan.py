@@ -7,15 +7,16 @@ module, in which
    ``candump -L vcan0`` captures them, then injects a good and a bad-CRC frame with ``cansend``
    and runs our E2E checker on what python-can received. Back on the host, ``cantools decode``
    with our DBC must give the values encoded here.
-2. A 20 s lockstep scenario (MRAC on the fast model) runs as plant and ECU processes on
+2. A 5 s lockstep scenario (MRAC on the fast model) runs as plant and ECU processes on
    ``socketcan:vcan0`` while ``candump -L vcan0`` captures the bus; ``cantools decode`` of the
    capture must agree with the run's can.log, which must equal the host's in-process run of the
    same scenario byte for byte. The plant's compiled code comes from a numba cache written on the
    host for a generic CPU (compiling it under emulation would take many minutes).
 
 When the VM cannot start, the tests fail with the reason: they are never skipped. Leave them out
-with ``-m "not vcan"``. The whole module takes 3 to 7 minutes (the run is some 100 times slower
-than on the host under software emulation).
+with ``-m "not vcan"``. The whole module takes 10 to 15 minutes of one core, most of it Python
+starting its processes in the guest (software emulation, the host's files shared over 9p); the
+suite runs it first, beside the other tests.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from tools.vcan_vm import VcanVmError, VmResult, run_in_vcan_vm
 VM_TIMEOUT_S = 1200.0
 CANTOOLS = Path(sys.executable).with_name("cantools")
 SIL_SCENARIO = "thesis-5.2-mrac-fast"
-SIL_DURATION_S = 20
+SIL_DURATION_S = 5  # 500 ticks: every frame of the run's schedule, many times over
 PAIR_DURATION_S = 5  # two runs at once on vcan0, each kept apart by its run tag
 # The plant's numba code, compiled on the host for a CPU that the emulated guest also has.
 NUMBA_ENV = {"NUMBA_CPU_NAME": "generic"}
