@@ -79,7 +79,10 @@ def _tier(name: str) -> dict:
 
 def run(quick: bool = False) -> dict:
     _setup()
-    figures: dict = {"cores": os.cpu_count(), "load_average_1min_before": os.getloadavg()[0]}
+    figures: dict = {
+        "cores": os.cpu_count(),
+        "load_average_1min_before": round(os.getloadavg()[0], 2),
+    }
     met = {}
     for name, key in (("quick", "quick_under_3_min"), ("full", "full_within_20_min")):
         if quick and name == "full":
