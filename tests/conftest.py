@@ -8,6 +8,7 @@ import json
 import os
 import random
 import select
+import signal
 import subprocess
 import sys
 import time
@@ -387,6 +388,13 @@ def _named_tests_missing() -> list[str]:
         if not path.is_file() or f"def {name}(" not in path.read_text():
             missing.append(entry)
     return missing
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # Ctrl-C as in a terminal, for the tests that interrupt a recording or a node: a test run
+    # started in the background by a shell without job control inherits Ctrl-C ignored, and so
+    # would every process a test starts (Python keeps an ignored SIGINT ignored).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
