@@ -37,20 +37,40 @@ def master(bus: can.BusABC, ids: tuple[int, int], policy):  # noqa: ANN001, ANN2
 def connect(x, timeout_s: float) -> None:  # noqa: ANN001 (pyXCP's Master)
     """CONNECT until the slave answers (an ECU not yet up, a run still starting), every 0.2 s
     rather than after the whole command timeout, so that no more of a lockstep run goes by
-    than needed."""
+    than needed. A slave that was busy answers the CONNECTs it held all at once: those answers
+    are let arrive and dropped (XCP answers carry no request number, so a stale one would be
+    taken as the answer to every later command in turn)."""
     from pyxcp.types import XcpTimeoutError
 
     transport = x.transport
     normal = transport.timeout
     transport.timeout = 200_000_000  # ns
     deadline = time.monotonic() + timeout_s
+    sent = 0
     try:
         while True:
             try:
+                sent += 1
                 x.connect()
-                return
+                break
             except XcpTimeoutError:
                 if time.monotonic() > deadline:
                     raise
     finally:
         transport.timeout = normal
+    if sent > 1:
+        _drop_late_answers(transport)
+
+
+def _drop_late_answers(transport, quiet_s: float = 0.3, limit_s: float = 5.0) -> int:  # noqa: ANN001
+    """Drop the answers that arrive until none has for ``quiet_s`` (at most ``limit_s``); how
+    many were dropped. (pyXCP's transport queues answers in ``resQueue``.)"""
+    dropped, end = 0, time.monotonic() + limit_s
+    while time.monotonic() < end:
+        time.sleep(quiet_s)
+        with transport.resQueue_condition:
+            if not transport.resQueue:
+                break
+            dropped += len(transport.resQueue)
+            transport.resQueue.clear()
+    return dropped
