@@ -108,12 +108,6 @@ class Recording:
     notes: list[str]
 
 
-# A loaded bus loses or delays a frame now and then: a command pyXCP repeats after its timeout
-# may be carried out twice (a WRITE_DAQ past its ODT's end), so a refused set-up is done again
-# from its start (FREE_DAQ) before the recording is refused.
-SETUP_ATTEMPTS = 3
-
-
 def _daq_info(x, attempts: int = 3) -> dict:  # noqa: ANN001 (pyXCP's Master)
     """The slave's DAQ processor and resolution info, asked again when an answer was lost (a
     loaded bus drops a frame now and then; pyXCP marks the info incomplete, it does not ask
@@ -162,20 +156,14 @@ def record(
             connect(x, connect_timeout_s)
         except XcpTimeoutError:
             return RecordError(f"no answer from {where} within {connect_timeout_s:g} s", 1), None
-        for attempt in range(1, SETUP_ATTEMPTS + 1):
-            try:
-                x.getCommModeInfo()
-                identification = x.identifier(0)
-                x.cond_unlock("DAQ")
-                policy.setup(daq_info_override=_daq_info(x))
-                policy.start()
-                break
-            except (XcpResponseError, XcpTimeoutError, RuntimeError) as exc:
-                if attempt == SETUP_ATTEMPTS:
-                    refused = f"{where} refused the DAQ list: {mdf.one_line(exc)}"
-                    return RecordError(refused, 1), None
-                notes.append(f"the DAQ list was set up again ({mdf.one_line(exc)}): a command "
-                             "or its answer was lost or late on the bus")  # fmt: skip
+        try:
+            x.getCommModeInfo()
+            identification = x.identifier(0)
+            x.cond_unlock("DAQ")
+            policy.setup(daq_info_override=_daq_info(x))
+            policy.start()
+        except (XcpResponseError, XcpTimeoutError, RuntimeError) as exc:
+            return RecordError(f"{where} refused the DAQ list: {mdf.one_line(exc)}", 1), None
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
             time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
