@@ -162,3 +162,38 @@ def test_a_recording_that_cannot_be_written_is_kept(tmp_path) -> None:  # noqa: 
     gsu.out_dir = tmp_path
     done = gsu.record_stop()
     assert done["frames"] == 5 and Path(done["path"]).parent == tmp_path
+
+
+def test_the_parameters_list_gives_up_in_its_budget_and_says_why(tmp_path, monkeypatch) -> None:  # noqa: ANN001
+    from types import SimpleNamespace
+
+    from sil.console.gsu import server
+    from sil.console.gsu.live import Live
+    from sil.console.gsu.xcp_link import ANOTHER_MASTER, Unavailable
+
+    read: list[str] = []
+    heard = [True]
+
+    class SlowLink:  # every read answered, each after another master's command came near it
+        a2l = SimpleNamespace(characteristics={
+            name: SimpleNamespace(name=name, kind="VALUE", unit="K", lower=0, upper=2, comment="")
+            for name in ("bench_arm", "a", "b", "c", "d")
+        })  # fmt: skip
+        problem = None
+
+        def read_characteristic(self, c) -> float:  # noqa: ANN001
+            time.sleep(0.05)
+            read.append(c.name)
+            return 1.0
+
+        def status(self) -> dict:
+            return {"another_master": heard[0]}
+
+    monkeypatch.setattr(server, "PARAMS_BUDGET_S", 0.12)
+    gsu = server.Gsu(Live(), SlowLink(), tmp_path, TOKEN)  # type: ignore[arg-type]
+    with pytest.raises(Unavailable, match=rf"parameters: 3 of 4 read in 0.12 s; {ANOTHER_MASTER}"):
+        gsu.parameters()
+    assert read == ["a", "b", "c"]  # the bench's commands are not parameters
+    heard[0] = False
+    with pytest.raises(Unavailable, match="the ECU answers slowly"):
+        gsu.parameters()

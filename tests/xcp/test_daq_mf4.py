@@ -127,7 +127,7 @@ def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path, sil, udp_group):
     assert np.allclose(t, (ticks - ticks[0]) * 0.01, atol=1e-6)
 
     column, rows = _trace(out / "trace.csv")
-    compared = 0
+    compared, last = 0, -1
     worst: dict[str, float] = {}
 
     def check(tick: int, name: str, trace_column: str, value: float, bound: float) -> None:
@@ -140,7 +140,7 @@ def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path, sil, udp_group):
         k = tick - 1  # sample n (the ECU's n-th tick done) is the trace's row of tick n - 1
         if k not in rows:
             continue
-        compared += 1
+        compared, last = compared + 1, k
         for name, (trace_column, clamp) in EVERY_TICK.items():
             value = float(physical[name].samples[i])
             if clamp is not None:
@@ -154,7 +154,10 @@ def test_daq_of_a_lockstep_run_into_mf4_is_its_trace(tmp_path, sil, udp_group):
             check(tick, "ap21", "Est_Ap21", float(physical["ap21"].samples[i]), 1e-8)
     print(f"DAQ MF4: {len(ticks)} samples, {compared} compared with trace.csv; largest "
           f"difference per measurement: {worst}")  # fmt: skip
-    assert compared >= 2000 and set(worst) == set(names) - {"ticks"}  # (the master joins late)
+    # the master joins when the machine lets it (its DAQ set-up is a few dozen commands, each
+    # answered at a tick): 10 s at least, more than a step of the staircase, on to the run's end
+    assert compared >= 1000 and last >= max(rows) - 1, (compared, last, max(rows))
+    assert set(worst) == set(names) - {"ticks"}
     m.close()
 
 

@@ -32,7 +32,7 @@ from urllib.parse import parse_qs, urlsplit
 
 from protocol import strict_json
 from sil.console.gsu.live import Live
-from sil.console.gsu.xcp_link import Refused, Unavailable, XcpLink
+from sil.console.gsu.xcp_link import ANOTHER_MASTER, Refused, Unavailable, XcpLink
 from sil.record import mdf
 
 STREAM_HZ = 20.0
@@ -46,6 +46,7 @@ PARAM_FILE = "turbojet-gsu parameters"
 MAX_BODY = 1 << 20
 MAX_NUMBER = 1e15  # a number in a request, at most this large
 SOCKET_TIMEOUT_S = 10.0  # a request (its headers, its body) comes within this
+PARAMS_BUDGET_S = 10.0  # the parameters' listing gives up after this (about 1 s alone on the bus)
 # a command's fields (None: any, the parameter file's own)
 FIELDS: dict[str, frozenset[str] | None] = {
     "/api/params": frozenset({"name", "value"}),
@@ -116,10 +117,19 @@ class Gsu:
 
     # -- parameters ----------------------------------------------------------------------------
     def parameters(self) -> list[dict]:
-        rows = []
-        for c in self.link.a2l.characteristics.values():
-            if c.name.startswith(BENCH_PREFIX):
-                continue
+        """Every parameter of the A2L as the ECU holds it, or :class:`Unavailable` when they
+        cannot all be read within :data:`PARAMS_BUDGET_S` (another master's commands keep coming
+        near the page's)."""
+        rows: list[dict] = []
+        every = self.link.a2l.characteristics
+        names = [name for name in every if not name.startswith(BENCH_PREFIX)]
+        deadline = time.monotonic() + PARAMS_BUDGET_S
+        for c in (every[name] for name in names):
+            if time.monotonic() > deadline:
+                heard = self.link.status()["another_master"]
+                why = ANOTHER_MASTER if heard else self.link.problem or "the ECU answers slowly"
+                raise Unavailable(f"parameters: {len(rows)} of {len(names)} read in "
+                                  f"{PARAMS_BUDGET_S:g} s; {why}")  # fmt: skip
             try:
                 value = self.link.read_characteristic(c)
                 problem = None
