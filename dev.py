@@ -8,7 +8,8 @@
                             the fast tier for the inner loop: no slow, virtual-machine or
                             machine-speed tests (a few minutes on 2 cores)
 
-Both are idempotent: the install step runs again only when pyproject.toml changes.
+Both are idempotent: the install step runs again only when pyproject.toml changes, the build
+of the compiled firmware tick only when its sources do.
 Extra arguments after `test` go to pytest (for example `python3 dev.py test -k replay`).
 
 The tests run in two parts: first those that do not depend on the wall clock, on every core
@@ -40,7 +41,14 @@ def _run(*cmd: str | Path) -> int:
 
 
 def setup() -> None:
-    """Create .venv and install the package with its test extras, unless already current."""
+    """Create .venv and install the package with its test extras, unless already current; then
+    build the firmware tick's compiled modules when their sources changed (ecu.compiled_tick:
+    without a C compiler the tick runs interpreted, as fast as before)."""
+    _install()
+    _run(BIN / "python", "-m", "ecu.build_tick", "build", "--if-stale")
+
+
+def _install() -> None:
     wanted = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
     if STAMP.exists() and STAMP.read_text().strip() == wanted:
         return

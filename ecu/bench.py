@@ -3,7 +3,8 @@
 The ECU runs the default preset (MRAC, robustness and limiters on: the longest path) in RUN on
 a scripted, realistic input sequence (speed swinging around trim with sensor noise, square-wave
 demand, EGT near its limit so the limit loop switches in and out, an occasional lost frame),
-generated before timing so only the tick is measured.
+generated before timing so only the tick is measured. ``tick_build`` says which tick ran: the
+compiled one (ecu.compiled_tick) when built from these sources, else the interpreted one.
 
 With ``against`` (``sil bench ecu --against REV``) the tick of the firmware at git revision REV
 runs in the same process beside this one: both first replay the same inputs and must give the
@@ -19,6 +20,7 @@ from __future__ import annotations
 import gc
 import importlib
 import io
+import shutil
 import statistics
 import subprocess
 import sys
@@ -29,6 +31,7 @@ from array import array
 from pathlib import Path
 from types import ModuleType
 
+from ecu import compiled_tick
 from ecu.firmware import Ecu, EcuInputs
 
 RPM_PER_PCT = 1125
@@ -88,7 +91,12 @@ def new_running_ecu() -> tuple[Ecu, EcuInputs]:
     return ecu, i
 
 
-TARGET_TEXT = {"no_allocation_per_tick": "under 1 allocated block per 1,000 firmware ticks"}
+TARGET_TEXT = {
+    "no_allocation_per_tick": "under 1 allocated block per 1,000 firmware ticks",
+    "compiled_speedup": ">= 1.5x: the compiled tick against the interpreted one of the same "
+    "source, side by side, the same outputs and state",
+}
+COMPILED_SPEEDUP = 1.5
 
 
 def run(quick: bool = False, against: str | None = None) -> dict:
@@ -110,9 +118,20 @@ def run(quick: bool = False, against: str | None = None) -> dict:
         "alloc_blocks_per_1k_ticks": round(per_1k, 3),
         "ticks": n,
         "mode_at_end": ecu.out.mode,
+        "tick_build": "compiled" if compiled_tick.in_use() else "interpreted",
         "sat_events": ecu.out.sat_events,
         "targets_met": {"no_allocation_per_tick": per_1k < 1},
     }
+    if compiled_tick.in_use():
+        side = compare_with(interpreted_firmware(), inputs, n)
+        figures["us_per_tick_interpreted"] = side["us_per_tick_against"]
+        figures["compiled_speedup"] = side["speedup"]
+        figures["compiled_same_outputs_and_state"] = side["same_outputs_and_state"]
+        figures["targets_met"]["compiled_speedup"] = (
+            side["speedup"] >= COMPILED_SPEEDUP and side["same_outputs_and_state"]
+        )
+    else:
+        figures["targets_met"]["compiled_speedup"] = False  # (no build: no C compiler here)
     if other is not None:
         figures.update(compare_with(other, inputs, n))
         figures["against"] = against
@@ -132,25 +151,38 @@ def firmware_at(rev: str) -> ModuleType:
     if done.returncode != 0:
         message = done.stderr.decode(errors="replace").strip().splitlines()
         raise ValueError(f"--against {rev}: {message[-1] if message else 'git archive failed'}")
-    ours = {name: m for name, m in sys.modules.items() if name.split(".")[0] == "ecu"}
     with tempfile.TemporaryDirectory(prefix="ecu-bench-") as root:
         with tarfile.open(fileobj=io.BytesIO(done.stdout)) as tar:
             tar.extractall(root, filter="data")
-        for name in ours:
+        return _import_beside(root)
+
+
+def interpreted_firmware() -> ModuleType:
+    """This package's ecu.firmware interpreted (no compiled build beside its sources),
+    imported beside the one this process runs."""
+    with tempfile.TemporaryDirectory(prefix="ecu-bench-") as root:
+        shutil.copytree(compiled_tick.PACKAGE, Path(root) / "ecu",
+                        ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
+        return _import_beside(root)
+
+
+def _import_beside(root: str) -> ModuleType:
+    ours = {name: m for name, m in sys.modules.items() if name.split(".")[0] == "ecu"}
+    for name in ours:
+        del sys.modules[name]
+    sys.path.insert(0, root)
+    try:
+        return importlib.import_module("ecu.firmware")
+    finally:
+        sys.path.remove(root)
+        for name in [name for name in sys.modules if name.split(".")[0] == "ecu"]:
             del sys.modules[name]
-        sys.path.insert(0, root)
-        try:
-            return importlib.import_module("ecu.firmware")
-        finally:
-            sys.path.remove(root)
-            for name in [name for name in sys.modules if name.split(".")[0] == "ecu"]:
-                del sys.modules[name]
-            sys.modules.update(ours)
+        sys.modules.update(ours)
 
 
 def _same(a: object, b: object) -> bool:
     """Two records (outputs or state) hold the same values, slot by slot."""
-    for name in type(a).__slots__:
+    for name in type(a).FIELDS:
         x, y = getattr(a, name), getattr(b, name)
         if (list(x) if isinstance(x, array) else x) != (list(y) if isinstance(y, array) else y):
             return False
@@ -164,7 +196,7 @@ def compare_with(other: ModuleType, inputs: tuple, n: int, rounds: int = 20) -> 
     ours, i = new_running_ecu()
     theirs = other.Ecu()
     j = other.EcuInputs()
-    for name in EcuInputs.__slots__:
+    for name in EcuInputs.FIELDS:
         setattr(j, name, getattr(i, name))
     same = True
     for k in range(2_000):

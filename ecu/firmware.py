@@ -27,6 +27,10 @@ as the C port's ``ecu_tick`` (``ecu/port/ecu_core.c``):
 
 from __future__ import annotations
 
+from typing import ClassVar
+
+from mypy_extensions import mypyc_attr
+
 from ecu import actuator_tests as T
 from ecu import faults as F
 from ecu import modes as M
@@ -92,7 +96,7 @@ SPEED_FAILS = F.SPEED_RANGE | F.SPEED_RATE | F.SPEED_STUCK  # a speed sensor fai
 class EcuInputs:
     """One tick's inputs, raw integers as the CAN driver delivers them."""
 
-    __slots__ = (
+    FIELDS: ClassVar[tuple[str, ...]] = (
         "tick",  # lockstep tick number of the sensor frame
         "speed_rpm",  # shaft speed, 1 rpm per count
         "egt_dk",  # EGT, 0.1 K per count
@@ -115,16 +119,32 @@ class EcuInputs:
         "test_level",
         "test_ms",
     )
+    __slots__ = FIELDS
+    tick: int
+    speed_rpm: int
+    egt_dk: int
+    supply_mv: int
+    pump_ma: int
+    demand_cpct: int
+    open_loop_mv: int
+    arm: int
+    stop: int
+    sensor_status: int
+    analog_status: int
+    demand_status: int
+    test_request: int
+    test_level: int
+    test_ms: int
 
     def __init__(self) -> None:
-        for name in self.__slots__:
+        for name in self.FIELDS:
             setattr(self, name, 0)
 
 
 class EcuOutputs:
     """One tick's outputs (the same object is reused every tick)."""
 
-    __slots__ = (
+    FIELDS: ClassVar[tuple[str, ...]] = (
         "tick",  # echo of the input tick (lockstep answer)
         "duty_cpct",  # pump PWM duty, 0.01 % per count (0..10000)
         "pump_mv",  # pump voltage aimed for, mV
@@ -146,24 +166,75 @@ class EcuOutputs:
         "seq_reason",  # the last start's abort reason (ecu.start_sequencer, 0: none)
         "inputs_valid",  # 1 once valid speed and EGT readings came since power-up
     )  # fmt: skip
+    __slots__ = FIELDS
+    tick: int
+    duty_cpct: int
+    pump_mv: int
+    pump_enable: int
+    mode: int
+    fault_word: int
+    sat_events: int
+    ap21_q24: int
+    ap22_q24: int
+    lambda_q24: int
+    theta21_q24: int
+    theta22_q24: int
+    kx1_q24: int
+    kx2_q24: int
+    kr_q24: int
+    kf1_q24: int
+    kf2_q24: int
+    pump_health_pm: int
+    nref_cpct: int
+    n_cpct: int
+    owner: int
+    starter_cpct: int
+    igniter: int
+    seq_state: int
+    seq_reason: int
+    inputs_valid: int
 
     def __init__(self) -> None:
-        for name in self.__slots__:
+        for name in self.FIELDS:
             setattr(self, name, 0)
 
 
 class TickVars:
     """What one tick's stages hand each other (preallocated: nothing survives the tick)."""
 
-    __slots__ = (
+    FIELDS: ClassVar[tuple[str, ...]] = (
         "mode", "new_mode", "faults", "speed_ok", "egt_ok", "analog_fresh", "inputs_valid",
         "n_rpm", "n_q24", "dn", "rate", "ctrl_rate", "demand",
         "running", "trip_fault", "trip_shutdown", "relight", "start_abort",
         "u", "v", "pump_mv", "duty", "enable",
     )  # fmt: skip
+    __slots__ = FIELDS
+    mode: int
+    new_mode: int
+    faults: int
+    speed_ok: int
+    egt_ok: int
+    analog_fresh: int
+    inputs_valid: int
+    n_rpm: int
+    n_q24: int
+    dn: int
+    rate: int
+    ctrl_rate: int
+    demand: int
+    running: int
+    trip_fault: int
+    trip_shutdown: int
+    relight: int
+    start_abort: int
+    u: int
+    v: int
+    pump_mv: int
+    duty: int
+    enable: int
 
     def __init__(self) -> None:
-        for name in self.__slots__:
+        for name in self.FIELDS:
             setattr(self, name, 0)
 
 
@@ -172,6 +243,7 @@ def _q24_to_cpct(x_q24: int) -> int:
     return (x_q24 * 100 + (1 << 23)) >> 24
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)  # (a recording or test firmware)
 class Ecu:
     """The firmware. ``Ecu(params)`` powers up in OFF; ``tick(inputs)`` runs one control step."""
 
@@ -192,7 +264,7 @@ class Ecu:
         """Power-on initialisation (the only way out of a latched FAULT)."""
         s = self.s
         p = self.p
-        for name in EcuState.__slots__:
+        for name in EcuState.FIELDS:
             v = getattr(s, name)
             if isinstance(v, int):
                 setattr(s, name, 0)

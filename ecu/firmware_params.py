@@ -16,6 +16,7 @@ Discretisation (all stated here, computed for the configured rate):
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 from ecu.fixedpoint import INT32_MAX, INT32_MIN, Q16, Q24, Q28
 from ecu.inlet import day_target_dk, ncor_k_q24
@@ -69,7 +70,7 @@ def _tustin(a21: float, a22: float, dt: float) -> tuple[tuple[float, ...], tuple
 class FirmwareParams:
     """Integer constants of the firmware (a C ``const`` struct). Built by :func:`compile_params`."""
 
-    __slots__ = (
+    FIELDS: ClassVar[tuple[str, ...]] = (
         "rate_hz", "controller", "dt_q24", "rpm_to_q24_k", "trim_n_q24", "trim_v_q24",
         "entry_v_q24",
         "am21_q24", "am22_q24", "idm11_q24", "idm12_q24", "idm21_q24", "idm22_q24",
@@ -118,9 +119,173 @@ class FirmwareParams:
         "seq_stabilise_ticks", "seq_relight_max", "seq_cool_cpct", "seq_cool_egt_dk",
         "seq_cool_rearm_dk", "seq_cool_rpm", "seq_cool_ticks", "seq_soak_ticks",
     )  # fmt: skip
+    __slots__ = FIELDS
+    rate_hz: int
+    controller: int
+    dt_q24: int
+    rpm_to_q24_k: int
+    trim_n_q24: int
+    trim_v_q24: int
+    entry_v_q24: int
+    am21_q24: int
+    am22_q24: int
+    idm11_q24: int
+    idm12_q24: int
+    idm21_q24: int
+    idm22_q24: int
+    idh1_q24: int
+    idh2_q24: int
+    g_a1_q28: int
+    g_a2_q28: int
+    g_lam_q28: int
+    g_th1_q28: int
+    g_th2_q28: int
+    init_theta_q24: tuple[int, ...]
+    lambda_comm_q24: int
+    health_alarm_pm: int
+    rate_half_window: int
+    lambda_floor_on: int
+    lambda_floor_q24: int
+    dead_zone_on: int
+    dead_zone_q24: int
+    freeze_on: int
+    adapt_band_q24: int
+    p12_ratio_q24: int
+    pump_scaling_on: int
+    th_per_lam1_q28: int
+    th_per_lam2_q28: int
+    pump_v0_q24: int
+    lam_comm_v0_q16: int
+    g_b_q28: int
+    ref_am21_q24: int
+    ref_am22_q24: int
+    ref_bm2_q24: int
+    refm11_q24: int
+    refm12_q24: int
+    refm21_q24: int
+    refm22_q24: int
+    refh1_q24: int
+    refh2_q24: int
+    g_x1_q28: int
+    g_x2_q28: int
+    g_r_q28: int
+    g_f1_q28: int
+    g_f2_q28: int
+    u_den_min_q24: int
+    mrac_lag_c_q24: int
+    pid_kp_q24: int
+    pid_ki_dt_q28: int
+    pid_kd_q24: int
+    pi_n0_q24: int
+    pi_step_q24: int
+    pi_kp_q24: tuple[int, ...]
+    pi_ki_dt_q28: tuple[int, ...]
+    fuel_schedules_on: int
+    sched_n0_q24: int
+    sched_step_q24: int
+    ncor_k_q24: int
+    inlet_from_egt: int
+    accel_line_q24: tuple[int, ...]
+    decel_floor_q24: tuple[int, ...]
+    accel_rate_q24: tuple[int, ...]
+    pump_dead_q24: int
+    sched_lam_lo_q24: int
+    sched_lam_hi_q24: int
+    idle_q24: int
+    demand_max_q24: int
+    limiters_on: int
+    egt_limit_dk: int
+    egt_gas_margin_dk: int
+    egt_zero_fuel_dk: int
+    egt_engage_q24: int
+    rate_engage_q24: int
+    n_limit_engage_q24: int
+    egt_kp_q24: int
+    egt_ki_dt_q24: int
+    egt_lead_cf_q16: int
+    egt_lead_ctc_q16: int
+    egt_max_dk: int
+    egt_max_ticks: int
+    accel_max_q24: int
+    decel_max_q24: int
+    rate_kp_q24: int
+    rate_ki_dt_q24: int
+    n_limit_q24: int
+    n_limit_kp_q24: int
+    n_limit_ki_dt_q24: int
+    overspeed_rpm: int
+    overspeed_ticks: int
+    flameout_rpm: int
+    flameout_ticks: int
+    flameout_egt_dk: int
+    flameout_egt_ticks: int
+    v_min_q24: int
+    v_max_q24: int
+    v_slew_q24: int
+    duty_min_cpct: int
+    duty_max_cpct: int
+    supply_nominal_mv: int
+    pump_stall_ma: int
+    pump_trip_ma: int
+    pump_stall_ticks: int
+    pump_dry_base_ma: int
+    pump_dry_ma_per_v: int
+    pump_dry_min_q24: int
+    pump_dry_ticks: int
+    speed_valid_max_rpm: int
+    speed_step_max_rpm: int
+    speed_fault_ticks: int
+    speed_stuck_ticks: int
+    speed_stuck_dv_q24: int
+    egt_open_high_dk: int
+    egt_open_low_dk: int
+    egt_fault_ticks: int
+    egt_fail_demand_q24: int
+    obs_l1_dt_q24: int
+    obs_l2_dt_q24: int
+    rate_filter_on: int
+    rf_k1_q24: int
+    rf_k2_q24: int
+    rf_k3_q24: int
+    demand_hold_ticks: int
+    demand_shutdown_ticks: int
+    sensor_loss_ticks: int
+    analog_loss_ticks: int
+    run_entry_rpm: int
+    shutdown_done_rpm: int
+    start_on: int
+    seq_start_cpct: int
+    seq_purge_ticks: int
+    seq_ign_rpm: int
+    seq_spinup_ticks: int
+    seq_ign_v0_q24: int
+    seq_ign_v_step_q24: int
+    seq_ign_v_max_q24: int
+    seq_light_rise_dk: int
+    seq_light_track_q8: int
+    seq_ign_ticks: int
+    seq_igniter_hold_ticks: int
+    seq_starter_step_cpct: int
+    seq_ramp_v_step_q24: int
+    seq_accel_q24: int
+    seq_egt_target_dk: int
+    seq_hot_dk: int
+    seq_egt_cap_dk: int
+    seq_day_target_dk: int
+    seq_cutoff_rpm: int
+    seq_ramp_ticks: int
+    seq_idle_rpm: int
+    seq_stabilise_ticks: int
+    seq_relight_max: int
+    seq_cool_cpct: int
+    seq_cool_egt_dk: int
+    seq_cool_rearm_dk: int
+    seq_cool_rpm: int
+    seq_cool_ticks: int
+    seq_soak_ticks: int
 
     def __init__(self, **values: object) -> None:
-        missing = set(self.__slots__) - set(values)
+        missing = set(self.FIELDS) - set(values)
         if missing:
             raise ParamError(f"FirmwareParams: missing {sorted(missing)}")
         for k, v in values.items():

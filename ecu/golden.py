@@ -22,8 +22,8 @@ from ecu.port.core import param_words
 from ecu.state import EcuState
 
 MAGIC = 0x31564745  # "EGV1"
-INPUT_FIELDS = EcuInputs.__slots__
-OUTPUT_FIELDS = EcuOutputs.__slots__
+INPUT_FIELDS = EcuInputs.FIELDS
+OUTPUT_FIELDS = EcuOutputs.FIELDS
 ROW_WORDS = len(INPUT_FIELDS) + len(OUTPUT_FIELDS) + 1
 _FNV_OFFSET = 2166136261
 _FNV_PRIME = 16777619
@@ -49,7 +49,7 @@ class Golden:
 def state_digest(s: EcuState) -> int:
     """FNV-1a (32-bit) over the state's int32 words, in slot order (arrays expanded)."""
     h = _FNV_OFFSET
-    for name in EcuState.__slots__:
+    for name in EcuState.FIELDS:
         value = getattr(s, name)
         for w in value if isinstance(value, array) else (value,):
             h = ((h ^ (w & 0xFFFFFFFF)) * _FNV_PRIME) & 0xFFFFFFFF

@@ -31,6 +31,8 @@ starter assisting. All voltages Q7.24 V, temperatures 0.1 K (dk), speeds rpm, du
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 from ecu.firmware_params import FirmwareParams
 from ecu.fixedpoint import INT32_MAX, clamp
 from ecu.state import EcuState
@@ -56,7 +58,7 @@ STARTER_FAILURE = 3  # the starter did not bring the rotor to the ignition speed
 HOT_START = 4  # EGT over the start limit
 FLAMEOUT = 5  # the flame went out during the start (the EGT fell back)
 STOPPED = 6  # stop request or arm released during the start
-REASONS = (
+REASONS: tuple[str, ...] = (
     "NONE",
     "IGNITION_TIMEOUT",
     "SLOW_ACCEL",
@@ -72,7 +74,11 @@ DUTY_FULL_CPCT = 10000
 class SeqOut:
     """The sequencer's commands for this tick (one preallocated record)."""
 
-    __slots__ = ("v_q24", "starter_cpct", "igniter")
+    FIELDS: ClassVar[tuple[str, ...]] = ("v_q24", "starter_cpct", "igniter")
+    __slots__ = FIELDS
+    v_q24: int
+    starter_cpct: int
+    igniter: int
 
     def __init__(self) -> None:
         self.v_q24 = 0

@@ -7,6 +7,7 @@ Scalars are slot attributes holding ints that every store saturates to int32; ve
 from __future__ import annotations
 
 from array import array
+from typing import ClassVar
 
 from ecu.params import LOG_ABORTS, RATE_BUF_LEN
 
@@ -29,7 +30,7 @@ N_THETA = 12
 class EcuState:
     """All firmware state, preallocated. Formats are in the names (see ecu.fixedpoint)."""
 
-    __slots__ = (
+    FIELDS: ClassVar[tuple[str, ...]] = (
         # adaptive parameters: Q7.24 words and their 16-bit extensions
         "theta_q24", "theta_ext",
         # speed history for the central-difference rate (raw rpm), ring index and fill count
@@ -81,6 +82,88 @@ class EcuState:
         "test_active", "test_ticks_left", "test_time_left_ms", "test_level_held",
         "test_request_last",
     )  # fmt: skip
+    __slots__ = FIELDS
+    theta_q24: array
+    theta_ext: array
+    n_hist_rpm: array
+    u_hist_q24: array
+    hist_idx: int
+    hist_fill: int
+    xh1_q24: int
+    xh2_q24: int
+    e2_q24: int
+    obs_n_q24: int
+    obs_v_q24: int
+    rf_n_q24: int
+    rf_v_q24: int
+    rf_a_q16: int
+    xm1_q24: int
+    xm2_q24: int
+    u_lag_q24: int
+    egt_e_prev_q24: int
+    acc_e_prev_q24: int
+    dec_e_prev_q24: int
+    nlim_e_prev_q24: int
+    egt_lead_q12: int
+    egt_vf_q24: int
+    v_applied_q24: int
+    owner: int
+    v_saturated: int
+    line_owns: int
+    speed_rpm: int
+    egt_dk: int
+    supply_mv: int
+    pump_ma: int
+    demand_q24: int
+    open_loop_q24: int
+    arm: int
+    stop: int
+    sensor_age: int
+    analog_age: int
+    demand_age: int
+    speed_range_cnt: int
+    speed_rate_cnt: int
+    speed_stuck_cnt: int
+    speed_stuck_v_q24: int
+    egt_open_cnt: int
+    egt_over_cnt: int
+    overspeed_cnt: int
+    flameout_cnt: int
+    flame_egt_cnt: int
+    pump_stall_cnt: int
+    pump_dry_cnt: int
+    speed_failed: int
+    speed_seen: int
+    inputs_seen: int
+    rearm_wait: int
+    seq_state: int
+    seq_reason: int
+    seq_timer: int
+    seq_v_q24: int
+    seq_egt_ref_q8: int
+    relights: int
+    starter_cpct: int
+    igniter: int
+    seq_target_dk: int
+    ncor_k_q24: int
+    mode: int
+    faults: int
+    sat_events: int
+    ticks: int
+    log_runs: int
+    log_run_time_s: int
+    log_run_frac_ticks: int
+    log_starts: int
+    log_aborts: array
+    log_last_max_egt_dk: int
+    log_last_max_speed_cpct: int
+    log_last_shutdown: int
+    log_in_run: int
+    test_active: int
+    test_ticks_left: int
+    test_time_left_ms: int
+    test_level_held: int
+    test_request_last: int
 
     def __init__(self) -> None:
         self.theta_q24 = array("i", [0] * N_THETA)
@@ -88,6 +171,6 @@ class EcuState:
         self.n_hist_rpm = array("i", [0] * RATE_BUF_LEN)
         self.u_hist_q24 = array("i", [0] * RATE_BUF_LEN)
         self.log_aborts = array("i", [0] * LOG_ABORTS)
-        for name in self.__slots__:
+        for name in self.FIELDS:
             if not hasattr(self, name):
                 setattr(self, name, 0)

@@ -31,6 +31,7 @@ from types import ModuleType
 
 from cantools.database.can.c_source import camel_to_snake_case
 
+from ecu.compiled_tick import source_file
 from protocol.dbc import DBC_PATH
 
 HEADER_NAME = "ecu_constants.h"
@@ -93,7 +94,7 @@ def _snake(name: str) -> str:
 def _module_ints(module: ModuleType) -> dict[str, int]:
     """The upper-case int constants a module assigns at its top level (not those it imports),
     read from its source, with their values from the module."""
-    tree = ast.parse(Path(str(module.__file__)).read_text())
+    tree = ast.parse(source_file(module).read_text())
     names = [
         target.id
         for node in tree.body

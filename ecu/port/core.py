@@ -2,7 +2,7 @@
 ``out``, ``reset()`` and ``tick(inputs) -> outputs``, so the CAN node runs either.
 
 The records' layouts are not restated here: they are read from the library's field-name strings
-(the X-macro lists of ``ecu_core.h``) and checked against the Python firmware's ``__slots__``,
+(the X-macro lists of ``ecu_core.h``) and checked against the Python firmware's ``FIELDS``,
 so a field added on one side only is refused at load time with its name.
 """
 
@@ -50,10 +50,10 @@ def _record(lib: ctypes.CDLL, symbol: str, expected: tuple[str, ...], what: str)
 class _Lib:
     def __init__(self) -> None:
         lib = ctypes.CDLL(str(host_library()))
-        self.params_t = _record(lib, "ecu_param_names", FirmwareParams.__slots__, "ecu_params_t")
-        self.state_t = _record(lib, "ecu_state_names", EcuState.__slots__, "ecu_state_t")
-        self.inputs_t = _record(lib, "ecu_input_names", EcuInputs.__slots__, "ecu_inputs_t")
-        self.outputs_t = _record(lib, "ecu_output_names", EcuOutputs.__slots__, "ecu_outputs_t")
+        self.params_t = _record(lib, "ecu_param_names", FirmwareParams.FIELDS, "ecu_params_t")
+        self.state_t = _record(lib, "ecu_state_names", EcuState.FIELDS, "ecu_state_t")
+        self.inputs_t = _record(lib, "ecu_input_names", EcuInputs.FIELDS, "ecu_inputs_t")
+        self.outputs_t = _record(lib, "ecu_output_names", EcuOutputs.FIELDS, "ecu_outputs_t")
         self.ecu_t = type(
             "ecu_t",
             (ctypes.Structure,),
@@ -87,7 +87,7 @@ def library() -> _Lib:
 def param_words(p: FirmwareParams) -> list[int]:
     """The parameter words in ``ecu_params_t`` order (the tuple init_theta_q24 expanded)."""
     words: list[int] = []
-    for name in FirmwareParams.__slots__:
+    for name in FirmwareParams.FIELDS:
         value = getattr(p, name)
         for v in value if isinstance(value, tuple) else (value,):
             if not -(1 << 31) <= v < (1 << 31):

@@ -25,7 +25,7 @@ def to_c(p: FirmwareParams, name: str, source: str) -> str:
         "",
         f"const ecu_params_t {name} = {{",
     ]
-    for field in FirmwareParams.__slots__:
+    for field in FirmwareParams.FIELDS:
         value = getattr(p, field)
         if isinstance(value, tuple):
             lines.append(f"    .{field} = {{{', '.join(f'{v}' for v in value)}}},")

@@ -343,7 +343,7 @@ def _word_index() -> dict[str, int]:
     out, at = {}, 0
     words = param_words(compile_params(EcuParams()))
     p = compile_params(EcuParams())
-    for name in FirmwareParams.__slots__:
+    for name in FirmwareParams.FIELDS:
         value = getattr(p, name)
         if isinstance(value, tuple):
             for k in range(len(value)):

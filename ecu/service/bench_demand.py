@@ -109,7 +109,7 @@ class BenchDemand:
         if left_run:
             self.arm = 0  # the start request is done: no retry by itself
         b = self._inputs
-        for name in EcuInputs.__slots__:
+        for name in EcuInputs.FIELDS:
             setattr(b, name, getattr(i, name))
         b.demand_cpct = self.throttle_cpct
         b.open_loop_mv = 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import ast
 import gc
+import os
+import subprocess
 import sys
 import tracemalloc
 from array import array
@@ -12,6 +14,7 @@ from types import FrameType
 
 import ecu
 from ecu.bench import _drive, new_running_ecu, scripted_inputs
+from ecu.compiled_tick import PURE_ENV
 from ecu.firmware import EcuOutputs
 from ecu.firmware_params import compile_params
 from ecu.state import EcuState
@@ -23,7 +26,14 @@ def _modules_run_by_ticks() -> frozenset[str]:
     """The ecu/ modules whose code runs inside ``tick()``, found by running it: each controller
     in RUN on the bench's inputs, and a start from rest through the sequencer (the inlet
     correction, the fuel schedules' tables) to a stop. What only sets up (params, the
-    parameter compiler) runs outside the tick and is not counted."""
+    parameter compiler) runs outside the tick and is not counted. Compiled modules make no
+    profile events: with the compiled tick in use, the interpreted one is traced, in a process
+    of its own."""
+    if ecu.COMPILED:
+        pure = {**os.environ, PURE_ENV: "1"}
+        done = subprocess.run([sys.executable, __file__], env=pure, capture_output=True,
+                              text=True, check=True)  # fmt: skip
+        return frozenset(done.stdout.split())
     from ecu.firmware import E2E_NONEWDATA, E2E_OK, Ecu, EcuInputs
     from ecu.params import EcuParams
 
@@ -138,7 +148,15 @@ def test_firmware_source_has_no_float_operation() -> None:
 
 
 def test_no_float_value_is_ever_held_while_ticking() -> None:
-    """Trace every line executed in the firmware modules and inspect every local variable."""
+    """Trace every line executed in the firmware modules and inspect every local variable (of
+    the interpreted tick: compiled code makes no trace events; it runs the same source)."""
+    if ecu.COMPILED:
+        pure = {**os.environ, PURE_ENV: "1"}
+        test = f"{__file__}::test_no_float_value_is_ever_held_while_ticking"
+        done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                               test], env=pure, capture_output=True, text=True)  # fmt: skip
+        assert done.returncode == 0, done.stdout[-3000:]
+        return
     files = {str(ECU_DIR / f"{n}.py") for n in FIRMWARE_MODULES}
     seen: list[str] = []
     lines = [0]
@@ -164,9 +182,13 @@ def test_no_float_value_is_ever_held_while_ticking() -> None:
         sys.settrace(None)
     assert lines[0] > 50_000
     assert not seen, seen[:5]
-    for name in EcuState.__slots__:
+    for name in EcuState.FIELDS:
         v = getattr(ecu_.s, name)
         assert isinstance(v, int) or (isinstance(v, array) and v.typecode == "i"), name
-    for name in EcuOutputs.__slots__:
+    for name in EcuOutputs.FIELDS:
         v = getattr(ecu_.out, name)
         assert isinstance(v, int) and -(1 << 31) <= v < 1 << 31, name
+
+
+if __name__ == "__main__":  # (the interpreted tick's modules, for a compiled session)
+    print(" ".join(sorted(_modules_run_by_ticks())))

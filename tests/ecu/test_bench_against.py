@@ -4,6 +4,7 @@ after checking the two give the same outputs and state."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import ecu.firmware
@@ -66,3 +67,12 @@ def test_the_command_reports_both_figures_and_the_speed_up(sil) -> None:
     assert figures["against"] == "HEAD" and figures["same_outputs_and_state"] is True
     assert figures["us_per_tick"] > 0 and figures["us_per_tick_against"] > 0
     assert figures["speedup"] > 0 and figures["targets_met"]["no_allocation_per_tick"]
+
+
+def test_the_compiled_tick_is_timed_beside_the_interpreted_one_of_the_same_source() -> None:
+    interpreted = bench.interpreted_firmware()
+    assert Path(interpreted.__file__).suffix == ".py" and interpreted.Ecu is not Ecu
+    figures = bench.run(quick=True)
+    assert figures["tick_build"] == "compiled"  # (the session's build: test_compiled_tick)
+    assert figures["compiled_same_outputs_and_state"] is True
+    assert figures["us_per_tick_interpreted"] > figures["us_per_tick"] > 0

@@ -25,7 +25,7 @@ RANGES = {
 
 
 def _state_difference(py: EcuState, c) -> str | None:
-    for name in EcuState.__slots__:
+    for name in EcuState.FIELDS:
         a, b = getattr(py, name), getattr(c, name)
         if isinstance(a, array):
             a, b = list(a), list(b)
@@ -60,7 +60,7 @@ def _fuzz(params: EcuParams, ticks: int, seed: int, wild: float) -> None:
             py.reset()
             c.reset()
         a, b = py.tick(i), c.tick(i)
-        for name in a.__slots__:
+        for name in a.FIELDS:
             assert getattr(a, name) == getattr(b, name), f"tick {k}: output {name}"
         assert (diff := _state_difference(py.s, c.s)) is None, f"tick {k}: state {diff}"
 
@@ -96,8 +96,8 @@ def test_digest_matches_the_python_digest():
 
 def test_a_field_missing_on_one_side_is_named():
     lib = core.library().lib
-    k = EcuState.__slots__.index("hist_idx")
-    expected = EcuState.__slots__[:k] + ("hist_cursor",) + EcuState.__slots__[k + 1 :]
+    k = EcuState.FIELDS.index("hist_idx")
+    expected = EcuState.FIELDS[:k] + ("hist_cursor",) + EcuState.FIELDS[k + 1 :]
     with pytest.raises(core.PortError, match="'hist_idx' \\(C\\) vs 'hist_cursor' \\(Python\\)"):
         core._record(lib, "ecu_state_names", expected, "ecu_state_t")
 
@@ -164,7 +164,7 @@ def _extreme(rng: random.Random) -> int:
 
 
 def _randomise_state(rng: random.Random, py: EcuState, c) -> None:
-    for name in EcuState.__slots__:
+    for name in EcuState.FIELDS:
         value = getattr(py, name)
         if isinstance(value, array):
             for k in range(len(value)):
@@ -203,7 +203,7 @@ def test_one_tick_from_extreme_states_is_equal(controller):
         for status in ("sensor_status", "analog_status", "demand_status"):
             setattr(i, status, rng.choice((0, 0, 0, 1, 4)))
         a, b = py.tick(i), c.tick(i)
-        for name in a.__slots__:
+        for name in a.FIELDS:
             assert getattr(a, name) == getattr(b, name), f"trial {trial}: output {name}"
         assert (diff := _state_difference(py.s, c.s)) is None, f"trial {trial}: state {diff}"
 
@@ -221,7 +221,7 @@ def test_assigning_parameters_applies_them_from_the_next_tick():
         i.demand_cpct = 9300 if (k // 100) % 2 else 8700
         i.speed_rpm += (py.out.pump_mv - 11560) // 40
         a, b = py.tick(i), c.tick(i)
-        for name in a.__slots__:
+        for name in a.FIELDS:
             assert getattr(a, name) == getattr(b, name), f"tick {k}: output {name}"
         differs += unchanged.tick(i).nref_cpct != a.nref_cpct
     assert differs > 100  # the new set did change the control

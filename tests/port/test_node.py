@@ -111,7 +111,7 @@ class Twin:
             assert getattr(c, name) == getattr(py, name), f"{name} {self.where()}"
         assert c.timeout_s == py.timeout_s, f"timeout_s {self.where()}"
         assert c.finished is py.finished is False
-        for name in EcuInputs.__slots__:
+        for name in EcuInputs.FIELDS:
             assert getattr(c.i, name) == getattr(py.i, name), f"inputs.{name} {self.where()}"
         if a:
             assert c.ecu.digest() == py.ecu.digest(), f"core state {self.where()}"

@@ -70,7 +70,7 @@ class Rigs:
         self.copy_inputs()
 
     def copy_inputs(self) -> None:
-        for name in EcuInputs.__slots__:
+        for name in EcuInputs.FIELDS:
             setattr(self.ci, name, getattr(self.i, name))
 
     def receive(self, frame: bytes) -> None:
@@ -100,11 +100,11 @@ class Rigs:
         a, b = self.serve()
         self.py_ecu.tick(self.py.inputs(self.i))
         cin = self._cin
-        for name in EcuInputs.__slots__:
+        for name in EcuInputs.FIELDS:
             setattr(cin, name, getattr(self.ci, name))
         ptr = self.c.inputs_c(cin)
         library().lib.ecu_tick(ctypes.byref(self.c_ecu._ecu), ptr)
-        for name in EcuInputs.__slots__:
+        for name in EcuInputs.FIELDS:
             setattr(self.ci, name, getattr(cin, name))
         self.py.sample(a.append)
         self.c.sample(b.append)
