@@ -16,7 +16,8 @@ but:
   the group (its route is looked up once, not per datagram), which joins no group and, being
   connected, accepts datagrams only from the group address, which sends none;
 - does not hear its own frames (multicast loopback delivers them to the sender too): each bus
-  marks what it sends with a channel token of its own and drops frames that carry it;
+  marks what it sends with a channel token of its own and drops frames that carry it (a frame
+  received has the bus's channel, the group, as python-can's buses give theirs);
 - hears, once told who they are (:meth:`~LoopbackUdpMulticastBus.admit`), only the senders of a
   run: each datagram names its sender by that token, so a frame of any other sender (a second
   ECU, a replay of a log) is handed to a hook, which keeps it (an XCP master's) or counts it
@@ -232,6 +233,7 @@ class LoopbackUdpMulticastBus(can.BusABC):
         self._on_other: Callable[[str, tuple[int, bytes] | can.Message], bool] | None = None
         self._held: deque[bytes] = deque()  # datagrams read by hold(), heard first
         self._can_protocol = can.CanProtocol.CAN_20
+        self.channel = channel  # (every frame received is on it)
         self.channel_info = f"udp loopback multicast {channel}:{port}"
         super().__init__(channel, **kwargs)
 
@@ -442,11 +444,12 @@ class LoopbackUdpMulticastBus(can.BusABC):
         except Exception as exception:
             raise can.CanOperationError("could not unpack received message") from exception
 
-    @staticmethod
-    def _message(fields: dict, timestamp: float) -> can.Message:
-        fields["timestamp"] = timestamp
+    def _message(self, fields: dict, timestamp: float) -> can.Message:
+        """The datagram's frame as python-can's message on this bus: its channel is the bus's
+        (the group), as on any python-can bus, not the sender's token the datagram carries."""
         try:
-            return can.Message(check=True, **fields)
+            return can.Message(check=True, **{**fields, "timestamp": timestamp,
+                                              "channel": self.channel})  # fmt: skip
         except Exception as exception:
             raise can.CanOperationError("could not unpack received message") from exception
 

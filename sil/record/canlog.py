@@ -19,6 +19,7 @@ from typing import BinaryIO, TextIO
 
 import can
 import numpy as np
+from can.util import channel2int
 
 from sil.record.results import WriteError, atomic
 
@@ -162,23 +163,19 @@ class CandumpWriter:
 
 
 def convert(candump_path: Path, fmt: str, start_s: float | None = None) -> Path:
-    """Write a copy of a candump log as ASC or BLF with python-can's writers, or as MF4 starting
-    at ``start_s`` (default: :func:`sil.record.mdf.log_start`), atomically
+    """Write a copy of a candump log as ASC, BLF or MF4 (:func:`convert_log`), all starting at
+    ``start_s`` (default: :func:`sil.record.mdf.log_start`): the MF4's header and time channel
+    from it, the ASC's and BLF's frames at their absolute times; atomically
     (:func:`sil.record.results.atomic`: a full disk leaves no part of a copy)."""
     if fmt not in EXTRA_FORMATS:
         raise ValueError(f"log format '{fmt}' is not one of {', '.join(EXTRA_FORMATS)}")
-    target = candump_path.with_suffix(f".{fmt}")
-    if fmt == "mf4":
-        from sil.record.mdf import MdfUnavailable
+    from sil.record.mdf import MdfUnavailable
 
-        try:
-            convert_log(candump_path, target, start_s=start_s)
-        except (LogReadError, MdfUnavailable) as exc:  # (nothing written): as a write error
-            raise WriteError(target, OSError(errno.EIO, str(exc))) from None
-        return target
-    with atomic(target) as tmp, can.Logger(str(tmp)) as writer:
-        for message in can.CanutilsLogReader(str(candump_path)):
-            writer.on_message_received(message)
+    target = candump_path.with_suffix(f".{fmt}")
+    try:
+        convert_log(candump_path, target, start_s=start_s)
+    except (LogReadError, MdfUnavailable) as exc:  # (nothing written): as a write error
+        raise WriteError(target, OSError(errno.EIO, str(exc))) from None
     return target
 
 
@@ -577,6 +574,29 @@ def candump_line(msg: can.Message) -> str:
     return f"{head}{ident}#{data}\n"
 
 
+CHANNELS_MAX = 64  # a channel number kept as it is below this; others numbered from 0
+
+
+def numbered_channels(frames: Iterable[can.Message]) -> Iterator[can.Message]:
+    """``frames`` with each channel as a number, for the formats that number their channels
+    (ASC, BLF, TRC): a channel that names a small number keeps it (``vcan0``, ``can1``, 2), any
+    other (a group address, a name) takes the lowest number no channel holds yet, in order of
+    appearance; a frame without a channel stays so (the format's first)."""
+    numbers: dict[object, int] = {}
+    for msg in frames:
+        channel = msg.channel
+        if channel is not None:
+            number = numbers.get(channel)
+            if number is None:
+                own = channel2int(channel)
+                taken = set(numbers.values())
+                if own is None or not 0 <= own < CHANNELS_MAX or own in taken:
+                    own = next(k for k in itertools.count() if k not in taken)
+                number = numbers[channel] = own
+            msg.channel = number
+        yield msg
+
+
 def write_log(path: Path, frames: Iterable[can.Message], fmt: str, shift_s: float = 0.0) -> int:
     """Write ``frames`` (their times plus ``shift_s``) as a candump, ASC, BLF, TRC or python-can
     CSV log, atomically; the frames written."""
@@ -592,6 +612,8 @@ def write_log(path: Path, frames: Iterable[can.Message], fmt: str, shift_s: floa
         writers = {"asc": can.ASCWriter, "blf": can.BLFWriter, "trc": can.TRCWriter,
                    "csv": can.CSVWriter}  # fmt: skip
         writer = writers[fmt](str(tmp))
+        if fmt != "csv":
+            frames = numbered_channels(frames)
         try:
             for msg in frames:
                 msg.timestamp += shift_s

@@ -29,6 +29,7 @@ import gc
 import gzip
 import heapq
 import io
+import json
 import logging
 import re
 import struct
@@ -51,6 +52,7 @@ from sil.record.results import atomic
 
 MAGIC = (b"MDF     ", b"UnFinMF ")  # a finished MDF file; one a logger did not finish
 VERSION = "4.10"
+TICK0_FIELD = "tick0_utc"  # summary.json: the wall-clock time of a run's tick 0, ISO 8601
 EPOCH_FROM_S = 1e8  # a first frame at or after this (1973-03-03) carries epoch times
 MDF_INSTALL = "pip install 'turbojet-sil[mdf]' (asammdf)"
 KINDS = ("CAN_DataFrame", "CAN_ErrorFrame", "CAN_RemoteFrame")
@@ -237,10 +239,14 @@ def time_base(
 
 def log_start(path: Path, header_start_s: float | None = None) -> tuple[float, str]:
     """The wall-clock start of a log whose times count from its own start: the one its header
-    gives (ASC's date), else, in a run's folder, the run's (``run.json`` is written as the run
+    gives (ASC's date), else, in a run's folder, the run's tick 0 (``summary.json``: the time
+    every log the run wrote starts at), else the run's start (``run.json`` is written as the run
     begins), else the file's modification time."""
     if header_start_s is not None:
         return header_start_s, "the log's header"
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        tick0 = json.loads((path.parent / "summary.json").read_text()).get(TICK0_FIELD)
+        return parse_start(tick0), "the run's tick 0 (summary.json)"
     record = path.parent / "run.json"
     if record.is_file():
         return record.stat().st_mtime_ns / 1e9, "the run's start (run.json)"

@@ -11,7 +11,7 @@ from ecu import faults as ecu_faults
 from ecu.params import preset
 from protocol.busload import bus_load_pct
 from sil.analysis import metrics
-from sil.record import results
+from sil.record import mdf, results
 from sil.record.canlog import convert
 from sil.record.recorder import Recorder
 from sil.run.command_node import CommandNode
@@ -123,6 +123,7 @@ def finish(
         if log.exists():
             summary[f"{name}_log"] = log.name
     tick0 = state.started_wall + (state.nodes_up - state.started if state.nodes_up else 0.0)
+    summary[mdf.TICK0_FIELD] = mdf.format_start(round(tick0 * 1e6))  # (every log's start)
     for fmt in opts.log_formats:
         try:
             convert(opts.out_dir / "can.log", fmt, start_s=tick0)

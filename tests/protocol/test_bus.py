@@ -106,6 +106,8 @@ def test_udp_round_trip_between_two_endpoints_and_isolation():
         assert (
             got is not None and got.arbitration_id == 0x100 and bytes(got.data) == bytes(range(8))
         )
+        # the frame's channel is the bus's (python-can's convention), not the sender's token
+        assert got.channel == b.channel == mine.channel != a.token
         assert c.recv(0.2) is None  # another run's bus hears nothing
 
 

@@ -21,6 +21,7 @@ import pytest
 
 from protocol.bus import open_bus
 from protocol.codec import Codec
+from sil.record import mdf as mdf_tools
 from sil.record import replay
 from sil.record.canlog import CandumpWriter, LogReadError, convert_log, detect_format, read_frames
 
@@ -238,7 +239,7 @@ def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path, sil):
     asammdf's MDF.extract_bus_logging decodes it with the DBC, and every signal at every tick
     it was sent is trace.csv's value there (the trace holds a tick's last frame), within half
     the DBC's resolution (and the trace's 9 significant digits). The MF4 starts at the run's
-    wall-clock start, its axis at the run's time 0; back to candump it is can.log."""
+    tick 0 on the wall clock, its axis at the run's time 0; back to candump it is can.log."""
     scenario = tmp_path / "short.toml"
     scenario.write_text(SCENARIO)
     out = tmp_path / "run"
@@ -247,11 +248,12 @@ def test_asammdf_decodes_a_runs_mf4_with_the_dbc_to_its_trace(tmp_path, sil):
     converted = sil("log", "convert", str(out / "can.log"), str(out / "can.mf4"), "--json")
     assert converted.returncode == 0, converted.stderr
     report = json.loads(converted.stdout)
-    assert report["start_from"] == "the run's start (run.json)"
+    assert report["start_from"] == "the run's tick 0 (summary.json)"
 
     mdf = asammdf.MDF(out / "can.mf4")
-    started = (out / "run.json").stat().st_mtime
+    started = mdf_tools.parse_start(json.loads((out / "summary.json").read_text())["tick0_utc"])
     assert mdf.header.start_time.timestamp() == pytest.approx(started, abs=1e-6)
+    assert (out / "run.json").stat().st_mtime <= started
     decoded = mdf.extract_bus_logging({"CAN": [(str(DBC), 0)]})
     assert decoded.header.start_time == mdf.header.start_time
 
