@@ -218,7 +218,7 @@ class PilImage:
         self.proc: subprocess.Popen | None = None
         self.port = 0  # QEMU's end of the link on 127.0.0.1 (TCP for slcan, UDP for eth)
         self._host: socket.socket | None = None  # eth: our UDP end, bound before QEMU starts
-        self._reader: threading.Thread | None = None
+        self._readers: list[threading.Thread] = []  # the console's and QEMU's stderr's
 
     @property
     def url(self) -> str:
@@ -258,9 +258,15 @@ class PilImage:
         )
 
     def _start_readers(self) -> None:
-        self._reader = threading.Thread(target=self._read_console, daemon=True)
-        self._reader.start()
-        threading.Thread(target=self._drain_stderr, daemon=True).start()
+        self._readers = [threading.Thread(target=self._read_console, daemon=True),
+                         threading.Thread(target=self._drain_stderr, daemon=True)]  # fmt: skip
+        for reader in self._readers:
+            reader.start()
+
+    def _read_to_the_end(self) -> None:
+        """Wait (2 s at most) for the readers to take what QEMU wrote before it ended."""
+        for reader in self._readers:
+            reader.join(2.0)
 
     def _until_listening(self) -> str | None:
         """None once QEMU says it waits for the slcan connection; else what it said before it
@@ -339,6 +345,7 @@ class PilImage:
             if self.profile.refused is not None:
                 raise PilError(f"the image refused its calibration block: {self.profile.refused}")
             if self.proc is None or self.proc.poll() is not None:
+                self._read_to_the_end()  # (its last lines may still be on their way)
                 said = " | ".join(self.profile.lines[-4:]) or "no message"
                 raise PilError(f"{QEMU} exited before the image was ready: {said}")
             if time.monotonic() > deadline:
@@ -357,8 +364,7 @@ class PilImage:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        if self._reader is not None:
-            self._reader.join(2.0)
+        self._read_to_the_end()
         if self._host is not None:
             self._host.close()
         self._dir.cleanup()

@@ -222,11 +222,13 @@ def _spec_conversion(spec: ParamSpec) -> Conversion:
     return Conversion(1.0 / (1 << spec.frac_bits), "" if spec.unit in ("-", "bool") else spec.unit)
 
 
-def _value(name: str, text: str, address: int, conv: Conversion, lo: float, hi: float) -> str:
+def _value(name: str, text: str, address: int, conv: Conversion, lo: float, hi: float,
+           read_only: bool = False) -> str:  # fmt: skip
     return (
         f"    /begin CHARACTERISTIC {name} {_text(text)} VALUE 0x{address:08X} RL_VALUE_SLONG "
         f"0 {conv.name} {_number(lo)} {_number(hi)}\n"
-        f'      FORMAT "{FORMAT}"\n'
+        + ("      READ_ONLY\n" if read_only else "")
+        + f'      FORMAT "{FORMAT}"\n'
         + (f"      PHYS_UNIT {_text(conv.unit)}\n" if conv.unit else "")
         + "    /end CHARACTERISTIC"
     )
@@ -265,10 +267,13 @@ def a2l_text(
     rate_hz: int | None = None,
     ids: tuple[int, int] = S.DEFAULT_IDS,
     limits: S.Limits = S.Limits(),  # noqa: B008 (frozen)
+    read_only: frozenset[str] = frozenset(),
 ) -> str:
     """The A2L of this firmware and slave, for an ECU ticking at ``rate_hz`` (default: the
     parameters' default) with the XCP identifiers ``ids`` (master to ECU, ECU to master) and a
-    slave that holds ``limits`` (the C slave's are smaller: ``ecu.port.xcp.header_limits``)."""
+    slave that holds ``limits`` (the C slave's are smaller: ``ecu.port.xcp.header_limits``);
+    the parameters of ``read_only`` (names as in the table) are READ_ONLY: the slave refuses
+    to write them (the C slave those it cannot recompute on the target)."""
     rate_hz = rate_hz or EcuParams().rate_hz
     identification = f"{FIRMWARE} build {build_id()}"
     epk_address = MEM.TEXT_BASE  # the slave's texts start with its identification
@@ -296,9 +301,11 @@ def a2l_text(
             if spec.element == 0:
                 body.append(_curve(spec.field, address, spec, conv, axis_conv))
             continue
-        run = "may change in RUN" if spec.run_safe else "refused in RUN"
+        fixed = spec.name in read_only
+        run = ("read only on this ECU" if fixed else
+               "may change in RUN" if spec.run_safe else "refused in RUN")  # fmt: skip
         body.append(_value(a2l_name(spec.name), f"{spec.name} ({run})", address, conv,
-                           spec.lo, spec.hi))  # fmt: skip
+                           spec.lo, spec.hi, fixed))  # fmt: skip
     for k, word in enumerate(MEM.BENCH):
         conv = use(Conversion(word.factor, word.unit))
         body.append(_value(word.name, word.description, MEM.bench_address(k), conv, word.lo,

@@ -42,15 +42,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def text_for(impl: str, rate_hz: int | None, ids: tuple[int, int] | None) -> str:
-    """The A2L of the ECU implementation ``impl`` (its slave's limits) at ``rate_hz``, with the
-    XCP identifiers ``ids`` (None: the DBC's)."""
+    """The A2L of the ECU implementation ``impl`` (its slave's limits; the C slave's and the
+    image's READ_ONLY parameters, which their targets do not recompute) at ``rate_hz``, with
+    the XCP identifiers ``ids`` (None: the DBC's)."""
+    from ecu.params import EcuParams
     from ecu.port.xcp import header_limits
+    from ecu.port.xcp_run import writable
+    from ecu.service.param_table import TABLE
     from ecu.xcp.a2l import a2l_text
     from ecu.xcp.slave import Limits
     from protocol.dbc import xcp_frame_ids
 
-    limits = Limits() if impl == "python" else header_limits()
-    return a2l_text(rate_hz, ids or xcp_frame_ids(), limits)
+    if impl == "python":
+        return a2l_text(rate_hz, ids or xcp_frame_ids(), Limits())
+    params = EcuParams() if rate_hz is None else EcuParams(rate_hz=rate_hz)
+    fixed = frozenset(spec.name for spec in TABLE) - writable(params)  # (computed on the host)
+    return a2l_text(rate_hz, ids or xcp_frame_ids(), header_limits(), fixed)
 
 
 def run(args: argparse.Namespace) -> int:

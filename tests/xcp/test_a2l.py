@@ -6,6 +6,9 @@ conversions are the Q formats, the EPK, identifiers and events are the slave's."
 from __future__ import annotations
 
 import struct
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -103,3 +106,23 @@ def test_the_c_slaves_a2l_states_what_the_c_slave_answers(sil, tmp_path):
         assert f"DYNAMIC {c_limits().max_daq} 2 0" in text
     python = sil("a2l").stdout
     assert "BLOCK MASTER 42 0" in python
+
+
+@pytest.mark.parametrize("impl", ["python", "c", "pil"])
+def test_a2ltool_strict_check_passes_every_a2l_we_write(sil, tmp_path, impl):  # noqa: ANN001
+    """a2ltool (the A2L checker calibration tools' users run) parses each A2L strictly and
+    finds nothing to report, also at another rate and with other identifiers; it refuses a
+    damaged one (a keyword misspelt), so its verdict is a real check."""
+    a2ltool = Path(sys.executable).with_name("a2ltool")
+    for extra in ([], ["--rate", "200", "--xcp-ids", "0x600,0x601"]):
+        path = tmp_path / f"{impl}.a2l"
+        assert sil("a2l", "--impl", impl, "--out", str(path), *extra).returncode == 0
+        done = subprocess.run([str(a2ltool), str(path), "--check", "--strict"],
+                              capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert done.returncode == 0 and "No problems found" in done.stdout, done.stdout
+    damaged = tmp_path / "damaged.a2l"
+    damaged.write_text(path.read_text(encoding="latin-1").replace("READ_ONLY", "READ_ONLYX"),
+                       encoding="latin-1")  # fmt: skip
+    done = subprocess.run([str(a2ltool), str(damaged), "--check", "--strict"],
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert done.returncode != 0 and "READ_ONLYX" in done.stdout + done.stderr

@@ -14,6 +14,7 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import random
+import re
 import struct
 from pathlib import Path
 
@@ -430,6 +431,33 @@ def test_the_commissioning_parameters_are_write_protected_on_c():
         new = raw + 1 if raw < spec.raw_hi else raw - 1
         py, c = _download(rigs, k, [new], same=False)
         assert c == err(C.Err.WRITE_PROTECTED) and py in (b"\xff", err(C.Err.VERIFY)), (name, py)
+
+
+def test_the_c_a2l_marks_read_only_exactly_what_the_c_slave_refuses_to_write():
+    """`sil a2l --impl c|pil` offers no parameter its slave refuses: the parameters the C slave
+    answers with ERR_WRITE_PROTECTED (a change of one raw count, in OFF, unlocked) are the
+    READ_ONLY ones of its A2L; the Python slave's A2L has none."""
+    from sil.commands.a2l import text_for
+
+    def read_only(text: str) -> set[str]:
+        blocks = re.findall(r"/begin CHARACTERISTIC (\w+) .*?/end CHARACTERISTIC", text, re.S)
+        bodies = re.split(r"/begin CHARACTERISTIC ", text)[1:]
+        return {name for name, body in zip(blocks, bodies, strict=True) if "READ_ONLY" in body}
+
+    refused = set()
+    for k, spec in enumerate(TABLE):
+        if spec.element not in (None, 0):
+            continue
+        rigs = Rigs()
+        rigs.connect()
+        rigs.unlock(C.RES_CAL_PAG)
+        raw = rigs.py_boot.table.raws()[k]
+        new = raw + 1 if raw < spec.raw_hi else raw - 1
+        if _download(rigs, k, [new], same=False)[1] == err(C.Err.WRITE_PROTECTED):
+            refused.add(spec.name)
+    assert refused >= set(COMMISSIONING)
+    assert read_only(text_for("c", None, None)) == read_only(text_for("pil", None, None)) == refused
+    assert not read_only(text_for("python", None, None)) & {spec.name for spec in TABLE}
 
 
 def test_the_bench_is_commanded_alike():
