@@ -16,7 +16,7 @@ import pytest
 from sil import scenario as scenarios
 from sil.run.runner import RunOptions, run
 
-TIMINGS = ("wall_time_s", "realtime_factor", "inproc_loop", "plots")
+TIMINGS = ("wall_time_s", "realtime_factor", "inproc_loop", "plots", "tick0_utc")
 
 
 def _run(s, out: Path, compiled: bool, **kw) -> dict:

@@ -77,7 +77,8 @@ def _alive(pids: list[int]) -> list[int]:
 
 
 # what differs from one run to the next of the same scenario: its times, its bus and its senders
-PER_RUN = ("wall_time_s", "realtime_factor", "startup_s", "bus", "run_id", "nodes", "run_senders")
+PER_RUN = ("wall_time_s", "realtime_factor", "startup_s", "bus", "run_id", "nodes", "run_senders",
+           "tick0_utc")  # fmt: skip
 
 
 @pytest.mark.parametrize("mode", ["inproc", "lockstep"])
