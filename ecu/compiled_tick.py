@@ -6,7 +6,8 @@ way), in about half the time. Nothing else changes: the source stays the referen
 machine without a C compiler runs it as it is.
 
 ``python -m ecu.build_tick`` builds into :data:`BUILD_DIR` and stamps the build with a
-digest of the ``ecu`` package's top-level sources; ``ecu/__init__.py`` puts the build in front
+digest of the sources it was compiled from and those they read (:func:`digest`);
+``ecu/__init__.py`` puts the build in front
 of the package's own modules only while that digest still matches, so an edited source is
 never shadowed by an older build: it runs interpreted until built again (``dev.py`` builds
 whenever the digest changed). ``TURBOJET_PURE_PYTHON=1`` runs the interpreted tick regardless.

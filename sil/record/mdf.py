@@ -244,9 +244,11 @@ def log_start(path: Path, header_start_s: float | None = None) -> tuple[float, s
     begins), else the file's modification time."""
     if header_start_s is not None:
         return header_start_s, "the log's header"
-    with contextlib.suppress(OSError, ValueError, AttributeError):
-        tick0 = json.loads((path.parent / "summary.json").read_text()).get(TICK0_FIELD)
-        return parse_start(tick0), "the run's tick 0 (summary.json)"
+    with contextlib.suppress(OSError, ValueError):  # (no summary, or not one of ours)
+        summary = json.loads((path.parent / "summary.json").read_text())
+        tick0 = summary.get(TICK0_FIELD) if isinstance(summary, dict) else None
+        if isinstance(tick0, str):  # (a run still under way, or of before, has none)
+            return parse_start(tick0), "the run's tick 0 (summary.json)"
     record = path.parent / "run.json"
     if record.is_file():
         return record.stat().st_mtime_ns / 1e9, "the run's start (run.json)"

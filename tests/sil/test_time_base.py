@@ -70,6 +70,19 @@ def test_python_cans_own_logconvert_takes_a_capture_of_our_bus(tmp_path: Path, s
     assert len(list(can.LogReader(str(out)))) == 4
 
 
+@pytest.mark.parametrize(
+    "summary",
+    ['{"status": "completed"}', '{"status": "running"}', "[]", '{"tick0_utc": 5}', "not json"],
+)
+def test_a_run_folder_without_tick_0_falls_back_to_its_start(tmp_path: Path, summary) -> None:  # noqa: ANN001
+    (tmp_path / "can.log").write_text(MIXED.replace("udp-8acf5c733522", "vcan0"))
+    (tmp_path / "summary.json").write_text(summary)  # (a run of before, or still under way)
+    (tmp_path / "run.json").write_text("{}")
+    start, origin = mdf.log_start(tmp_path / "can.log")
+    assert origin == "the run's start (run.json)"
+    assert start == (tmp_path / "run.json").stat().st_mtime_ns / 1e9
+
+
 def _trigger_block_s(asc: Path) -> float:
     line = next(x for x in asc.read_text().splitlines() if x.startswith("Begin Triggerblock"))
     stamp = line.removeprefix("Begin Triggerblock ").strip()
