@@ -14,6 +14,7 @@ import logging
 import re
 import zlib
 from collections.abc import Iterable, Iterator
+from datetime import datetime
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
@@ -574,6 +575,14 @@ def candump_line(msg: can.Message) -> str:
     return f"{head}{ident}#{data}\n"
 
 
+class _AscWriter(can.ASCWriter):
+    """python-can's ASC writer with the header's milliseconds in three digits, as CANoe reads
+    them: python-can writes 85 ms as ".85", which any reader (python-can's too) takes as 850."""
+
+    def _format_header_datetime(self, dt: datetime) -> str:
+        return dt.strftime(f"%a %b %d %H:%M:%S.{dt.microsecond // 1000:03d} %Y")
+
+
 CHANNELS_MAX = 64  # a channel number kept as it is below this; others numbered from 0
 
 
@@ -609,7 +618,7 @@ def write_log(path: Path, frames: Iterable[can.Message], fmt: str, shift_s: floa
                     f.write(candump_line(msg))
                     count += 1
             return count
-        writers = {"asc": can.ASCWriter, "blf": can.BLFWriter, "trc": can.TRCWriter,
+        writers = {"asc": _AscWriter, "blf": can.BLFWriter, "trc": can.TRCWriter,
                    "csv": can.CSVWriter}  # fmt: skip
         writer = writers[fmt](str(tmp))
         if fmt != "csv":

@@ -83,6 +83,20 @@ def test_a_run_folder_without_tick_0_falls_back_to_its_start(tmp_path: Path, sum
     assert start == (tmp_path / "run.json").stat().st_mtime_ns / 1e9
 
 
+@pytest.mark.parametrize("ms", [0, 7, 85, 999])
+def test_an_asc_starts_at_its_millisecond(tmp_path: Path, sil, ms: int) -> None:  # noqa: ANN001
+    """The ASC header's time in three-digit milliseconds (python-can alone writes 85 ms as
+    ".85", read back as 850 ms by its reader and by ours)."""
+    source = tmp_path / "run.log"
+    source.write_text("(0.000000) vcan0 100#01\n(0.010000) vcan0 100#02\n")
+    start = f"2026-12-01T10:00:00.{ms:03d}Z"
+    done = sil("log", "convert", str(source), str(tmp_path / "x.asc"), "--start", start)
+    assert done.returncode == 0, done.stderr
+    assert _trigger_block_s(tmp_path / "x.asc") == mdf.parse_start(start)
+    first = next(iter(can.ASCReader(str(tmp_path / "x.asc"), relative_timestamp=False)))
+    assert first.timestamp == pytest.approx(mdf.parse_start(start), abs=1e-6)
+
+
 def _trigger_block_s(asc: Path) -> float:
     line = next(x for x in asc.read_text().splitlines() if x.startswith("Begin Triggerblock"))
     stamp = line.removeprefix("Begin Triggerblock ").strip()
